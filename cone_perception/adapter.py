@@ -1,0 +1,145 @@
+"""Driver adapter: camera frames (YUYV, BGR, RGB, JPEG/PNG) -> cropped BGR band.
+
+The work is done on as few bytes as possible: the rows (and columns) of the
+band are sliced out of the raw buffer before any colour conversion, so a
+1920x1080 YUYV frame costs only the 1920x576 band's conversion.
+
+Every per-frame problem raises :class:`~cone_perception.errors.FrameError`
+with a ``reason`` key; the caller drops that frame and counts it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from .crop import CropSpec
+from .errors import FrameError
+
+# encoding -> (canonical name, bytes per pixel)
+_ENCODINGS = {
+    "yuv422_yuy2": ("yuyv", 2),
+    "yuyv": ("yuyv", 2),
+    "yuy2": ("yuyv", 2),
+    "bgr8": ("bgr8", 3),
+    "rgb8": ("rgb8", 3),
+}
+SUPPORTED_ENCODINGS = tuple(_ENCODINGS)
+
+
+def raw_frame_view(encoding: str, width: int, height: int, step: int, data) -> tuple[str, np.ndarray]:
+    """Validate a raw image message and view its buffer as ``(height, step)`` uint8.
+
+    Returns the canonical encoding name and the view (no copy).
+    Raises :class:`FrameError` for unknown encodings, zero sizes, odd YUYV
+    widths, a too small ``step`` and a too short ``data``.
+    """
+    enc = _ENCODINGS.get(str(encoding).lower())
+    if enc is None:
+        raise FrameError("unknown_encoding", f"unsupported encoding {encoding!r}; supported: {', '.join(SUPPORTED_ENCODINGS)}")
+    name, bpp = enc
+    if width <= 0 or height <= 0:
+        raise FrameError("zero_size", f"image has zero size ({width}x{height})")
+    if name == "yuyv" and width % 2:
+        raise FrameError("odd_width", f"YUYV image width must be even, got {width}")
+    if step < width * bpp:
+        raise FrameError("step_too_small", f"step {step} < width {width} * {bpp} bytes per pixel for {encoding}")
+    buf = np.frombuffer(data, dtype=np.uint8)
+    if buf.size < step * height:
+        raise FrameError("data_too_short", f"data has {buf.size} bytes, step*height needs {step * height}")
+    return name, buf[: step * height].reshape(height, step)
+
+
+def _downscale(bgr: np.ndarray, crop: CropSpec) -> np.ndarray:
+    if crop.downscale == 1:
+        return np.ascontiguousarray(bgr)
+    return cv2.resize(bgr, (crop.out_width, crop.out_height), interpolation=cv2.INTER_AREA)
+
+
+def crop_raw_to_bgr(name: str, view: np.ndarray, crop: CropSpec) -> np.ndarray:
+    """Cut the band out of a validated raw buffer view, convert to BGR, downscale."""
+    h, w = crop.height_full_px, crop.width_full_px
+    if name == "yuyv":
+        band = view[crop.v0 : crop.v1, 2 * crop.u0 : 2 * crop.u1].reshape(h, w, 2)
+        bgr = cv2.cvtColor(band, cv2.COLOR_YUV2BGR_YUY2)
+        return _downscale(bgr, crop)
+    band = view[crop.v0 : crop.v1, 3 * crop.u0 : 3 * crop.u1].reshape(h, w, 3)
+    if name == "rgb8":
+        band = cv2.cvtColor(band, cv2.COLOR_RGB2BGR)
+    return _downscale(band, crop)
+
+
+def crop_bgr(bgr_full: np.ndarray, crop: CropSpec) -> np.ndarray:
+    """Crop + downscale an already decoded full BGR image."""
+    return _downscale(bgr_full[crop.v0 : crop.v1, crop.u0 : crop.u1], crop)
+
+
+def decode_compressed(data) -> np.ndarray:
+    """JPEG/PNG bytes -> full BGR image. Raises :class:`FrameError` if undecodable."""
+    buf = np.frombuffer(data, dtype=np.uint8)
+    if buf.size == 0:
+        raise FrameError("undecodable", "compressed image has no data")
+    img = cv2.imdecode(buf, cv2.IMREAD_COLOR)
+    if img is None:
+        raise FrameError("undecodable", f"compressed image ({buf.size} bytes) could not be decoded as JPEG/PNG")
+    return img
+
+
+@dataclass
+class DriverAdapter:
+    """Turns camera frames into the cropped BGR band of one calibrated camera.
+
+    ``image_width``/``image_height`` are the full image size the calibration was
+    made for; frames of another size are rejected (the homography would not apply).
+    """
+
+    crop: CropSpec
+    image_width: int
+    image_height: int
+
+    def __post_init__(self) -> None:
+        self.crop.validate(self.image_width, self.image_height)
+
+    def _check_size(self, width: int, height: int) -> None:
+        if (width, height) != (self.image_width, self.image_height):
+            raise FrameError(
+                "wrong_size",
+                f"image is {width}x{height} but the calibration is for {self.image_width}x{self.image_height}",
+            )
+
+    def from_raw(self, encoding: str, width: int, height: int, step: int, data) -> np.ndarray:
+        """sensor_msgs/Image fields -> cropped BGR ``(out_h, out_w, 3) uint8``."""
+        name, view = raw_frame_view(encoding, width, height, step, data)
+        self._check_size(width, height)
+        return crop_raw_to_bgr(name, view, self.crop)
+
+    def from_compressed(self, data) -> np.ndarray:
+        """sensor_msgs/CompressedImage data (JPEG/PNG) -> cropped BGR."""
+        img = decode_compressed(data)
+        self._check_size(img.shape[1], img.shape[0])
+        return crop_bgr(img, self.crop)
+
+    def camera_info_fields(self) -> dict:
+        """Fields of the ``image_cropped/camera_info`` that goes with each output."""
+        return self.crop.camera_info_fields(self.image_width, self.image_height)
+
+
+def bgr_to_yuyv(bgr: np.ndarray) -> np.ndarray:
+    """Full BGR image -> YUYV bytes as ``(H, W, 2) uint8`` (BT.601, as cameras send).
+
+    Used to make YUYV test frames and benchmark input; chroma of each pixel pair
+    is averaged. Width must be even.
+    """
+    h, w = bgr.shape[:2]
+    if w % 2:
+        raise ValueError(f"YUYV needs an even width, got {w}")
+    yuv = cv2.cvtColor(bgr, cv2.COLOR_BGR2YUV).astype(np.uint16)
+    out = np.empty((h, w, 2), dtype=np.uint8)
+    out[:, :, 0] = yuv[:, :, 0]
+    u = ((yuv[:, 0::2, 1] + yuv[:, 1::2, 1] + 1) // 2).astype(np.uint8)
+    v = ((yuv[:, 0::2, 2] + yuv[:, 1::2, 2] + 1) // 2).astype(np.uint8)
+    out[:, 0::2, 1] = u
+    out[:, 1::2, 1] = v
+    return out

@@ -1,0 +1,59 @@
+"""``cone-perception``: one command with sub-commands.
+
+Each sub-command lives in ``cone_perception/commands/<name>.py`` with
+``add_arguments(parser)`` and ``run(args) -> int``; it is imported only when
+used, so ``cone-perception --help`` answers at once (no torch import).
+Errors of this package (:class:`~cone_perception.errors.ConePerceptionError`)
+end the command with one clear line on stderr and exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+# name -> (module under cone_perception.commands, one-line help)
+COMMANDS: dict[str, tuple[str, str]] = {
+    "map": ("map", "map pixels or boxes to rear_axle metres with a calibration"),
+    "bench": ("bench", "benchmark the per-frame stages on real-size frames"),
+}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="cone-perception",
+        description="Camera cone perception for a Formula Student driverless car: tools around the ROS 2 nodes.",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name, (_, help_text) in COMMANDS.items():
+        sub.add_parser(name, help=help_text, add_help=False)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser()
+    if not argv or argv[0] not in COMMANDS:
+        args = parser.parse_args(argv)  # prints help / errors for unknown commands
+        parser.print_help()
+        return 1
+    name = argv[0]
+    module = importlib.import_module(f"cone_perception.commands.{COMMANDS[name][0]}")
+    sub = argparse.ArgumentParser(prog=f"cone-perception {name}", description=COMMANDS[name][1])
+    module.add_arguments(sub)
+    args = sub.parse_args(argv[1:])
+    from .errors import ConePerceptionError
+
+    try:
+        return int(module.run(args) or 0)
+    except ConePerceptionError as e:
+        print(f"cone-perception {name}: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"cone-perception {name}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

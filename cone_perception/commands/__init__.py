@@ -1,0 +1,1 @@
+"""Sub-commands of ``cone-perception`` (see :mod:`cone_perception.cli`)."""

@@ -1,0 +1,128 @@
+"""The band of the road: crop rectangle and integer downscale, and the mapping
+between cropped-image pixels and full-image pixels.
+
+Conventions: all rectangles are half-open ``[u0, u1) x [v0, v1)`` in pixels of
+the FULL camera image. The cropped image has size
+``((u1 - u0) / downscale, (v1 - v0) / downscale)``.
+A cropped pixel coordinate ``(uc, vc)`` (continuous, pixel corners at integers)
+maps to the full image as ``u = u0 + uc * downscale``, ``v = v0 + vc * downscale``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import ConfigError
+
+ALLOWED_DOWNSCALE = (1, 2, 4)
+
+
+@dataclass(frozen=True)
+class CropSpec:
+    """Crop band in full-image pixels plus an integer downscale factor."""
+
+    v0: int
+    v1: int
+    u0: int
+    u1: int
+    downscale: int = 1
+
+    @property
+    def width_full_px(self) -> int:
+        return self.u1 - self.u0
+
+    @property
+    def height_full_px(self) -> int:
+        return self.v1 - self.v0
+
+    @property
+    def out_width(self) -> int:
+        """Width of the cropped (and downscaled) image in pixels."""
+        return self.width_full_px // self.downscale
+
+    @property
+    def out_height(self) -> int:
+        """Height of the cropped (and downscaled) image in pixels."""
+        return self.height_full_px // self.downscale
+
+    def validate(self, image_width: int, image_height: int, source: str = "crop") -> None:
+        """Raise :class:`ConfigError` unless the crop fits the image and the factor."""
+        if self.downscale not in ALLOWED_DOWNSCALE:
+            raise ConfigError(source, "downscale", f"must be one of {ALLOWED_DOWNSCALE}, got {self.downscale}")
+        if not (0 <= self.v0 < self.v1 <= image_height):
+            raise ConfigError(
+                source, "crop.v0/v1", f"rows [{self.v0}, {self.v1}) must lie inside 0..{image_height} with v0 < v1"
+            )
+        if not (0 <= self.u0 < self.u1 <= image_width):
+            raise ConfigError(
+                source, "crop.u0/u1", f"columns [{self.u0}, {self.u1}) must lie inside 0..{image_width} with u0 < u1"
+            )
+        if self.u0 % 2 or self.u1 % 2:
+            raise ConfigError(source, "crop.u0/u1", f"must be even (YUYV packs 2 pixels), got {self.u0}, {self.u1}")
+        if self.width_full_px % self.downscale or self.height_full_px % self.downscale:
+            raise ConfigError(
+                source,
+                "crop",
+                f"band {self.width_full_px}x{self.height_full_px} is not divisible by downscale {self.downscale}",
+            )
+
+    @classmethod
+    def full_image(cls, width: int, height: int, downscale: int = 1) -> "CropSpec":
+        return cls(0, height, 0, width, downscale)
+
+    # -- coordinates --------------------------------------------------------------
+    def to_full(self, uv_cropped_px: np.ndarray) -> np.ndarray:
+        """(N, 2) cropped-image px -> (N, 2) full-image px (float)."""
+        uv = np.asarray(uv_cropped_px, dtype=np.float64)
+        return uv * self.downscale + np.array([self.u0, self.v0], dtype=np.float64)
+
+    def to_cropped(self, uv_full_px: np.ndarray) -> np.ndarray:
+        """(N, 2) full-image px -> (N, 2) cropped-image px (float)."""
+        uv = np.asarray(uv_full_px, dtype=np.float64)
+        return (uv - np.array([self.u0, self.v0], dtype=np.float64)) / self.downscale
+
+    def boxes_to_full(self, boxes_cropped_px: np.ndarray) -> np.ndarray:
+        """(N, 4) boxes ``u1 v1 u2 v2`` in cropped px -> full-image px (float32)."""
+        b = np.asarray(boxes_cropped_px, dtype=np.float32).reshape(-1, 4)
+        off = np.array([self.u0, self.v0, self.u0, self.v0], dtype=np.float32)
+        return b * np.float32(self.downscale) + off
+
+    # -- sensor_msgs/CameraInfo roi + binning ---------------------------------------
+    def camera_info_fields(self, image_width: int, image_height: int) -> dict:
+        """Fields of the ``image_cropped/camera_info`` message (plain values).
+
+        ``width``/``height`` are the FULL image size; ``roi`` the crop rectangle
+        in full-image px; ``binning_x/y`` the downscale factor.
+        """
+        return {
+            "width": int(image_width),
+            "height": int(image_height),
+            "binning_x": int(self.downscale),
+            "binning_y": int(self.downscale),
+            "roi": {
+                "x_offset": int(self.u0),
+                "y_offset": int(self.v0),
+                "width": int(self.width_full_px),
+                "height": int(self.height_full_px),
+                "do_rectify": False,
+            },
+        }
+
+    @classmethod
+    def from_camera_info(
+        cls, *, width: int, height: int, roi_x: int, roi_y: int, roi_w: int, roi_h: int, binning_x: int, binning_y: int
+    ) -> "CropSpec":
+        """Inverse of :meth:`camera_info_fields`.
+
+        Follows the CameraInfo convention: an all-zero roi means the full image;
+        binning 0 means 1. Raises ``ValueError`` for unequal binning.
+        """
+        bx = int(binning_x) or 1
+        by = int(binning_y) or 1
+        if bx != by:
+            raise ValueError(f"camera_info binning_x={bx} != binning_y={by}: only square downscale is supported")
+        if roi_w == 0 or roi_h == 0:
+            return cls(0, int(height), 0, int(width), bx)
+        return cls(int(roi_y), int(roi_y + roi_h), int(roi_x), int(roi_x + roi_w), bx)

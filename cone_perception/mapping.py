@@ -1,0 +1,76 @@
+"""Mapping stage: detected boxes (full-image px) -> cones in ``rear_axle`` metres.
+
+One call per frame: :meth:`ConeMapper.map_boxes` takes :data:`BOX_DTYPE`
+records, validates them, picks each class's foot point, maps it through the
+calibration's ``H_F_B`` and returns :data:`CONE_DTYPE` records with covariance.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .calib import Calibration
+from .classes import NUM_CLASSES
+from .errors import FrameError
+from .geometry import GroundMapper, foot_point_weights, foot_points
+from .records import BOX_DTYPE, CONE_DTYPE, boxes_to_arrays
+
+
+def validate_boxes(records: np.ndarray) -> None:
+    """Raise :class:`FrameError` for NaN/inf, ``u2 < u1``, ``v2 < v1`` or an unknown class id."""
+    if records.dtype != BOX_DTYPE:
+        records = records.astype(BOX_DTYPE)
+    b, s, c = boxes_to_arrays(records)
+    if not (np.all(np.isfinite(b)) and np.all(np.isfinite(s))):
+        i = int(np.flatnonzero(~(np.isfinite(b).all(axis=1) & np.isfinite(s)))[0])
+        raise FrameError("bad_box", f"box {i} has a non-finite value: {b[i].tolist()} score {s[i]}")
+    bad = np.flatnonzero((b[:, 2] < b[:, 0]) | (b[:, 3] < b[:, 1]))
+    if bad.size:
+        i = int(bad[0])
+        raise FrameError("bad_box", f"box {i} has u2 < u1 or v2 < v1: {b[i].tolist()}")
+    bad = np.flatnonzero(c >= NUM_CLASSES)
+    if bad.size:
+        raise FrameError("bad_class", f"box {int(bad[0])} has unknown class id {int(c[bad[0]])} (0..{NUM_CLASSES - 1})")
+
+
+class ConeMapper:
+    """Boxes -> cones for one calibrated camera."""
+
+    def __init__(self, calib: Calibration):
+        self.calib = calib
+        self.ground = GroundMapper(
+            calib.H_F_B,
+            calib.max_range_m,
+            (calib.pixel_sigma_u, calib.pixel_sigma_v),
+            calib.camera_matrix,
+            calib.dist_coeffs,
+        )
+        self._u_weights = foot_point_weights(calib.foot_points)
+
+    def foot_points(self, records: np.ndarray) -> np.ndarray:
+        """(N, 2) foot pixels of :data:`BOX_DTYPE` records, by each box's class rule."""
+        b, _, c = boxes_to_arrays(records)
+        return foot_points(b, c, self._u_weights)
+
+    def map_boxes(self, records: np.ndarray) -> np.ndarray:
+        """Validated :data:`BOX_DTYPE` records -> :data:`CONE_DTYPE` records.
+
+        Boxes whose foot point is above the horizon or beyond ``max_range_m``
+        are dropped (they are never published). Raises :class:`FrameError` for
+        a malformed box (the whole message is dropped by the caller).
+        """
+        validate_boxes(records)
+        if records.shape[0] == 0:
+            return np.zeros(0, dtype=CONE_DTYPE)
+        uv = self.foot_points(records)
+        xy, valid = self.ground.map_pixels(uv)
+        cov = self.ground.covariance(uv[valid])
+        out = np.zeros(int(valid.sum()), dtype=CONE_DTYPE)
+        out["x"] = xy[valid, 0]
+        out["y"] = xy[valid, 1]
+        out["class_id"] = records["class_id"][valid]
+        out["score"] = records["score"][valid]
+        out["cov_xx"] = cov[:, 0, 0]
+        out["cov_xy"] = cov[:, 0, 1]
+        out["cov_yy"] = cov[:, 1, 1]
+        return out

@@ -1,0 +1,151 @@
+"""Typed record arrays for the PointCloud2 topics, converted both ways here only.
+
+``cone_boxes`` and ``/cones`` travel as ``sensor_msgs/PointCloud2`` with height 1
+and one point per box / cone. In Python they are numpy structured arrays:
+
+* :data:`BOX_DTYPE`: ``u1 v1 u2 v2`` float32 (full-image px), ``score`` float32,
+  ``class_id`` uint8 (24 bytes a point, 4-byte aligned).
+* :data:`CONE_DTYPE`: ``x y z`` float32 (m, ``rear_axle``, z = 0), ``class_id``
+  uint8, ``score`` float32, ``cov_xx cov_xy cov_yy`` float32 (m^2) (32 bytes).
+
+The converters are duck-typed over the message classes, so the same code builds
+rclpy messages in the nodes and rosbags messages in the offline tools; this
+module imports neither.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .errors import FrameError
+
+BOX_DTYPE = np.dtype(
+    {
+        "names": ["u1", "v1", "u2", "v2", "score", "class_id"],
+        "formats": ["<f4", "<f4", "<f4", "<f4", "<f4", "u1"],
+        "offsets": [0, 4, 8, 12, 16, 20],
+        "itemsize": 24,
+    }
+)
+
+CONE_DTYPE = np.dtype(
+    {
+        "names": ["x", "y", "z", "class_id", "score", "cov_xx", "cov_xy", "cov_yy"],
+        "formats": ["<f4", "<f4", "<f4", "u1", "<f4", "<f4", "<f4", "<f4"],
+        "offsets": [0, 4, 8, 12, 16, 20, 24, 28],
+        "itemsize": 32,
+    }
+)
+
+# sensor_msgs/PointField datatype constants
+_PF_CODE = {
+    np.dtype("i1"): 1,
+    np.dtype("u1"): 2,
+    np.dtype("<i2"): 3,
+    np.dtype("<u2"): 4,
+    np.dtype("<i4"): 5,
+    np.dtype("<u4"): 6,
+    np.dtype("<f4"): 7,
+    np.dtype("<f8"): 8,
+}
+_PF_DTYPE = {code: dt for dt, code in _PF_CODE.items()}
+
+
+def empty(dtype: np.dtype, n: int = 0) -> np.ndarray:
+    """A zero-filled record array of ``n`` points."""
+    return np.zeros(n, dtype=dtype)
+
+
+def boxes_from_arrays(boxes_px: np.ndarray, scores: np.ndarray, class_ids: np.ndarray) -> np.ndarray:
+    """(N, 4) boxes, (N,) scores, (N,) class ids -> :data:`BOX_DTYPE` records."""
+    b = np.asarray(boxes_px, dtype=np.float32).reshape(-1, 4)
+    out = np.zeros(b.shape[0], dtype=BOX_DTYPE)
+    out["u1"], out["v1"], out["u2"], out["v2"] = b.T
+    out["score"] = np.asarray(scores, dtype=np.float32).reshape(-1)
+    out["class_id"] = np.asarray(class_ids).reshape(-1).astype(np.uint8)
+    return out
+
+
+def boxes_to_arrays(records: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:data:`BOX_DTYPE` records -> ((N, 4) float32 boxes, (N,) scores, (N,) int class ids)."""
+    b = np.stack([records["u1"], records["v1"], records["u2"], records["v2"]], axis=1).astype(np.float32)
+    return b.reshape(-1, 4), records["score"].astype(np.float32), records["class_id"].astype(np.int64)
+
+
+def point_fields(dtype: np.dtype) -> list[tuple[str, int, int, int]]:
+    """``(name, offset, datatype, count)`` of each field, in PointField terms."""
+    out = []
+    for name in dtype.names:
+        fdt, off = dtype.fields[name][:2]
+        out.append((name, int(off), _PF_CODE[fdt.newbyteorder("<") if fdt.byteorder == "=" else fdt], 1))
+    return out
+
+
+def _is_rosbags(cls: type) -> bool:
+    return hasattr(cls, "__msgtype__")
+
+
+def to_pointcloud2(records: np.ndarray, header: Any, cloud_cls: type, field_cls: type) -> Any:
+    """Record array -> PointCloud2 of the given message classes (rclpy or rosbags).
+
+    ``header`` is put in as it is (copy the image's header to keep its stamp).
+    """
+    records = np.ascontiguousarray(records)
+    dtype = records.dtype
+    rosbags = _is_rosbags(cloud_cls)
+    fields = [
+        field_cls(name=n, offset=o, datatype=d, count=c) for (n, o, d, c) in point_fields(dtype)
+    ]
+    raw = records.view(np.uint8).reshape(-1)
+    n = int(records.shape[0])
+    return cloud_cls(
+        header=header,
+        height=1,
+        width=n,
+        fields=fields,
+        is_bigendian=False,
+        point_step=dtype.itemsize,
+        row_step=dtype.itemsize * n,
+        data=raw.copy() if rosbags else raw.tobytes(),
+        is_dense=True,
+    )
+
+
+def from_pointcloud2(msg: Any, dtype: np.dtype) -> np.ndarray:
+    """PointCloud2 (rclpy or rosbags) -> record array of ``dtype``.
+
+    Fields are found by name, so a cloud with other offsets or extra fields is
+    read correctly. Raises :class:`FrameError` naming the missing or mistyped
+    field, a big-endian cloud, or a ``data`` shorter than the points need.
+    """
+    if msg.is_bigendian:
+        raise FrameError("bad_cloud", "big-endian PointCloud2 is not supported")
+    n = int(msg.width) * int(msg.height)
+    step = int(msg.point_step)
+    by_name = {f.name: f for f in msg.fields}
+    layout = {"names": [], "formats": [], "offsets": [], "itemsize": max(step, 1)}
+    for name in dtype.names:
+        f = by_name.get(name)
+        if f is None:
+            raise FrameError("bad_cloud", f"PointCloud2 has no field {name!r} (fields: {sorted(by_name)})")
+        want = dtype.fields[name][0]
+        got = _PF_DTYPE.get(int(f.datatype))
+        if got is None or got.kind != want.kind:
+            raise FrameError("bad_cloud", f"PointCloud2 field {name!r} has datatype {f.datatype}, expected {want}")
+        if int(f.offset) + got.itemsize > step:
+            raise FrameError("bad_cloud", f"PointCloud2 field {name!r} at offset {f.offset} exceeds point_step {step}")
+        layout["names"].append(name)
+        layout["formats"].append(got)
+        layout["offsets"].append(int(f.offset))
+    buf = np.frombuffer(msg.data, dtype=np.uint8) if not isinstance(msg.data, np.ndarray) else msg.data.view(np.uint8)
+    if n == 0:
+        return np.zeros(0, dtype=dtype)
+    if buf.size < n * step:
+        raise FrameError("bad_cloud", f"PointCloud2 data has {buf.size} bytes, {n} points of {step} need {n * step}")
+    src = np.frombuffer(buf[: n * step].tobytes(), dtype=np.dtype(layout))
+    out = np.zeros(n, dtype=dtype)
+    for name in dtype.names:
+        out[name] = src[name]
+    return out

@@ -1,0 +1,70 @@
+"""Where the package's shipped files are: ``calib/``, ``models/``, ``launch_configs/``.
+
+Looked up in this order: the source checkout (editable install, tests), the
+install prefix's ``share/cone_perception`` (pip or colcon install), the ament
+index (a sourced ROS 2 workspace).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from functools import lru_cache
+from pathlib import Path
+
+PACKAGE_NAME = "cone_perception"
+PACKAGE_DIR = Path(__file__).resolve().parent
+
+
+@lru_cache(maxsize=1)
+def share_dir() -> Path:
+    """Directory holding ``calib/``, ``models/`` and ``launch_configs/``."""
+    repo = PACKAGE_DIR.parent
+    if (repo / "package.xml").is_file() and (repo / "calib").is_dir():
+        return repo
+    candidates = [Path(sys.prefix) / "share" / PACKAGE_NAME]
+    # colcon installs the package under <prefix>/lib/pythonX.Y/site-packages
+    for parent in PACKAGE_DIR.parents:
+        candidates.append(parent / "share" / PACKAGE_NAME)
+    for c in candidates:
+        if (c / "calib").is_dir():
+            return c
+    try:  # a sourced ROS 2 workspace
+        from ament_index_python.packages import get_package_share_directory
+
+        return Path(get_package_share_directory(PACKAGE_NAME))
+    except Exception:  # noqa: BLE001 - any failure means "not there"
+        pass
+    raise FileNotFoundError(
+        f"cannot find the {PACKAGE_NAME} share directory (calib/, models/); looked in {repo} and "
+        + ", ".join(str(c) for c in candidates[:3])
+    )
+
+
+def calib_dir() -> Path:
+    return share_dir() / "calib"
+
+
+def models_dir() -> Path:
+    return share_dir() / "models"
+
+
+def launch_dir() -> Path:
+    return share_dir() / "launch_configs"
+
+
+def dds_profile_path() -> Path:
+    """The shipped Fast DDS profile (shared memory 64 MiB + UDP on 127.0.0.1)."""
+    return PACKAGE_DIR / "config" / "fastdds_localhost_shm.xml"
+
+
+def resolve_in(directory: Path, name_or_path: str | os.PathLike, suffixes: tuple[str, ...]) -> Path:
+    """An existing path as given, else ``directory/name`` with one of ``suffixes``."""
+    p = Path(name_or_path).expanduser()
+    if p.is_file() or p.parent != Path("."):
+        return p
+    for suffix in ("",) + suffixes:
+        cand = directory / f"{p.name}{suffix}"
+        if cand.is_file():
+            return cand
+    return p
