@@ -1,0 +1,89 @@
+"""Architecture config of the detector: one plain dataclass, and the named sizes.
+
+Channels are given per stage, already scaled (no hidden width multiplier at build
+time), so a config reads as what is built. ``n`` matches YOLO11n in width and
+depth (16-32-64-128-256 channels, one bottleneck per CSP block); ``p`` ("pico")
+is the cone-sized model: few channels at high resolution, a lighter head and
+fewer DFL bins, for >= 2x the frames/s of ``n`` on CPU.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, fields
+
+from ..classes import NUM_CLASSES
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    """What :class:`~cone_perception.model.yolo.ConeYOLO` builds.
+
+    ``channels``: output channels of stem (stride 2) and the stages at strides
+    4, 8, 16, 32. ``depths``: bottlenecks per CSP block at strides 4, 8, 16, 32
+    (the neck's blocks use ``neck_depth``). ``head_reg_ch``/``head_cls_ch``:
+    width of the box and class branches of the head (0 = YOLOv8 rule).
+    ``reg_max``: DFL bins per box side. ``head_dw``: depth-wise class branch
+    (YOLO11 style).
+    """
+
+    name: str = "n"
+    channels: tuple[int, int, int, int, int] = (16, 32, 64, 128, 256)
+    depths: tuple[int, int, int, int] = (1, 1, 1, 1)
+    neck_depth: int = 1
+    head_reg_ch: int = 0
+    head_cls_ch: int = 0
+    head_dw: bool = True
+    reg_max: int = 16
+    num_classes: int = NUM_CLASSES
+    strides: tuple[int, ...] = field(default=(8, 16, 32))
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "ModelConfig":
+        """Inverse of :meth:`to_dict`; raises ``ValueError`` naming unknown or bad keys."""
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise ValueError(f"unknown architecture keys {unknown}; known: {sorted(known)}")
+        kw = {k: (tuple(v) if isinstance(v, list) else v) for k, v in d.items()}
+        cfg = cls(**kw)
+        cfg.validate()
+        return cfg
+
+    def validate(self) -> None:
+        if len(self.channels) != 5 or any(int(c) <= 0 for c in self.channels):
+            raise ValueError(f"channels must be 5 positive ints, got {self.channels}")
+        if len(self.depths) != 4 or any(int(d) < 0 for d in self.depths):
+            raise ValueError(f"depths must be 4 ints >= 0, got {self.depths}")
+        if tuple(self.strides) != (8, 16, 32):
+            raise ValueError(f"strides must be (8, 16, 32), got {self.strides}")
+        if not 1 <= self.reg_max <= 32:
+            raise ValueError(f"reg_max must be 1..32, got {self.reg_max}")
+        if self.num_classes < 1:
+            raise ValueError(f"num_classes must be >= 1, got {self.num_classes}")
+
+
+#: Named sizes. ``n``: YOLO11n width/depth. ``p``: the car's default (smaller, faster).
+MODEL_SIZES: dict[str, ModelConfig] = {
+    "n": ModelConfig(name="n", channels=(16, 32, 64, 128, 256), depths=(1, 1, 1, 1), neck_depth=1, reg_max=16),
+    "p": ModelConfig(
+        name="p",
+        channels=(8, 16, 32, 64, 128),
+        depths=(1, 1, 1, 1),
+        neck_depth=1,
+        head_reg_ch=32,
+        head_cls_ch=32,
+        reg_max=8,
+    ),
+}
+
+
+def model_config(size: str, num_classes: int = NUM_CLASSES) -> ModelConfig:
+    """The named size ``size`` with ``num_classes`` classes; ``KeyError`` names the sizes."""
+    if size not in MODEL_SIZES:
+        raise KeyError(f"unknown model size {size!r}; known: {sorted(MODEL_SIZES)}")
+    d = MODEL_SIZES[size].to_dict()
+    d["num_classes"] = int(num_classes)
+    return ModelConfig.from_dict(d)

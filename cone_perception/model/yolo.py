@@ -1,0 +1,59 @@
+"""The detector: backbone + neck + head, built from a :class:`ModelConfig`."""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from .backbone import CSPBackbone
+from .blocks import Conv, fuse_conv_bn
+from .config import ModelConfig
+from .decode import decode_outputs
+from .head import DecoupledHead
+from .neck import PAFPN
+
+
+class ConeYOLO(nn.Module):
+    """YOLO-style single-stage cone detector.
+
+    ``forward(x)``: x (B, 3, H, W) float RGB in 0..1, H and W multiples of 32.
+    Training mode returns the raw head output (list per stride); eval mode
+    returns (B, 4 + nc, N): cx, cy, w, h in input px, then class scores (the
+    common YOLO export layout).
+    """
+
+    def __init__(self, cfg: ModelConfig):
+        super().__init__()
+        cfg.validate()
+        self.cfg = cfg
+        self.backbone = CSPBackbone(cfg.channels, cfg.depths)
+        self.neck = PAFPN(self.backbone.out_channels, cfg.neck_depth)
+        self.head = DecoupledHead(
+            self.backbone.out_channels, cfg.num_classes, cfg.reg_max, cfg.strides,
+            reg_ch=cfg.head_reg_ch, cls_ch=cfg.head_cls_ch, dw=cfg.head_dw,
+        )
+        self.strides = tuple(cfg.strides)
+        self.fused = False
+
+    def forward_raw(self, x: torch.Tensor) -> list[torch.Tensor]:
+        return self.head(self.neck(self.backbone(x)))
+
+    def forward(self, x: torch.Tensor):
+        feats = self.forward_raw(x)
+        if self.training:
+            return feats
+        return decode_outputs(feats, self.strides, self.cfg.reg_max, self.cfg.num_classes)
+
+    @torch.no_grad()
+    def fuse(self) -> "ConeYOLO":
+        """Fold every batch-norm into its convolution (inference only; in place)."""
+        for m in self.modules():
+            if isinstance(m, Conv) and hasattr(m, "bn"):
+                m.conv = fuse_conv_bn(m.conv, m.bn)
+                del m.bn
+                m.forward = m.forward_fused
+        self.fused = True
+        return self
+
+    def num_params(self) -> int:
+        return sum(p.numel() for p in self.parameters())
