@@ -1,0 +1,139 @@
+"""The detector checkpoint: one file with weights, architecture, class names,
+input size, training-data summary and metrics; validated on load.
+
+Layout (a ``torch.save`` dict)::
+
+    format: "cone_perception.detector", version: 1
+    arch: ModelConfig.to_dict()        class_names: [str] (model class order)
+    imgsz: [W, H] (input px)           state_dict: weights (EMA when trained)
+    data: {...} training data summary  metrics: {...} validation metrics
+    train: {...} optimizer / RNG state for exact resume (``last.pt`` only)
+"""
+
+from __future__ import annotations
+
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from .classes import CLASS_NAMES, class_id_from_name
+from .errors import ConfigError
+from .model import ConeYOLO, ModelConfig
+
+FORMAT = "cone_perception.detector"
+VERSION = 1
+REQUIRED_KEYS = ("format", "version", "arch", "class_names", "imgsz", "state_dict")
+
+RESTORE_HINT = (
+    "restore the shipped file with `git checkout models/` or train one with `cone-perception train` "
+    "(see README)"
+)
+
+
+@dataclass
+class Checkpoint:
+    cfg: ModelConfig
+    class_names: list[str]
+    imgsz: tuple[int, int]  # (W, H) input px
+    state_dict: dict[str, torch.Tensor]
+    data: dict = field(default_factory=dict)
+    metrics: dict = field(default_factory=dict)
+    train: dict | None = None
+    path: str = ""
+
+    def build_model(self) -> ConeYOLO:
+        """The model with these weights (eval mode, not fused)."""
+        model = ConeYOLO(self.cfg)
+        try:
+            model.load_state_dict(self.state_dict, strict=True)
+        except RuntimeError as e:
+            first = str(e).splitlines()[0:3]
+            raise ConfigError(self.path, "state_dict", f"weights do not fit architecture {self.cfg.name!r}: {' '.join(first)}") from e
+        return model.eval()
+
+
+def class_map_from_names(names: list[str], source: str) -> list[int]:
+    """Project class id per model class; :class:`ConfigError` names a name that does not map."""
+    out = []
+    for i, n in enumerate(names):
+        try:
+            out.append(class_id_from_name(n))
+        except KeyError as e:
+            raise ConfigError(source, f"class_names[{i}]", str(e.args[0])) from e
+    return out
+
+
+def save_checkpoint(
+    path: str | Path,
+    model: torch.nn.Module,
+    imgsz: tuple[int, int],
+    class_names: list[str] | tuple[str, ...] = CLASS_NAMES,
+    data: dict | None = None,
+    metrics: dict | None = None,
+    train: dict | None = None,
+) -> None:
+    """Write ``model`` (a :class:`ConeYOLO`, not fused) and its description to ``path`` (atomic)."""
+    if getattr(model, "fused", False):
+        raise ValueError("cannot save a fused model: save the training model")
+    obj: dict[str, Any] = {
+        "format": FORMAT,
+        "version": VERSION,
+        "arch": model.cfg.to_dict(),
+        "class_names": list(class_names),
+        "imgsz": [int(imgsz[0]), int(imgsz[1])],
+        "state_dict": {k: v.detach().cpu().clone() for k, v in model.state_dict().items()},
+        "data": data or {},
+        "metrics": metrics or {},
+    }
+    if train is not None:
+        obj["train"] = train
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    torch.save(obj, tmp)
+    tmp.replace(path)
+
+
+def load_checkpoint(path: str | Path) -> Checkpoint:
+    """Read and validate a checkpoint; every problem is a :class:`ConfigError` naming file and field."""
+    src = str(path)
+    p = Path(path)
+    if not p.is_file():
+        raise ConfigError(src, None, f"model file not found; {RESTORE_HINT}")
+    try:
+        obj = torch.load(p, map_location="cpu", weights_only=False)
+    except (RuntimeError, EOFError, zipfile.BadZipFile, OSError, ValueError, AttributeError, ModuleNotFoundError) as e:
+        raise ConfigError(src, None, f"not a readable checkpoint (truncated or corrupt: {type(e).__name__}: {e}); {RESTORE_HINT}") from e
+    if not isinstance(obj, dict) or obj.get("format") != FORMAT:
+        raise ConfigError(src, "format", f"not a cone_perception detector checkpoint (expected format {FORMAT!r})")
+    missing = [k for k in REQUIRED_KEYS if k not in obj]
+    if missing:
+        raise ConfigError(src, missing[0], f"missing from checkpoint (required: {', '.join(REQUIRED_KEYS)})")
+    if obj["version"] != VERSION:
+        raise ConfigError(src, "version", f"checkpoint version {obj['version']} is not supported (this code reads {VERSION})")
+    try:
+        cfg = ModelConfig.from_dict(dict(obj["arch"]))
+    except (ValueError, TypeError) as e:
+        raise ConfigError(src, "arch", str(e)) from e
+    names = [str(n) for n in obj["class_names"]]
+    if len(names) != cfg.num_classes:
+        raise ConfigError(src, "class_names", f"{len(names)} names for a model of {cfg.num_classes} classes")
+    class_map_from_names(names, src)
+    imgsz = obj["imgsz"]
+    if len(imgsz) != 2 or any(int(v) <= 0 or int(v) % 32 for v in imgsz):
+        raise ConfigError(src, "imgsz", f"must be [W, H], positive multiples of 32, got {imgsz}")
+    ck = Checkpoint(
+        cfg=cfg,
+        class_names=names,
+        imgsz=(int(imgsz[0]), int(imgsz[1])),
+        state_dict=obj["state_dict"],
+        data=dict(obj.get("data") or {}),
+        metrics=dict(obj.get("metrics") or {}),
+        train=obj.get("train"),
+        path=src,
+    )
+    ck.build_model()  # validates the weights against the architecture
+    return ck

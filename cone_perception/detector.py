@@ -1,0 +1,351 @@
+"""Run the cone detector on images: backends, pre- and post-processing.
+
+    det = Detector.load(default_model_path(), backend="torch")   # or "torchscript", "onnx"
+    det.warmup()
+    boxes = det.detect(bgr_cropped, crop)    # BOX_DTYPE records, FULL-image px
+    det.timing                                # last frame's preprocess / forward / postprocess ms
+
+Model files:
+
+* our checkpoint (``*.pt``, see :mod:`.checkpoint`): any backend; TorchScript
+  and ONNX Runtime are built from it at load time for the checkpoint's input size;
+* TorchScript (``*.torchscript``, ``*.ts``) or ONNX (``*.onnx``) exported by us or
+  by other YOLO tools: output ``(1, 4 + nc, N)`` (cx, cy, w, h in input px, then
+  class scores), RGB 0..1 NCHW input, with a YAML sidecar next to it
+  (``<stem>.yaml``: ``names:`` list or {id: name}, optional ``imgsz: [W, H]``).
+
+The network input is the cropped band as it is (the car's 960x288); an image
+whose size is not a multiple of 32 is padded right / bottom (said once). Fixed
+size backends (TorchScript, ONNX) letterbox other sizes to their input size.
+"""
+
+from __future__ import annotations
+
+import io
+import logging
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import cv2
+import numpy as np
+import torch
+import yaml
+
+from . import records
+from .checkpoint import RESTORE_HINT, Checkpoint, class_map_from_names, load_checkpoint
+from .crop import CropSpec
+from .errors import ConfigError
+from .model.decode import postprocess
+from .resources import models_dir
+
+log = logging.getLogger(__name__)
+
+#: File name of the shipped default model under ``models/``.
+DEFAULT_MODEL_NAME = "cone_detector.pt"
+BACKENDS = ("torch", "torchscript", "onnx")
+PAD_VALUE = 114
+
+
+def default_model_path() -> Path:
+    """``models/cone_detector.pt`` of the installed package (may not exist yet)."""
+    return models_dir() / DEFAULT_MODEL_NAME
+
+
+def round_up32(n: int) -> int:
+    return int(-(-int(n) // 32) * 32)
+
+
+@dataclass(frozen=True)
+class Letterbox:
+    """How an image was fitted into the network input: scale, then pad right / bottom."""
+
+    scale: float
+    in_w: int
+    in_h: int
+
+    def boxes_to_image(self, boxes_in_px: np.ndarray, image_w: int, image_h: int) -> np.ndarray:
+        """(N, 4) boxes in network-input px -> image px, clipped to the image (float32)."""
+        b = np.asarray(boxes_in_px, dtype=np.float32).reshape(-1, 4) / np.float32(self.scale)
+        b[:, 0::2] = b[:, 0::2].clip(0, image_w)
+        b[:, 1::2] = b[:, 1::2].clip(0, image_h)
+        return b
+
+
+def letterbox(img: np.ndarray, in_w: int, in_h: int) -> tuple[np.ndarray, Letterbox]:
+    """Fit ``img`` (h, w, 3) into (in_h, in_w, 3): scale to fit, pad right / bottom with grey."""
+    h, w = img.shape[:2]
+    r = min(in_w / w, in_h / h)
+    if abs(r - 1.0) > 1e-9:
+        nw, nh = min(in_w, round(w * r)), min(in_h, round(h * r))
+        img = cv2.resize(img, (nw, nh), interpolation=cv2.INTER_LINEAR if r > 1 else cv2.INTER_AREA)
+    else:
+        r = 1.0
+    h2, w2 = img.shape[:2]
+    if (h2, w2) != (in_h, in_w):
+        img = cv2.copyMakeBorder(img, 0, in_h - h2, 0, in_w - w2, cv2.BORDER_CONSTANT, value=(PAD_VALUE,) * 3)
+    return img, Letterbox(r, in_w, in_h)
+
+
+# -- backends: (1, 3, H, W) float32 RGB 0..1 -> (4 + nc, N) float32 numpy --------------------------
+
+
+class _TorchRunner:
+    def __init__(self, module: Callable, device: str, fp16: bool, channels_last: bool):
+        self.module, self.device, self.fp16, self.channels_last = module, torch.device(device), fp16, channels_last
+
+    def __call__(self, blob: np.ndarray) -> np.ndarray:
+        x = torch.from_numpy(blob).to(self.device)
+        if self.channels_last:
+            x = x.contiguous(memory_format=torch.channels_last)
+        if self.fp16:
+            x = x.half()
+        with torch.inference_mode():
+            y = self.module(x)
+        if isinstance(y, (list, tuple)):
+            y = y[0]
+        return y[0].float().cpu().numpy()
+
+
+class _OrtRunner:
+    def __init__(self, session):
+        self.session = session
+        self.input_name = session.get_inputs()[0].name
+        self.fp16 = session.get_inputs()[0].type == "tensor(float16)"
+
+    def __call__(self, blob: np.ndarray) -> np.ndarray:
+        x = blob.astype(np.float16) if self.fp16 else blob
+        return np.asarray(self.session.run(None, {self.input_name: x})[0][0], dtype=np.float32)
+
+
+def _ort_session(model_bytes_or_path, device: str, threads: int | None, source: str):
+    try:
+        import onnxruntime as ort
+    except ImportError as e:  # optional dependency
+        raise ConfigError(source, "backend", "backend 'onnx' needs the onnxruntime package (pip install onnxruntime)") from e
+    so = ort.SessionOptions()
+    if threads:
+        so.intra_op_num_threads = int(threads)
+        so.inter_op_num_threads = 1
+    so.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
+    providers = ["CPUExecutionProvider"]
+    if device.startswith("cuda") and "CUDAExecutionProvider" in ort.get_available_providers():
+        providers.insert(0, "CUDAExecutionProvider")
+    try:
+        return ort.InferenceSession(model_bytes_or_path, sess_options=so, providers=providers)
+    except Exception as e:  # noqa: BLE001 - onnxruntime raises its own exception types
+        raise ConfigError(source, None, f"ONNX Runtime cannot load the model: {e}") from e
+
+
+def read_sidecar(model_path: Path) -> tuple[list[str], tuple[int, int] | None]:
+    """Class names and optional input size from ``<stem>.yaml`` next to an exported model."""
+    side = model_path.with_suffix(".yaml")
+    if not side.is_file():
+        raise ConfigError(str(side), None, f"class-name sidecar of {model_path.name} not found (write `names: [blue_cone, ...]`)")
+    try:
+        doc = yaml.safe_load(side.read_text()) or {}
+    except yaml.YAMLError as e:
+        raise ConfigError(str(side), None, f"not valid YAML: {e}") from e
+    names = doc.get("names") if isinstance(doc, dict) else None
+    if isinstance(names, dict):
+        try:
+            names = [names[k] for k in sorted(names, key=int)]
+        except (ValueError, TypeError) as e:
+            raise ConfigError(str(side), "names", f"dict keys must be class indices 0..n-1: {e}") from e
+    if not isinstance(names, list) or not names:
+        raise ConfigError(str(side), "names", "must be a non-empty list of class names (or {index: name})")
+    imgsz = doc.get("imgsz")
+    if imgsz is not None:
+        if not (isinstance(imgsz, (list, tuple)) and len(imgsz) == 2 and all(int(v) > 0 and int(v) % 32 == 0 for v in imgsz)):
+            raise ConfigError(str(side), "imgsz", f"must be [W, H], positive multiples of 32, got {imgsz}")
+        imgsz = (int(imgsz[0]), int(imgsz[1]))
+    return [str(n) for n in names], imgsz
+
+
+def write_sidecar(model_path: Path, class_names: list[str], imgsz: tuple[int, int], extra: dict | None = None) -> Path:
+    side = Path(model_path).with_suffix(".yaml")
+    doc = {"names": list(class_names), "imgsz": [int(imgsz[0]), int(imgsz[1])], **(extra or {})}
+    side.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return side
+
+
+class Detector:
+    """A loaded detector: image in, :data:`records.BOX_DTYPE` boxes out."""
+
+    def __init__(
+        self,
+        run: Callable[[np.ndarray], np.ndarray],
+        class_map: list[int],
+        imgsz: tuple[int, int],
+        fixed_size: bool,
+        backend: str,
+        source: str,
+        conf: float = 0.25,
+        iou: float = 0.45,
+        max_det: int = 300,
+        checkpoint: Checkpoint | None = None,
+    ):
+        self._run = run
+        self.class_map = np.asarray(class_map, dtype=np.uint8)
+        self.num_classes = len(class_map)
+        self.imgsz = (int(imgsz[0]), int(imgsz[1]))
+        self.fixed_size = fixed_size
+        self.backend = backend
+        self.source = source
+        self.conf, self.iou, self.max_det = float(conf), float(iou), int(max_det)
+        self.checkpoint = checkpoint
+        self.timing: dict[str, float] = {"preprocess_ms": 0.0, "forward_ms": 0.0, "postprocess_ms": 0.0}
+        self._said: set[tuple] = set()
+        self._checked_output = False
+
+    # -- loading -----------------------------------------------------------------------------
+    @classmethod
+    def load(
+        cls,
+        path: str | Path,
+        backend: str = "torch",
+        device: str = "cpu",
+        fp16: bool = False,
+        conf: float = 0.25,
+        iou: float = 0.45,
+        max_det: int = 300,
+        imgsz: tuple[int, int] | None = None,
+        threads: int | None = None,
+    ) -> "Detector":
+        """Load a model file for ``backend`` (see module doc). ``imgsz`` (W, H) overrides the input
+        size of fixed-size backends; ``threads`` sets torch / ONNX Runtime intra-op threads."""
+        path = Path(path)
+        src = str(path)
+        if backend not in BACKENDS:
+            raise ConfigError(src, "backend", f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
+        if device.startswith("cuda") and not torch.cuda.is_available():
+            raise ConfigError(src, "device", f"device {device!r} requested but CUDA is not available")
+        if fp16 and not device.startswith("cuda"):
+            raise ConfigError(src, "fp16", "fp16 needs a CUDA device (CPU half precision is slower than fp32)")
+        if threads:
+            torch.set_num_threads(int(threads))
+        if not path.is_file():
+            raise ConfigError(src, None, f"model file not found; {RESTORE_HINT}")
+        kw = dict(conf=conf, iou=iou, max_det=max_det)
+        suffix = path.suffix.lower()
+        if suffix in (".torchscript", ".ts", ".onnx"):
+            names, side_imgsz = read_sidecar(path)
+            class_map = class_map_from_names(names, str(path.with_suffix(".yaml")))
+            if suffix == ".onnx":
+                if backend != "onnx":
+                    raise ConfigError(src, "backend", f"an ONNX file runs with backend 'onnx', not {backend!r}")
+                sess = _ort_session(str(path), device, threads, src)
+                size = imgsz or side_imgsz or _onnx_input_size(sess, src)
+                det = cls(_OrtRunner(sess), class_map, size, True, "onnx", src, **kw)
+            else:
+                if backend != "torchscript":
+                    raise ConfigError(src, "backend", f"a TorchScript file runs with backend 'torchscript', not {backend!r}")
+                try:
+                    module = torch.jit.load(str(path), map_location=device).eval()
+                except (RuntimeError, ValueError) as e:
+                    raise ConfigError(src, None, f"not a readable TorchScript file: {e}") from e
+                if fp16:
+                    module = module.half()
+                size = imgsz or side_imgsz
+                if size is None:
+                    raise ConfigError(str(path.with_suffix(".yaml")), "imgsz", "TorchScript models need imgsz: [W, H] in the sidecar")
+                det = cls(_TorchRunner(module, device, fp16, False), class_map, size, True, "torchscript", src, **kw)
+            det._check_output_shape()
+            return det
+
+        ck = load_checkpoint(path)
+        class_map = class_map_from_names(ck.class_names, src)
+        size = tuple(imgsz) if imgsz else ck.imgsz
+        model = ck.build_model()
+        if backend == "onnx":
+            from .export import onnx_bytes
+
+            sess = _ort_session(onnx_bytes(model, size), device, threads, src)
+            return cls(_OrtRunner(sess), class_map, size, True, "onnx", src, checkpoint=ck, **kw)
+        model = model.fuse().to(device)
+        if fp16:
+            model = model.half()
+        if backend == "torchscript":
+            from .export import trace
+
+            module = trace(model, size, device=device, fp16=fp16)
+            return cls(_TorchRunner(module, device, fp16, False), class_map, size, True, "torchscript", src, checkpoint=ck, **kw)
+        model = model.to(memory_format=torch.channels_last)
+        return cls(_TorchRunner(model, device, fp16, True), class_map, size, False, "torch", src, checkpoint=ck, **kw)
+
+    def _check_output_shape(self) -> None:
+        """Run one blank input; an output that is not (4 + nc, N) is a :class:`ConfigError`."""
+        w, h = self.imgsz
+        try:
+            out = self._run(np.zeros((1, 3, h, w), np.float32))
+        except Exception as e:  # noqa: BLE001 - foreign models fail in many ways
+            raise ConfigError(self.source, None, f"model does not run on a (1, 3, {h}, {w}) input: {e}") from e
+        if out.ndim != 2 or out.shape[0] != 4 + self.num_classes:
+            raise ConfigError(
+                self.source, "output",
+                f"expected output (1, 4 + {self.num_classes}, N) for {self.num_classes} classes, got (1, {', '.join(map(str, out.shape))})",
+            )
+
+    # -- running -----------------------------------------------------------------------------
+    def warmup(self, n: int = 3) -> None:
+        """Run ``n`` blank frames at the input size (first-call allocations, JIT)."""
+        w, h = self.imgsz
+        for _ in range(n):
+            self._run(np.zeros((1, 3, h, w), np.float32))
+
+    def _say_once(self, key: tuple, msg: str) -> None:
+        if key not in self._said:
+            self._said.add(key)
+            log.warning(msg)
+
+    def input_size_for(self, w: int, h: int) -> tuple[int, int]:
+        """Network input (W, H) used for an image of w x h as it is (no scaling if possible)."""
+        if self.fixed_size:
+            return self.imgsz
+        return round_up32(w), round_up32(h)
+
+    def infer(self, bgr: np.ndarray, in_size: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Detect in a BGR image (h, w, 3) uint8 -> ((K, 4) float32 x1 y1 x2 y2 in THIS image's px,
+        (K,) float32 scores, (K,) uint8 project class ids). Fills :attr:`timing`."""
+        if bgr.ndim != 3 or bgr.shape[2] != 3 or bgr.dtype != np.uint8:
+            raise ValueError(f"expected a (h, w, 3) uint8 BGR image, got {bgr.shape} {bgr.dtype}")
+        t0 = time.perf_counter()
+        h, w = bgr.shape[:2]
+        in_w, in_h = in_size or self.input_size_for(w, h)
+        if (in_w, in_h) != (w, h):
+            if not self.fixed_size:
+                self._say_once(("pad", w, h), f"image {w}x{h} is not a multiple of 32: padded to {in_w}x{in_h}")
+            elif in_size is None:
+                self._say_once(("fit", w, h), f"image {w}x{h} letterboxed to the model input {in_w}x{in_h}")
+        img, lb = letterbox(bgr, in_w, in_h)
+        blob = cv2.dnn.blobFromImage(img, 1.0 / 255.0, swapRB=True)  # (1, 3, H, W) float32 RGB
+        t1 = time.perf_counter()
+        pred = self._run(blob)
+        t2 = time.perf_counter()
+        boxes, scores, cls = postprocess(pred, self.conf, self.iou, self.max_det)
+        boxes = lb.boxes_to_image(boxes, w, h)
+        t3 = time.perf_counter()
+        self.timing = {"preprocess_ms": (t1 - t0) * 1e3, "forward_ms": (t2 - t1) * 1e3, "postprocess_ms": (t3 - t2) * 1e3}
+        return boxes, scores, self.class_map[cls]
+
+    def detect(self, bgr_cropped: np.ndarray, crop: CropSpec) -> np.ndarray:
+        """Boxes in a cropped (and downscaled) band -> :data:`records.BOX_DTYPE`, FULL-image px."""
+        boxes, scores, cls = self.infer(bgr_cropped)
+        return records.boxes_from_arrays(crop.boxes_to_full(boxes), scores, cls)
+
+    def detect_image(self, bgr: np.ndarray) -> np.ndarray:
+        """Boxes in an arbitrary image, letterboxed to the model input size -> records in its px."""
+        boxes, scores, cls = self.infer(bgr, in_size=self.imgsz)
+        return records.boxes_from_arrays(boxes, scores, cls)
+
+    def raw(self, blob: np.ndarray) -> np.ndarray:
+        """(1, 3, H, W) float32 RGB 0..1 -> (4 + nc, N) network output (for tests and export checks)."""
+        return self._run(np.ascontiguousarray(blob, dtype=np.float32))
+
+
+def _onnx_input_size(sess, source: str) -> tuple[int, int]:
+    shape = sess.get_inputs()[0].shape
+    if len(shape) != 4 or not all(isinstance(v, int) for v in shape[2:]):
+        raise ConfigError(source, "imgsz", f"ONNX input shape {shape} is dynamic: give imgsz: [W, H] in the sidecar")
+    return int(shape[3]), int(shape[2])
