@@ -1,0 +1,273 @@
+"""The training loop: one function, :func:`train`, readable from batch to optimizer step.
+
+Per iteration: images -> model -> loss (task-aligned assignment inside) ->
+backward -> clip -> optimizer step -> EMA update; learning rate warm-up then
+cosine. Per epoch: validation mAP of the EMA model, ``last.pt`` (with the
+optimizer and RNG state for exact resume) and ``best.pt``, early stop.
+"""
+
+from __future__ import annotations
+
+import copy
+import csv
+import logging
+import math
+import random
+import time
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch.utils.data import DataLoader
+from tqdm import tqdm
+
+from ..checkpoint import load_checkpoint, save_checkpoint
+from ..classes import CLASS_NAMES
+from ..errors import ConfigError
+from ..metrics import ImageDetections, coco_map
+from ..model import ConeYOLO, MODEL_SIZES, model_config
+from ..model.decode import postprocess
+from ..model.loss import DetectionLoss
+from .augment import AugmentConfig
+from .datasets import load_data_yaml
+from .loader import EpochSampler, TrainSet, ValSet, collate
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class TrainConfig:
+    data: str
+    out: str
+    model: str = "p"  # a size name (see model.MODEL_SIZES) or a checkpoint to fine-tune
+    epochs: int = 100
+    batch: int = 16
+    imgsz: tuple[int, int] = (960, 288)  # (W, H) input px, multiples of 32
+    optimizer: str = "adamw"  # or "sgd"
+    lr0: float = 0.002
+    lrf: float = 0.01  # final lr = lr0 * lrf
+    momentum: float = 0.937
+    weight_decay: float = 5e-4
+    warmup_epochs: float = 1.0
+    warmup_min_iters: int = 20
+    ema_decay: float = 0.9999
+    ema_tau: float = 200.0  # EMA ramp: decay * (1 - exp(-updates / tau))
+    patience: int = 30  # early stop after this many epochs without a better fitness
+    workers: int = 2
+    threads: int = 2
+    seed: int = 0
+    close_mosaic: int = 5  # last N epochs without mosaic
+    max_batches: int = 0  # > 0: cap on batches per epoch (quick runs)
+    val_conf: float = 0.001
+    val_iou: float = 0.6
+    augment: AugmentConfig = field(default_factory=AugmentConfig)
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["imgsz"] = list(self.imgsz)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "TrainConfig":
+        d = dict(d)
+        aug = d.pop("augment", None) or {}
+        aug = AugmentConfig(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in aug.items()})
+        known = {f.name for f in fields(cls)}
+        return cls(augment=aug, **{k: (tuple(v) if k == "imgsz" else v) for k, v in d.items() if k in known})
+
+
+class ModelEMA:
+    """Exponential moving average of a model's weights (and buffers), with a warm-up ramp."""
+
+    def __init__(self, model: torch.nn.Module, decay: float, tau: float, updates: int = 0):
+        self.ema = copy.deepcopy(model).eval().requires_grad_(False)
+        self.decay, self.tau, self.updates = decay, tau, updates
+
+    @torch.no_grad()
+    def update(self, model: torch.nn.Module) -> None:
+        self.updates += 1
+        d = self.decay * (1 - math.exp(-self.updates / self.tau))
+        msd = model.state_dict()
+        for k, v in self.ema.state_dict().items():
+            if v.dtype.is_floating_point:
+                v.mul_(d).add_(msd[k].detach(), alpha=1 - d)
+            else:
+                v.copy_(msd[k])
+
+
+def round_imgsz(imgsz: tuple[int, int]) -> tuple[int, int]:
+    w, h = (int(-(-int(v) // 32) * 32) for v in imgsz)
+    if (w, h) != tuple(int(v) for v in imgsz):
+        log.warning("image size %sx%s is not a multiple of 32: rounded up to %dx%d", imgsz[0], imgsz[1], w, h)
+    return w, h
+
+
+def build_optimizer(model: torch.nn.Module, cfg: TrainConfig) -> torch.optim.Optimizer:
+    """Weight decay on conv weights only (not on batch-norm or biases)."""
+    decay, no_decay = [], []
+    for name, p in model.named_parameters():
+        (no_decay if p.ndim <= 1 or name.endswith(".bias") else decay).append(p)
+    groups = [{"params": decay, "weight_decay": cfg.weight_decay}, {"params": no_decay, "weight_decay": 0.0}]
+    if cfg.optimizer == "adamw":
+        return torch.optim.AdamW(groups, lr=cfg.lr0, betas=(cfg.momentum, 0.999))
+    if cfg.optimizer == "sgd":
+        return torch.optim.SGD(groups, lr=cfg.lr0, momentum=cfg.momentum, nesterov=True)
+    raise ConfigError("train", "optimizer", f"unknown optimizer {cfg.optimizer!r}; choose adamw or sgd")
+
+
+def lr_at(it: int, iters_per_epoch: int, cfg: TrainConfig) -> float:
+    """Learning rate at global iteration ``it``: linear warm-up, then cosine from lr0 to lr0 * lrf."""
+    epoch_f = it / iters_per_epoch
+    cos = cfg.lr0 * (cfg.lrf + (1 - cfg.lrf) * 0.5 * (1 + math.cos(math.pi * epoch_f / cfg.epochs)))
+    warm = max(cfg.warmup_epochs * iters_per_epoch, cfg.warmup_min_iters)
+    return cos * min(1.0, (it + 1) / warm)
+
+
+@torch.no_grad()
+def evaluate(model: ConeYOLO, loader: DataLoader, conf: float, iou: float, max_det: int = 300) -> dict:
+    """mAP of ``model`` on a validation loader (boxes compared in the letterboxed input px)."""
+    model.eval()
+    images = []
+    for imgs, targets in loader:
+        pred = model(imgs.float().div_(255)).numpy()
+        for i in range(imgs.shape[0]):
+            t = targets[targets[:, 0] == i].numpy()
+            b, s, c = postprocess(pred[i], conf, iou, max_det)
+            images.append(ImageDetections(t[:, 2:6], t[:, 1].astype(int), b, s, c))
+    return coco_map(images, CLASS_NAMES, max_dets=max_det).to_dict()
+
+
+def _seed_all(seed: int) -> None:
+    random.seed(seed)
+    np.random.seed(seed)
+    torch.manual_seed(seed)
+
+
+def _rng_state() -> dict:
+    return {"python": random.getstate(), "numpy": np.random.get_state(), "torch": torch.get_rng_state()}
+
+
+def _set_rng_state(s: dict) -> None:
+    random.setstate(s["python"])
+    np.random.set_state(s["numpy"])
+    torch.set_rng_state(s["torch"])
+
+
+def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> dict:
+    """Train; returns the history (one dict per epoch). Writes ``last.pt``, ``best.pt``, ``results.csv`` to ``cfg.out``."""
+    out = Path(cfg.out)
+    last_path, best_path = out / "last.pt", out / "best.pt"
+    state = None
+    if resume:
+        if not last_path.is_file():
+            raise ConfigError(str(last_path), None, "nothing to resume: no last.pt in the output folder")
+        ck = load_checkpoint(last_path)
+        if not ck.train:
+            raise ConfigError(str(last_path), "train", "checkpoint holds no training state (is it a best.pt?)")
+        state = ck.train
+        saved = TrainConfig.from_dict(state["config"])
+        cfg = TrainConfig.from_dict({**saved.to_dict(), "epochs": cfg.epochs, "out": cfg.out})
+    cfg.imgsz = round_imgsz(cfg.imgsz)
+    torch.set_num_threads(cfg.threads)
+    _seed_all(cfg.seed)
+
+    train_entries, val_entries, _ = load_data_yaml(cfg.data)
+    data_summary = {"data_yaml": str(cfg.data), "train": [e.summary() for e in train_entries],
+                    "val": [e.summary() for e in val_entries]}
+
+    if cfg.model in MODEL_SIZES:
+        model = ConeYOLO(model_config(cfg.model))
+    else:
+        model = load_checkpoint(cfg.model).build_model()
+    model.train()
+    criterion = DetectionLoss(model.cfg.num_classes, model.cfg.reg_max, model.strides)
+    optimizer = build_optimizer(model, cfg)
+    ema = ModelEMA(model, cfg.ema_decay, cfg.ema_tau)
+    start_epoch, best_fitness, best_epoch, history = 0, -math.inf, -1, []
+    if state is not None:
+        model.load_state_dict(state["model"])
+        ema.ema.load_state_dict(ck.state_dict)
+        ema.updates = int(state["ema_updates"])
+        optimizer.load_state_dict(state["optimizer"])
+        start_epoch = int(state["epoch"]) + 1
+        best_fitness, best_epoch, history = state["best_fitness"], state["best_epoch"], list(state["history"])
+        _set_rng_state(state["rng"])
+        log.info("resuming from %s at epoch %d", last_path, start_epoch)
+
+    train_set = TrainSet(train_entries, cfg.imgsz, cfg.augment, cfg.seed)
+    sampler = EpochSampler(train_entries, cfg.seed)
+    loader = DataLoader(train_set, batch_size=cfg.batch, sampler=sampler, num_workers=cfg.workers,
+                        collate_fn=collate, drop_last=len(sampler) > cfg.batch)
+    val_loader = None
+    if val_entries:
+        val_loader = DataLoader(ValSet(val_entries, cfg.imgsz), batch_size=cfg.batch, num_workers=cfg.workers,
+                                collate_fn=collate)
+    nb = len(loader) if not cfg.max_batches else min(len(loader), cfg.max_batches)
+    out.mkdir(parents=True, exist_ok=True)
+
+    for epoch in range(start_epoch, cfg.epochs):
+        t0 = time.perf_counter()
+        sampler.set_epoch(epoch)
+        train_set.mosaic_enabled = epoch < cfg.epochs - cfg.close_mosaic
+        model.train()
+        loss_sum, n_img, n_batches = torch.zeros(3), 0, 0
+        bar = tqdm(loader, total=nb, desc=f"epoch {epoch + 1}/{cfg.epochs}", disable=not progress, leave=False)
+        for i, (imgs, targets) in enumerate(bar):
+            if i >= nb:
+                break
+            lr = lr_at(epoch * nb + i, nb, cfg)
+            for g in optimizer.param_groups:
+                g["lr"] = lr
+            loss, parts = criterion(model(imgs.float().div_(255)), targets)
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(model.parameters(), 10.0)
+            optimizer.step()
+            ema.update(model)
+            loss_sum += parts
+            n_batches += 1
+            n_img += imgs.shape[0]
+            bar.set_postfix(box=f"{parts[0]:.3f}", cls=f"{parts[1]:.3f}", dfl=f"{parts[2]:.3f}", lr=f"{lr:.2e}")
+        bar.close()
+        train_s = time.perf_counter() - t0
+        mean = (loss_sum / max(n_batches, 1)).tolist()
+        row = {"epoch": epoch, "box_loss": mean[0], "cls_loss": mean[1], "dfl_loss": mean[2],
+               "images_per_s": n_img / max(train_s, 1e-9), "lr": lr}
+        if val_loader is not None:
+            m = evaluate(ema.ema, val_loader, cfg.val_conf, cfg.val_iou)
+            row.update(map50=m["map50"], map50_95=m["map50_95"])
+            fitness = 0.1 * m["map50"] + 0.9 * m["map50_95"]
+        else:
+            m = {}
+            fitness = -sum(mean)
+        row["fitness"] = fitness
+        history.append(row)
+        improved = fitness > best_fitness
+        if improved:
+            best_fitness, best_epoch = fitness, epoch
+        metrics = {"epoch": epoch, **m, "fitness": fitness}
+        train_state = {
+            "epoch": epoch, "model": {k: v.detach().clone() for k, v in model.state_dict().items()},
+            "optimizer": optimizer.state_dict(), "ema_updates": ema.updates, "best_fitness": best_fitness,
+            "best_epoch": best_epoch, "history": history, "rng": _rng_state(), "config": cfg.to_dict(),
+        }
+        save_checkpoint(last_path, ema.ema, cfg.imgsz, CLASS_NAMES, data_summary, metrics, train=train_state)
+        if improved:
+            save_checkpoint(best_path, ema.ema, cfg.imgsz, CLASS_NAMES, data_summary, metrics)
+        _append_csv(out / "results.csv", row)
+        msg = " ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items())
+        (tqdm.write if progress else log.info)(msg)
+        if epoch - best_epoch >= cfg.patience:
+            (tqdm.write if progress else log.info)(f"early stop: no better fitness for {cfg.patience} epochs (best epoch {best_epoch})")
+            break
+    return {"history": history, "best_epoch": best_epoch, "best_fitness": best_fitness, "out": str(out)}
+
+
+def _append_csv(path: Path, row: dict) -> None:
+    new = not path.is_file()
+    with path.open("a", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(row))
+        if new:
+            w.writeheader()
+        w.writerow(row)

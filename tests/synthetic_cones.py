@@ -1,0 +1,74 @@
+"""Tiny synthetic cone images for tests: cone-shaped coloured polygons with stripes on a grey
+textured background, written in YOLO txt layout with a names list. Deterministic from a seed."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import yaml
+
+# project class -> (body BGR, stripe BGR, number of stripes, size factor)
+_LOOK = {
+    0: ((200, 80, 10), (250, 250, 250), 1, 1.0),  # blue, white stripe
+    1: ((20, 210, 240), (20, 20, 20), 1, 1.0),  # yellow, black stripe
+    2: ((10, 110, 250), (250, 250, 250), 1, 1.0),  # small orange
+    3: ((20, 90, 235), (250, 250, 250), 2, 1.5),  # large orange, two stripes
+}
+NAMES = ["blue_cone", "yellow_cone", "orange_cone", "large_orange_cone"]  # dataset ids 0..3 (project 0..3)
+
+
+def draw_cone(img: np.ndarray, cls: int, x1: int, y2: int, w: int, h: int) -> None:
+    """A cone with base (x1..x1+w, y2) and height h."""
+    body, stripe, n, _ = _LOOK[cls]
+    cx = x1 + w / 2
+    top = w * 0.18
+
+    def poly(v0: float, v1: float) -> np.ndarray:  # trapezoid between heights v0..v1 (fractions from the top)
+        ya, yb = y2 - h + v0 * h, y2 - h + v1 * h
+        ha, hb = (top + (w - top) * v0) / 2, (top + (w - top) * v1) / 2
+        return np.array([[cx - ha, ya], [cx + ha, ya], [cx + hb, yb], [cx - hb, yb]], np.int32)
+
+    cv2.fillPoly(img, [poly(0, 1)], body)
+    for k in range(n):
+        a = 0.35 + 0.25 * k
+        cv2.fillPoly(img, [poly(a, a + 0.15)], stripe)
+
+
+def make_image(rng: np.random.Generator, w: int, h: int, n_cones: int) -> tuple[np.ndarray, list]:
+    g = rng.normal(125, 12, (h // 4 + 1, w // 4 + 1)).clip(0, 255).astype(np.uint8)
+    bg = cv2.resize(g, (w, h), interpolation=cv2.INTER_LINEAR)
+    img = cv2.merge([bg, bg, bg])
+    labels, taken = [], []
+    for _ in range(n_cones * 10):
+        if len(labels) == n_cones:
+            break
+        cls = int(rng.integers(0, 4))
+        ch = int(rng.uniform(0.25, 0.6) * h * _LOOK[cls][3])
+        ch = min(ch, h - 2)
+        cw = int(ch * 0.7)
+        x1 = int(rng.uniform(0, w - cw))
+        y2 = int(rng.uniform(ch + 1, h))
+        box = (x1, y2 - ch, x1 + cw, y2)
+        if any(not (box[2] < t[0] or box[0] > t[2] or box[3] < t[1] or box[1] > t[3]) for t in taken):
+            continue
+        taken.append(box)
+        draw_cone(img, cls, x1, y2, cw, ch)
+        labels.append((cls, (box[0] + box[2]) / 2 / w, (box[1] + box[3]) / 2 / h, cw / w, ch / h))
+    return img, labels
+
+
+def write_dataset(root: Path, n_images: int = 8, size: tuple[int, int] = (256, 96), seed: int = 0, cones: int = 3) -> Path:
+    """Write ``root/images/*.png``, ``root/labels/*.txt`` and ``root/data.yaml`` (names); returns root."""
+    rng = np.random.default_rng(seed)
+    (root / "images").mkdir(parents=True, exist_ok=True)
+    (root / "labels").mkdir(parents=True, exist_ok=True)
+    for i in range(n_images):
+        img, labels = make_image(rng, size[0], size[1], cones)
+        cv2.imwrite(str(root / "images" / f"synth-{i:03d}.png"), img)
+        (root / "labels" / f"synth-{i:03d}.txt").write_text(
+            "".join(f"{c} {cx:.6f} {cy:.6f} {bw:.6f} {bh:.6f}\n" for c, cx, cy, bw, bh in labels)
+        )
+    (root / "data.yaml").write_text(yaml.safe_dump({"names": NAMES}))
+    return root
