@@ -17,6 +17,10 @@ import sys
 COMMANDS: dict[str, tuple[str, str]] = {
     "map": ("map", "map pixels or boxes to rear_axle metres with a calibration"),
     "bench": ("bench", "benchmark the per-frame stages on real-size frames"),
+    "train": ("train", "train the cone detector on YOLO txt datasets"),
+    "export": ("export", "export a detector checkpoint to TorchScript or ONNX, verified against eager"),
+    "data": ("data", "dataset converters: fsoco-to-yolo, restore-aspect"),
+    "speed": ("speed", "forward micro-benchmark of detector sizes and backends"),
 }
 
 

@@ -34,6 +34,7 @@ import torch
 import yaml
 
 from . import records
+from .classes import CLASS_NAMES
 from .checkpoint import RESTORE_HINT, Checkpoint, class_map_from_names, load_checkpoint
 from .crop import CropSpec
 from .errors import ConfigError
@@ -254,15 +255,28 @@ class Detector:
             det._check_output_shape()
             return det
 
-        ck = load_checkpoint(path)
-        class_map = class_map_from_names(ck.class_names, src)
-        size = tuple(imgsz) if imgsz else ck.imgsz
+        return cls.from_checkpoint(load_checkpoint(path), backend, device, fp16, imgsz=imgsz, threads=threads, **kw)
+
+    @classmethod
+    def from_checkpoint(
+        cls,
+        ck: Checkpoint,
+        backend: str = "torch",
+        device: str = "cpu",
+        fp16: bool = False,
+        imgsz: tuple[int, int] | None = None,
+        threads: int | None = None,
+        **kw,
+    ) -> "Detector":
+        """A detector from a loaded checkpoint (or one made in memory, see :meth:`from_model`)."""
+        class_map = class_map_from_names(ck.class_names, ck.path)
+        size = (int(imgsz[0]), int(imgsz[1])) if imgsz else ck.imgsz
         model = ck.build_model()
         if backend == "onnx":
             from .export import onnx_bytes
 
-            sess = _ort_session(onnx_bytes(model, size), device, threads, src)
-            return cls(_OrtRunner(sess), class_map, size, True, "onnx", src, checkpoint=ck, **kw)
+            sess = _ort_session(onnx_bytes(model, size), device, threads, ck.path)
+            return cls(_OrtRunner(sess), class_map, size, True, "onnx", ck.path, checkpoint=ck, **kw)
         model = model.fuse().to(device)
         if fp16:
             model = model.half()
@@ -270,9 +284,18 @@ class Detector:
             from .export import trace
 
             module = trace(model, size, device=device, fp16=fp16)
-            return cls(_TorchRunner(module, device, fp16, False), class_map, size, True, "torchscript", src, checkpoint=ck, **kw)
+            return cls(_TorchRunner(module, device, fp16, False), class_map, size, True, "torchscript", ck.path, checkpoint=ck, **kw)
+        if backend != "torch":
+            raise ConfigError(ck.path, "backend", f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
         model = model.to(memory_format=torch.channels_last)
-        return cls(_TorchRunner(model, device, fp16, True), class_map, size, False, "torch", src, checkpoint=ck, **kw)
+        return cls(_TorchRunner(model, device, fp16, True), class_map, size, False, "torch", ck.path, checkpoint=ck, **kw)
+
+    @classmethod
+    def from_model(cls, model, imgsz: tuple[int, int], backend: str = "torch", **kw) -> "Detector":
+        """A detector around an in-memory :class:`ConeYOLO` (benchmarks, tests); classes in project order."""
+        ck = Checkpoint(model.cfg, list(CLASS_NAMES[: model.cfg.num_classes]), tuple(imgsz),
+                        {k: v.detach().clone() for k, v in model.state_dict().items()}, path=f"<{model.cfg.name} in memory>")
+        return cls.from_checkpoint(ck, backend, imgsz=imgsz, **kw)
 
     def _check_output_shape(self) -> None:
         """Run one blank input; an output that is not (4 + nc, N) is a :class:`ConfigError`."""

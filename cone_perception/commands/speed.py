@@ -1,0 +1,56 @@
+"""``cone-perception speed``: network-forward micro-benchmark per model size and backend."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from ..model import MODEL_SIZES
+from .train import parse_size
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--sizes", nargs="+", default=list(MODEL_SIZES), help=f"model sizes, random weights (default: {' '.join(MODEL_SIZES)})")
+    p.add_argument("--model", default=None, help="time this checkpoint / exported model instead of --sizes")
+    p.add_argument("--backends", nargs="+", default=["torch", "onnx"], choices=("torch", "torchscript", "onnx"), help="backends (default torch onnx)")
+    p.add_argument("--imgsz", type=parse_size, default=(960, 288), help="input WxH px (default 960x288)")
+    p.add_argument("--threads", type=int, default=2, help="intra-op threads (default 2)")
+    p.add_argument("--frames", type=int, default=50, help="timed forwards per case (default 50)")
+    p.add_argument("--json", action="store_true", help="print JSON instead of a table")
+
+
+def run(args: argparse.Namespace) -> int:
+    import torch
+
+    from ..detector import Detector
+    from ..model import ConeYOLO, model_config
+    from ..speed import gflops, time_forward
+
+    torch.set_num_threads(args.threads)
+    rows = []
+    cases = [(args.model, None)] if args.model else [(None, s) for s in args.sizes]
+    for path, size in cases:
+        for backend in args.backends:
+            if path:
+                det = Detector.load(path, backend=backend, imgsz=args.imgsz, threads=args.threads)
+                name, gf, params = path, None, None
+            else:
+                torch.manual_seed(0)
+                model = ConeYOLO(model_config(size))
+                gf, params = gflops(model, args.imgsz), model.num_params()
+                det = Detector.from_model(model, args.imgsz, backend, threads=args.threads)
+                name = size
+            r = time_forward(det, args.frames)
+            rows.append({"model": name, "backend": backend, "imgsz": list(args.imgsz), "threads": args.threads,
+                         "params": params, "gflops": gf, **r})
+    if args.json:
+        print(json.dumps(rows))
+        return 0
+    print(f"forward only, input {args.imgsz[0]}x{args.imgsz[1]}, {args.threads} threads, {args.frames} frames")
+    print(f"{'model':<12}{'backend':<13}{'params':>10}{'GFLOPs':>8}{'median ms':>11}{'p90 ms':>9}{'min-max ms':>16}{'fps':>8}")
+    for r in rows:
+        params = f"{r['params'] / 1e6:.2f}M" if r["params"] else "-"
+        gf = f"{r['gflops']:.2f}" if r["gflops"] else "-"
+        print(f"{str(r['model']):<12}{r['backend']:<13}{params:>10}{gf:>8}{r['median_ms']:>11.2f}{r['p90_ms']:>9.2f}"
+              f"{r['min_ms']:>8.2f}-{r['max_ms']:<7.2f}{1e3 / r['median_ms']:>8.1f}")
+    return 0

@@ -1,0 +1,70 @@
+"""``cone-perception train``: train the cone detector on YOLO txt datasets."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+
+from ..model import MODEL_SIZES
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """``"960x288"`` -> (960, 288); a single number means a square."""
+    try:
+        parts = [int(v) for v in text.lower().split("x")]
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(f"expected WxH like 960x288, got {text!r}") from e
+    if len(parts) == 1:
+        parts *= 2
+    if len(parts) != 2 or min(parts) <= 0:
+        raise argparse.ArgumentTypeError(f"expected WxH like 960x288, got {text!r}")
+    return parts[0], parts[1]
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    from ..train.trainer import TrainConfig
+
+    d = TrainConfig(data="", out="")
+    p.add_argument("--data", required=True, help="data YAML listing train / val datasets (see README, 'train')")
+    p.add_argument("--model", default=d.model,
+                   help=f"model size ({', '.join(MODEL_SIZES)}) or a checkpoint to fine-tune (default {d.model})")
+    p.add_argument("--epochs", type=int, default=d.epochs, help=f"epochs (default {d.epochs}; with --resume: new total)")
+    p.add_argument("--imgsz", type=parse_size, default=d.imgsz, help="input WxH px, multiples of 32 (default 960x288)")
+    p.add_argument("--batch", type=int, default=d.batch, help=f"images per batch (default {d.batch})")
+    p.add_argument("--out", required=True, help="output folder: last.pt, best.pt, results.csv")
+    p.add_argument("--resume", action="store_true", help="continue exactly from OUT/last.pt (its settings, new --epochs)")
+    p.add_argument("--optimizer", choices=("adamw", "sgd"), default=d.optimizer, help="optimizer (default adamw)")
+    p.add_argument("--lr0", type=float, default=d.lr0, help=f"peak learning rate (default {d.lr0})")
+    p.add_argument("--patience", type=int, default=d.patience, help=f"early stop after N epochs without improvement (default {d.patience})")
+    p.add_argument("--workers", type=int, default=d.workers, help=f"data-loading worker processes (default {d.workers})")
+    p.add_argument("--threads", type=int, default=d.threads, help=f"torch threads for the model (default {d.threads})")
+    p.add_argument("--seed", type=int, default=d.seed, help="random seed (default 0)")
+    p.add_argument("--mosaic", type=float, default=d.augment.mosaic, help=f"mosaic probability (default {d.augment.mosaic})")
+    p.add_argument("--close-mosaic", type=int, default=d.close_mosaic, help=f"last N epochs without mosaic (default {d.close_mosaic})")
+    p.add_argument("--no-augment", action="store_true", help="switch every augmentation off")
+    p.add_argument("--max-batches", type=int, default=0, help="cap batches per epoch (quick trials; 0 = all)")
+    p.add_argument("--json", action="store_true", help="print the final summary as JSON")
+
+
+def run(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from ..train.augment import AugmentConfig
+    from ..train.trainer import TrainConfig, train
+
+    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    aug = AugmentConfig.off() if args.no_augment else replace(AugmentConfig(), mosaic=args.mosaic)
+    cfg = TrainConfig(
+        data=args.data, out=args.out, model=args.model, epochs=args.epochs, batch=args.batch, imgsz=args.imgsz,
+        optimizer=args.optimizer, lr0=args.lr0, patience=args.patience, workers=args.workers, threads=args.threads,
+        seed=args.seed, close_mosaic=args.close_mosaic, max_batches=args.max_batches, augment=aug,
+    )
+    result = train(cfg, resume=args.resume)
+    last = result["history"][-1] if result["history"] else {}
+    summary = {"out": result["out"], "best_epoch": result["best_epoch"], "best_fitness": result["best_fitness"], "last": last}
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        print(f"done: best epoch {result['best_epoch']} (fitness {result['best_fitness']:.4f}); checkpoints in {result['out']}")
+    return 0
