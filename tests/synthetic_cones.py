@@ -3,6 +3,8 @@ textured background, written in YOLO txt layout with a names list. Deterministic
 
 from __future__ import annotations
 
+import functools
+import tempfile
 from pathlib import Path
 
 import cv2
@@ -72,3 +74,26 @@ def write_dataset(root: Path, n_images: int = 8, size: tuple[int, int] = (256, 9
         )
     (root / "data.yaml").write_text(yaml.safe_dump({"names": NAMES}))
     return root
+
+
+SMOKE_SIZE = (256, 96)  # (W, H) of the smoke-test images and model input
+
+
+@functools.lru_cache(maxsize=1)
+def trained_smoke_model() -> tuple[Path, Path, dict]:
+    """Train the ``p`` model to overfit 8 synthetic images (once per test process, ~15 s on 2 cores).
+
+    Returns (checkpoint best.pt, dataset root, training result)."""
+    from cone_perception.train.augment import AugmentConfig
+    from cone_perception.train.trainer import TrainConfig, train
+
+    work = Path(tempfile.mkdtemp(prefix="cone_smoke_"))
+    root = write_dataset(work / "data", n_images=8, size=SMOKE_SIZE, seed=0)
+    (root / "overfit.yaml").write_text(yaml.safe_dump({"train": [{"path": "."}], "val": [{"path": "."}]}))
+    cfg = TrainConfig(
+        data=str(root / "overfit.yaml"), out=str(work / "run"), model="p", epochs=80, batch=8, imgsz=SMOKE_SIZE,
+        lr0=0.01, workers=0, threads=2, augment=AugmentConfig.off(), warmup_epochs=0, warmup_min_iters=10,
+        patience=1000, close_mosaic=0, ema_tau=20, seed=0,
+    )
+    result = train(cfg, progress=False)
+    return work / "run" / "best.pt", root, result

@@ -99,7 +99,7 @@ def postprocess(
     scores, cls = scores[keep], cls[keep].astype(np.int64)
     xywh = cxcywh.copy()
     xywh[:, :2] -= cxcywh[:, 2:] / 2  # top-left corner + size, as OpenCV wants
-    idx = cv2.dnn.NMSBoxesBatched(xywh.tolist(), scores.tolist(), cls.tolist(), conf, iou, top_k=max_det)
+    idx = cv2.dnn.NMSBoxesBatched(xywh.tolist(), scores.tolist(), cls.tolist(), conf, iou)  # top_k would cut before NMS
     idx = np.asarray(idx, dtype=np.int64).reshape(-1)
     if idx.size == 0:
         return empty

@@ -62,8 +62,14 @@ class DatasetEntry:
 
 
 def clip_of(stem: str) -> str:
-    """Clip name of a frame file: the part before the first '-'."""
+    """Clip name of a frame file: the part before the first '-' (``autox3_mp4-12_jpg_ab`` -> ``autox3_mp4``)."""
     return stem.split("-", 1)[0]
+
+
+def in_clips(stem: str, clips: set[str]) -> bool:
+    """Whether a frame belongs to one of ``clips``; ``autox3`` matches clip ``autox3`` and ``autox3_mp4``."""
+    c = clip_of(stem)
+    return c in clips or c.split("_", 1)[0] in clips
 
 
 def parse_label_file(path: Path, class_map: list[int], problems: list[str]) -> np.ndarray:
@@ -144,9 +150,9 @@ def load_entry(entry: dict, base_dir: Path, source: str, idx: str) -> DatasetEnt
 
     images = sorted(p for p in images_dir.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
     if clips:
-        images = [p for p in images if clip_of(p.stem) in clips]
+        images = [p for p in images if in_clips(p.stem, clips)]
     if exclude:
-        images = [p for p in images if clip_of(p.stem) not in exclude]
+        images = [p for p in images if not in_clips(p.stem, exclude)]
     stems = {p.stem for p in images}
     problems: list[str] = []
     labels, unlabelled = [], 0
@@ -159,7 +165,7 @@ def load_entry(entry: dict, base_dir: Path, source: str, idx: str) -> DatasetEnt
             labels.append(np.zeros((0, 5), np.float32))
     all_label_stems = {p.stem for p in labels_dir.glob("*.txt")}
     orphan = sorted(s for s in all_label_stems - {p.stem for p in images_dir.iterdir()}
-                    if (not clips or clip_of(s) in clips) and clip_of(s) not in exclude)
+                    if (not clips or in_clips(s, clips)) and not in_clips(s, exclude))
     for s in orphan:
         problems.append(f"{labels_dir / (s + '.txt')}: no image {s}.* in {images_dir}")
     for msg in problems[:MAX_REPORTED]:
