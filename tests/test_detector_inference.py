@@ -1,0 +1,200 @@
+"""Inference: checkpoint validation, backends agree with eager, external YOLO layout, crop mapping, export."""
+
+from __future__ import annotations
+
+import logging
+
+import cv2
+import numpy as np
+import pytest
+import torch
+import yaml
+
+from cone_perception import records
+from cone_perception.checkpoint import load_checkpoint, save_checkpoint
+from cone_perception.classes import CLASS_NAMES
+from cone_perception.cli import main as cli_main
+from cone_perception.crop import CropSpec
+from cone_perception.detector import Detector, default_model_path, write_sidecar
+from cone_perception.errors import ConfigError
+from cone_perception.export import export_model, onnx_bytes
+from cone_perception.model import ConeYOLO, model_config
+from synthetic_cones import SMOKE_SIZE, trained_smoke_model
+
+
+@pytest.fixture(scope="module")
+def trained():
+    ckpt, root, _ = trained_smoke_model()
+    images = sorted((root / "images").glob("*.png"))
+    return ckpt, [cv2.imread(str(p)) for p in images]
+
+
+def _as_arrays(recs):
+    b, s, c = records.boxes_to_arrays(recs)
+    return b, s, c
+
+
+def test_default_model_path_is_under_models():
+    p = default_model_path()
+    assert p.parent.name == "models" and p.suffix == ".pt"
+
+
+@pytest.mark.parametrize("backend", ["torchscript", "onnx"])
+def test_backends_give_eager_boxes(trained, backend):
+    ckpt, images = trained
+    eager = Detector.load(ckpt, backend="torch")
+    other = Detector.load(ckpt, backend=backend)
+    n_boxes = 0
+    for img in images:
+        be, se, ce = _as_arrays(eager.detect_image(img))
+        bo, so, co = _as_arrays(other.detect_image(img))
+        assert len(be) == len(bo) and len(be) > 0
+        np.testing.assert_allclose(bo, be, atol=1e-3)
+        np.testing.assert_allclose(so, se, atol=1e-3)
+        assert np.array_equal(co, ce)
+        n_boxes += len(be)
+    assert n_boxes >= len(images)
+
+
+def test_detect_maps_crop_and_downscale_to_full_image(trained):
+    ckpt, images = trained
+    det = Detector.load(ckpt)
+    img = images[0]
+    crop = CropSpec(v0=400, v1=400 + 2 * img.shape[0], u0=100, u1=100 + 2 * img.shape[1], downscale=2)
+    full = det.detect(img, crop)
+    local = det.detect_image(img)
+    assert len(full) == len(local) > 0
+    b_full, _, _ = _as_arrays(full)
+    b_loc, _, _ = _as_arrays(local)
+    np.testing.assert_allclose(b_full, b_loc * 2 + np.array([100, 400, 100, 400]), atol=1e-3)
+    assert set(det.timing) == {"preprocess_ms", "forward_ms", "postprocess_ms"}
+    assert full.dtype == records.BOX_DTYPE
+
+
+def test_size_not_multiple_of_32_is_padded_and_said_once(trained, caplog):
+    ckpt, images = trained
+    det = Detector.load(ckpt)
+    img = images[1]
+    odd = np.ascontiguousarray(img[:90, :250])  # 250x90 -> padded to 256x96
+    with caplog.at_level(logging.WARNING):
+        a = det.detect_image(img)
+        b = det.infer(odd)
+        det.infer(odd)
+    assert sum("padded to 256x96" in r.message for r in caplog.records) == 1
+    assert len(b[0]) > 0
+    assert b[0][:, 2].max() <= 250 and b[0][:, 3].max() <= 90
+    del a
+
+
+def test_external_layout_with_permuted_class_names(tmp_path, trained):
+    """An export in the common layout whose classes are in another tool's order and naming."""
+    ckpt, images = trained
+    ck = load_checkpoint(ckpt)
+    model = ck.build_model().fuse()
+    perm = [3, 0, 2, 1, 4]  # external class k = project class perm[k]
+    foreign_names = ["large_orange_cone", "blue_cone", "orange_cone", "yellow_cone", "unknown_cone"]
+
+    class Foreign(torch.nn.Module):
+        def __init__(self, m):
+            super().__init__()
+            self.m = m
+
+        def forward(self, x):
+            y = self.m(x)
+            return torch.cat([y[:, :4], y[:, 4:][:, perm]], 1)
+
+    w, h = SMOKE_SIZE
+    ts = torch.jit.trace(Foreign(model).eval(), torch.rand(1, 3, h, w))
+    ts_path = tmp_path / "foreign.torchscript"
+    ts.save(str(ts_path))
+    write_sidecar(ts_path, foreign_names, SMOKE_SIZE)
+    onnx_path = tmp_path / "foreign_onnx.onnx"
+    torch.onnx.export(Foreign(model).eval(), (torch.rand(1, 3, h, w),), str(onnx_path), opset_version=17, dynamo=False)
+    # ONNX sidecar as {index: name} and without imgsz: the ONNX input shape gives it
+    (tmp_path / "foreign_onnx.yaml").write_text(yaml.safe_dump({"names": {i: n for i, n in enumerate(foreign_names)}}))
+
+    eager = Detector.load(ckpt)
+    for path, backend in ((ts_path, "torchscript"), (onnx_path, "onnx")):
+        det = Detector.load(path, backend=backend)
+        assert det.imgsz == SMOKE_SIZE
+        for img in images[:3]:
+            be, se, ce = _as_arrays(eager.detect_image(img))
+            bo, so, co = _as_arrays(det.detect_image(img))
+            assert len(bo) == len(be) > 0
+            np.testing.assert_allclose(bo, be, atol=1e-3)
+            assert np.array_equal(co, ce)
+
+
+def test_external_model_bad_output_shape_and_names(tmp_path):
+    class Wrong(torch.nn.Module):
+        def forward(self, x):
+            return x.mean(1, keepdim=True).flatten(2).repeat(1, 7, 1)  # (1, 7, N): 3 classes, not 5
+
+    p = tmp_path / "wrong.onnx"
+    torch.onnx.export(Wrong(), (torch.rand(1, 3, 64, 64),), str(p), opset_version=17, dynamo=False)
+    write_sidecar(p, ["blue", "yellow", "orange", "large_orange", "unknown"], (64, 64))
+    with pytest.raises(ConfigError, match=r"expected output \(1, 4 \+ 5, N\)"):
+        Detector.load(p, backend="onnx")
+    write_sidecar(p, ["blue", "yellow", "traffic_light"], (64, 64))
+    with pytest.raises(ConfigError, match=r"names\[2\]|class_names\[2\]"):
+        Detector.load(p, backend="onnx")
+    (tmp_path / "wrong.yaml").unlink()
+    with pytest.raises(ConfigError, match="sidecar"):
+        Detector.load(p, backend="onnx")
+    with pytest.raises(ConfigError, match="backend 'onnx'"):
+        write_sidecar(p, list(CLASS_NAMES), (64, 64))
+        Detector.load(p, backend="torch")
+
+
+def test_bad_checkpoints(tmp_path):
+    missing = tmp_path / "nope.pt"
+    with pytest.raises(ConfigError, match="not found.*git checkout models/"):
+        Detector.load(missing)
+    m = ConeYOLO(model_config("p"))
+    good = tmp_path / "good.pt"
+    save_checkpoint(good, m, (320, 96))
+    ck = load_checkpoint(good)
+    assert ck.cfg == m.cfg and ck.imgsz == (320, 96) and ck.class_names == list(CLASS_NAMES)
+
+    truncated = tmp_path / "trunc.pt"
+    truncated.write_bytes(good.read_bytes()[:5000])
+    with pytest.raises(ConfigError, match="truncated or corrupt"):
+        load_checkpoint(truncated)
+
+    obj = torch.load(good, weights_only=False)
+    wrong_arch = dict(obj, arch=model_config("n").to_dict())
+    torch.save(wrong_arch, tmp_path / "arch.pt")
+    with pytest.raises(ConfigError, match="state_dict: weights do not fit architecture 'n'"):
+        load_checkpoint(tmp_path / "arch.pt")
+
+    torch.save(dict(obj, class_names=["blue", "yellow", "orange", "large_orange", "pylon"]), tmp_path / "names.pt")
+    with pytest.raises(ConfigError, match=r"class_names\[4\]"):
+        load_checkpoint(tmp_path / "names.pt")
+
+    torch.save(dict(obj, imgsz=[300, 96]), tmp_path / "size.pt")
+    with pytest.raises(ConfigError, match="imgsz"):
+        load_checkpoint(tmp_path / "size.pt")
+
+    torch.save({"weights": 1}, tmp_path / "foreign.pt")
+    with pytest.raises(ConfigError, match="format"):
+        load_checkpoint(tmp_path / "foreign.pt")
+    with pytest.raises(ConfigError, match="backend"):
+        Detector.load(good, backend="tensorrt")
+
+
+@pytest.mark.parametrize("fmt", ["onnx", "torchscript"])
+def test_export_command_verifies(tmp_path, trained, capsys, fmt):
+    ckpt, images = trained
+    suffix = ".onnx" if fmt == "onnx" else ".torchscript"
+    out = tmp_path / f"model{suffix}"
+    rc = cli_main(["export", "--model", str(ckpt), "--format", fmt, "--out", str(out)])
+    assert rc == 0
+    assert "verified against eager" in capsys.readouterr().out
+    side = yaml.safe_load(out.with_suffix(".yaml").read_text())
+    assert side["names"] == list(CLASS_NAMES) and side["imgsz"] == list(SMOKE_SIZE)
+    det = Detector.load(out, backend=fmt)
+    eager = Detector.load(ckpt)
+    be, _, ce = _as_arrays(eager.detect_image(images[2]))
+    bo, _, co = _as_arrays(det.detect_image(images[2]))
+    np.testing.assert_allclose(bo, be, atol=1e-3)
+    assert np.array_equal(co, ce)
