@@ -154,8 +154,11 @@ def _set_rng_state(s: dict) -> None:
     torch.set_rng_state(s["torch"])
 
 
-def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> dict:
-    """Train; returns the history (one dict per epoch). Writes ``last.pt``, ``best.pt``, ``results.csv`` to ``cfg.out``."""
+def train(cfg: TrainConfig, resume: bool = False, progress: bool = True, stop_after: int | None = None) -> dict:
+    """Train; returns the history (one dict per epoch). Writes ``last.pt``, ``best.pt``, ``results.csv`` to ``cfg.out``.
+
+    ``stop_after``: leave after this many epochs of this call (a run spread over
+    sessions; continue with ``resume=True``)."""
     out = Path(cfg.out)
     last_path, best_path = out / "last.pt", out / "best.pt"
     state = None
@@ -258,6 +261,8 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> dict
         _append_csv(out / "results.csv", row)
         msg = " ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items())
         (tqdm.write if progress else log.info)(msg)
+        if stop_after is not None and epoch + 1 - start_epoch >= stop_after:
+            break
         if epoch - best_epoch >= cfg.patience:
             (tqdm.write if progress else log.info)(f"early stop: no better fitness for {cfg.patience} epochs (best epoch {best_epoch})")
             break
