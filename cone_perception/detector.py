@@ -12,7 +12,9 @@ Model files:
 * TorchScript (``*.torchscript``, ``*.ts``) or ONNX (``*.onnx``) exported by us or
   by other YOLO tools: output ``(1, 4 + nc, N)`` (cx, cy, w, h in input px, then
   class scores), RGB 0..1 NCHW input, with a YAML sidecar next to it
-  (``<stem>.yaml``: ``names:`` list or {id: name}, optional ``imgsz: [W, H]``).
+  (``<stem>.yaml``: ``names:`` list or {id: name}, optional ``imgsz: [W, H]``);
+  without a sidecar, the class names other YOLO tools embed (ONNX metadata,
+  TorchScript ``config.txt``) are used.
 
 The network input is the cropped band as it is (the car's 960x288); an image
 whose size is not a multiple of 32 is padded right / bottom (said once). Fixed
@@ -21,7 +23,8 @@ size backends (TorchScript, ONNX) letterbox other sizes to their input size.
 
 from __future__ import annotations
 
-import io
+import ast
+import json
 import logging
 import time
 from dataclasses import dataclass
@@ -164,6 +167,29 @@ def read_sidecar(model_path: Path) -> tuple[list[str], tuple[int, int] | None]:
     return [str(n) for n in names], imgsz
 
 
+def _external_names(model_path: Path, embedded: dict) -> tuple[list[str], tuple[int, int] | None, str]:
+    """Class names and input size of an exported model: the YAML sidecar if there is one, else the
+    metadata other YOLO tools embed (``names`` as "{0: 'blue_cone', ...}", ``imgsz`` as [h, w])."""
+    side = model_path.with_suffix(".yaml")
+    if side.is_file() or "names" not in embedded:
+        names, imgsz = read_sidecar(model_path)
+        return names, imgsz, str(side)
+    src = f"{model_path}: embedded metadata"
+    try:
+        names = embedded["names"]
+        names = ast.literal_eval(names) if isinstance(names, str) else names
+        if isinstance(names, dict):
+            names = [names[k] for k in sorted(names, key=int)]
+        imgsz = embedded.get("imgsz")
+        imgsz = ast.literal_eval(imgsz) if isinstance(imgsz, str) else imgsz
+    except (ValueError, SyntaxError, KeyError, TypeError) as e:
+        raise ConfigError(src, "names", f"cannot read the embedded class names ({e}); write a sidecar {side.name}") from e
+    if not isinstance(names, (list, tuple)) or not names:
+        raise ConfigError(src, "names", f"embedded class names are not a list or dict; write a sidecar {side.name}")
+    size = (int(imgsz[1]), int(imgsz[0])) if isinstance(imgsz, (list, tuple)) and len(imgsz) == 2 else None  # [h, w]
+    return [str(n) for n in names], size, src
+
+
 def write_sidecar(model_path: Path, class_names: list[str], imgsz: tuple[int, int], extra: dict | None = None) -> Path:
     side = Path(model_path).with_suffix(".yaml")
     doc = {"names": list(class_names), "imgsz": [int(imgsz[0]), int(imgsz[1])], **(extra or {})}
@@ -231,27 +257,35 @@ class Detector:
         kw = dict(conf=conf, iou=iou, max_det=max_det)
         suffix = path.suffix.lower()
         if suffix in (".torchscript", ".ts", ".onnx"):
-            names, side_imgsz = read_sidecar(path)
-            class_map = class_map_from_names(names, str(path.with_suffix(".yaml")))
+            side = path.with_suffix(".yaml")
             if suffix == ".onnx":
                 if backend != "onnx":
                     raise ConfigError(src, "backend", f"an ONNX file runs with backend 'onnx', not {backend!r}")
                 sess = _ort_session(str(path), device, threads, src)
+                embedded = dict(sess.get_modelmeta().custom_metadata_map)
+                names, side_imgsz, names_src = _external_names(path, embedded)
                 size = imgsz or side_imgsz or _onnx_input_size(sess, src)
-                det = cls(_OrtRunner(sess), class_map, size, True, "onnx", src, **kw)
+                det = cls(_OrtRunner(sess), class_map_from_names(names, names_src), size, True, "onnx", src, **kw)
             else:
                 if backend != "torchscript":
                     raise ConfigError(src, "backend", f"a TorchScript file runs with backend 'torchscript', not {backend!r}")
+                extra = {"config.txt": ""}
                 try:
-                    module = torch.jit.load(str(path), map_location=device).eval()
+                    module = torch.jit.load(str(path), map_location=device, _extra_files=extra).eval()
                 except (RuntimeError, ValueError) as e:
                     raise ConfigError(src, None, f"not a readable TorchScript file: {e}") from e
+                try:
+                    embedded = json.loads(extra["config.txt"]) if extra["config.txt"] else {}
+                except (json.JSONDecodeError, UnicodeDecodeError):
+                    embedded = {}
+                names, side_imgsz, names_src = _external_names(path, embedded)
                 if fp16:
                     module = module.half()
                 size = imgsz or side_imgsz
                 if size is None:
-                    raise ConfigError(str(path.with_suffix(".yaml")), "imgsz", "TorchScript models need imgsz: [W, H] in the sidecar")
-                det = cls(_TorchRunner(module, device, fp16, False), class_map, size, True, "torchscript", src, **kw)
+                    raise ConfigError(str(side), "imgsz", "TorchScript models need imgsz: [W, H] in the sidecar")
+                det = cls(_TorchRunner(module, device, fp16, False), class_map_from_names(names, names_src), size, True,
+                          "torchscript", src, **kw)
             det._check_output_shape()
             return det
 

@@ -198,3 +198,32 @@ def test_export_command_verifies(tmp_path, trained, capsys, fmt):
     bo, _, co = _as_arrays(det.detect_image(images[2]))
     np.testing.assert_allclose(bo, be, atol=1e-3)
     assert np.array_equal(co, ce)
+
+
+def test_external_names_embedded_like_other_yolo_tools(tmp_path, trained):
+    """No sidecar: names (and imgsz as [h, w]) from ONNX metadata / TorchScript config.txt."""
+    import json
+
+    import onnx
+
+    ckpt, images = trained
+    ck = load_checkpoint(ckpt)
+    w, h = SMOKE_SIZE
+    names = "{0: 'blue_cone', 1: 'yellow_cone', 2: 'orange_cone', 3: 'large_orange_cone', 4: 'unknown_cone'}"
+    proto = onnx.load_from_string(onnx_bytes(ck.build_model(), SMOKE_SIZE))
+    for k, v in (("names", names), ("imgsz", f"[{h}, {w}]")):
+        prop = proto.metadata_props.add()
+        prop.key, prop.value = k, v
+    onnx.save(proto, str(tmp_path / "ext.onnx"))
+    model = ck.build_model().fuse()
+    ts = torch.jit.trace(model, torch.rand(1, 3, h, w))
+    torch.jit.save(ts, str(tmp_path / "ext.torchscript"),
+                   _extra_files={"config.txt": json.dumps({"names": {str(i): n for i, n in enumerate(CLASS_NAMES)}, "imgsz": [h, w]})})
+    eager = Detector.load(ckpt)
+    be, _, ce = _as_arrays(eager.detect_image(images[0]))
+    for f, backend in (("ext.onnx", "onnx"), ("ext.torchscript", "torchscript")):
+        det = Detector.load(tmp_path / f, backend=backend)
+        assert det.imgsz == SMOKE_SIZE
+        bo, _, co = _as_arrays(det.detect_image(images[0]))
+        np.testing.assert_allclose(bo, be, atol=1e-3)
+        assert np.array_equal(co, ce)
