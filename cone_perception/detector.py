@@ -344,6 +344,12 @@ class Detector:
                 f"expected output (1, 4 + {self.num_classes}, N) for {self.num_classes} classes, got (1, {', '.join(map(str, out.shape))})",
             )
 
+    def describe(self) -> str:
+        """One line for logs: file, backend, input size, classes, thresholds."""
+        arch = f"size {self.checkpoint.cfg.name}, " if self.checkpoint else ""
+        return (f"{self.source} ({arch}backend {self.backend}, input {self.imgsz[0]}x{self.imgsz[1]}, "
+                f"{self.num_classes} classes, conf {self.conf}, iou {self.iou}, max_det {self.max_det})")
+
     # -- running -----------------------------------------------------------------------------
     def warmup(self, n: int = 3) -> None:
         """Run ``n`` blank frames at the input size (first-call allocations, JIT)."""

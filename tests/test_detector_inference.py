@@ -69,6 +69,7 @@ def test_detect_maps_crop_and_downscale_to_full_image(trained):
     np.testing.assert_allclose(b_full, b_loc * 2 + np.array([100, 400, 100, 400]), atol=1e-3)
     assert set(det.timing) == {"preprocess_ms", "forward_ms", "postprocess_ms"}
     assert full.dtype == records.BOX_DTYPE
+    assert "backend torch" in det.describe() and "size p" in det.describe()
 
 
 def test_size_not_multiple_of_32_is_padded_and_said_once(trained, caplog):

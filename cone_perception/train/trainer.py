@@ -230,13 +230,18 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True, stop_af
             ema.update(model)
             loss_sum += parts
             n_batches += 1
+            if n_batches == 1:  # throughput is counted after the first batch (worker start-up, kernel set-up)
+                t_first, n_first = time.perf_counter(), n_img + imgs.shape[0]
             n_img += imgs.shape[0]
             bar.set_postfix(box=f"{parts[0]:.3f}", cls=f"{parts[1]:.3f}", dfl=f"{parts[2]:.3f}", lr=f"{lr:.2e}")
         bar.close()
-        train_s = time.perf_counter() - t0
+        t_end = time.perf_counter()
+        steady_s = t_end - t_first if n_batches > 1 else t_end - t0
+        steady_n = n_img - n_first if n_batches > 1 else n_img
         mean = (loss_sum / max(n_batches, 1)).tolist()
         row = {"epoch": epoch, "box_loss": mean[0], "cls_loss": mean[1], "dfl_loss": mean[2],
-               "images_per_s": n_img / max(train_s, 1e-9), "lr": lr}
+               "images_per_s": steady_n / max(steady_s, 1e-9),
+               "epoch_train_s": t_end - t0, "lr": lr}
         if val_loader is not None:
             m = evaluate(ema.ema, val_loader, cfg.val_conf, cfg.val_iou)
             row.update(map50=m["map50"], map50_95=m["map50_95"])
