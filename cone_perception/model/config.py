@@ -2,9 +2,10 @@
 
 Channels are given per stage, already scaled (no hidden width multiplier at build
 time), so a config reads as what is built. ``n`` matches YOLO11n in width and
-depth (16-32-64-128-256 channels, one bottleneck per CSP block); ``p`` ("pico")
-is the cone-sized model: few channels at high resolution, a lighter head and
-fewer DFL bins, for >= 2x the frames/s of ``n`` on CPU.
+depth (16-32-64-128-256 channels, one bottleneck per CSP block); ``t`` ("tiny")
+and ``p`` ("pico") are cone-sized: few channels at high resolution (8 in the
+stem), a lighter head and fewer DFL bins (7 bins x stride 32 = 224 px
+from a cell centre to each side is enough for cones), for >= 2x the frames/s of ``n`` on CPU.
 """
 
 from __future__ import annotations
@@ -65,9 +66,19 @@ class ModelConfig:
             raise ValueError(f"num_classes must be >= 1, got {self.num_classes}")
 
 
-#: Named sizes. ``n``: YOLO11n width/depth. ``p``: the car's default (smaller, faster).
+#: Named sizes. ``n``: YOLO11n width/depth. ``t``: in between (about half the FLOPs of ``n``).
+#: ``p``: the smallest and fastest (a quarter of the FLOPs of ``n``).
 MODEL_SIZES: dict[str, ModelConfig] = {
     "n": ModelConfig(name="n", channels=(16, 32, 64, 128, 256), depths=(1, 1, 1, 1), neck_depth=1, reg_max=16),
+    "t": ModelConfig(
+        name="t",
+        channels=(8, 24, 48, 96, 192),
+        depths=(1, 1, 1, 1),
+        neck_depth=1,
+        head_reg_ch=32,
+        head_cls_ch=48,
+        reg_max=8,
+    ),
     "p": ModelConfig(
         name="p",
         channels=(8, 16, 32, 64, 128),
