@@ -81,7 +81,7 @@ SMOKE_SIZE = (256, 96)  # (W, H) of the smoke-test images and model input
 
 @functools.lru_cache(maxsize=1)
 def trained_smoke_model() -> tuple[Path, Path, dict]:
-    """Train the ``p`` model to overfit 8 synthetic images (once per test process, ~15-30 s on 2 shared cores).
+    """Train the ``p`` model to overfit 8 synthetic images (once per test process, ~8 s on a quiet 2-core machine; 1 thread, which is as fast here and does not stall when the cores are shared).
 
     Returns (checkpoint best.pt, dataset root, training result)."""
     from cone_perception.train.augment import AugmentConfig
@@ -92,7 +92,7 @@ def trained_smoke_model() -> tuple[Path, Path, dict]:
     (root / "overfit.yaml").write_text(yaml.safe_dump({"train": [{"path": "."}], "val": [{"path": "."}]}))
     cfg = TrainConfig(
         data=str(root / "overfit.yaml"), out=str(work / "run"), model="p", epochs=40, batch=4, imgsz=SMOKE_SIZE,
-        lr0=0.01, workers=0, threads=2, augment=AugmentConfig.off(), warmup_epochs=0, warmup_min_iters=10,
+        lr0=0.01, workers=0, threads=1, augment=AugmentConfig.off(), warmup_epochs=0, warmup_min_iters=10,
         patience=1000, close_mosaic=0, ema_tau=20, seed=0,
     )
     result = train(cfg, progress=False)

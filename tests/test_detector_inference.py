@@ -228,3 +228,13 @@ def test_external_names_embedded_like_other_yolo_tools(tmp_path, trained):
         bo, _, co = _as_arrays(det.detect_image(images[0]))
         np.testing.assert_allclose(bo, be, atol=1e-3)
         assert np.array_equal(co, ce)
+
+
+def test_speed_command_reports_each_case(capsys):
+    import json
+
+    rc = cli_main(["speed", "--sizes", "p", "--backends", "torch", "onnx", "--imgsz", "128x64", "--frames", "3", "--json"])
+    assert rc == 0
+    rows = json.loads(capsys.readouterr().out)
+    assert [(r["model"], r["backend"]) for r in rows] == [("p", "torch"), ("p", "onnx")]
+    assert all(0 < r["min_ms"] <= r["median_ms"] <= r["max_ms"] for r in rows) and rows[0]["gflops"] > 0

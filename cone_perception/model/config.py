@@ -71,24 +71,8 @@ class ModelConfig:
 #: ``p``: the smallest and fastest (a quarter of the FLOPs of ``n``).
 MODEL_SIZES: dict[str, ModelConfig] = {
     "n": ModelConfig(name="n", channels=(16, 32, 64, 128, 256), depths=(1, 1, 1, 1), neck_depth=1, reg_max=16),
-    "t": ModelConfig(
-        name="t",
-        channels=(8, 24, 48, 96, 192),
-        depths=(1, 1, 1, 1),
-        neck_depth=1,
-        head_reg_ch=32,
-        head_cls_ch=48,
-        reg_max=8,
-    ),
-    "p": ModelConfig(
-        name="p",
-        channels=(8, 16, 32, 64, 128),
-        depths=(1, 1, 1, 1),
-        neck_depth=1,
-        head_reg_ch=32,
-        head_cls_ch=32,
-        reg_max=8,
-    ),
+    "t": ModelConfig(name="t", channels=(8, 24, 48, 96, 192), head_reg_ch=32, head_cls_ch=48, reg_max=8),
+    "p": ModelConfig(name="p", channels=(8, 16, 32, 64, 128), head_reg_ch=32, head_cls_ch=32, reg_max=8),
 }
 
 
