@@ -162,9 +162,9 @@ def _too_close(new: np.ndarray, old: np.ndarray, min_gap: float) -> bool:
     return bool(d2.min() < min_gap**2)
 
 
-def autocross(seed: int, width_m: float | None = None, length_m: float | None = None) -> Track:
+def autocross(seed: int, width_m: float | None = None, length_m: float | None = None, attempt: int = 0) -> Track:
     """Random open autocross track: straights, turns, hairpins, chicanes, slaloms; start and finish lines."""
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng([seed, attempt]) if attempt else np.random.default_rng(seed)
     w = float(rng.uniform(3.0, 5.0) if width_m is None else width_m)
     target = float(rng.uniform(250.0, 450.0) if length_m is None else length_m)
     r_min = MIN_INNER_RADIUS_M + w / 2.0
@@ -174,7 +174,7 @@ def autocross(seed: int, width_m: float | None = None, length_m: float | None = 
     clearance = w + 4.0
     length = 25.0
     while length < target:
-        kind = rng.choice(["straight", "turn", "turn", "hairpin", "chicane", "slalom"])
+        kind = rng.choice(["straight", "turn", "hairpin", "chicane", "slalom"], p=[0.25, 0.37, 0.12, 0.14, 0.12])
         sign = rng.choice([-1.0, 1.0])
         if kind == "straight":
             pieces = [(float(rng.uniform(10.0, MAX_STRAIGHT_M)), 0.0)]
@@ -218,6 +218,9 @@ def autocross(seed: int, width_m: float | None = None, length_m: float | None = 
         length += sum(L for L, _ in pieces)
     fin = max(min(20.0, MAX_STRAIGHT_M - path.straight_run_m()), 0.0)
     p, h = path.candidate(max(fin, STEP_M), 0.0)  # finish straight
+    old = np.array(path.pts[: max(len(path.pts) - int(3 * clearance / STEP_M), 0)])
+    if _too_close(p, old, clearance) and attempt < 20:
+        return autocross(seed, width_m, length_m, attempt + 1)
     path.append(p, h, 0.0)
     center, curv = path.array()
     total = float(np.sum(np.hypot(*np.diff(center, axis=0).T)))
