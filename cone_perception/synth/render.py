@@ -121,6 +121,16 @@ def _noise(rng: np.random.Generator, h: int, w: int, scales: tuple[int, ...], we
     return out
 
 
+def _seamless(tex: np.ndarray) -> np.ndarray:
+    """Make a square tile wrap without seams: blend it with its half-shifted copy, whose seams sit where the
+    original's weight is 1."""
+    T = tex.shape[0]
+    w1 = np.sin(np.pi * (np.arange(T) + 0.5) / T) ** 2
+    w = np.outer(w1, w1).astype(np.float32)[:, :, None]
+    shifted = np.roll(tex, (T // 2, T // 2), axis=(0, 1))
+    return tex * w + shifted * (1 - w)
+
+
 @dataclass
 class Look:
     """Randomised appearance of one scene (track): ground, sky, background, sun, paints, nose."""
@@ -148,7 +158,7 @@ def make_look(camera: PinholeCamera, rng: np.random.Generator, options: RenderOp
     # ground tile: asphalt grey with multi-scale noise, patches, cracks, painted lines
     T, res = 1024, 0.02
     grey = rng.uniform(85, 150)
-    tint = rng.uniform(-6, 6, 3)
+    tint = rng.uniform(-3, 3, 3)
     n = _noise(rng, T, T, (1, 3, 12, 48, 200), (5.0, 4.0, 5.0, 6.0, 7.0))
     tex = np.clip(grey + n, 0, 255).astype(np.float32)
     tex = np.repeat(tex[:, :, None], 3, axis=2) + tint
@@ -175,7 +185,7 @@ def make_look(camera: PinholeCamera, rng: np.random.Generator, options: RenderOp
                 cv2.line(lines, (0, y), (T, y), 1.0, 6)
         a = (cv2.GaussianBlur(lines, (0, 0), 1.0) * wear * rng.uniform(0.4, 0.9))[:, :, None]
         tex = tex * (1 - a) + np.array(line_col, np.float32) * a
-    tex = np.clip(tex, 0, 255).astype(np.uint8)
+    tex = np.clip(_seamless(tex), 0, 255).astype(np.uint8)
     haze = tex.reshape(-1, 3).mean(0) * rng.uniform(0.95, 1.1)
 
     # sky: zenith -> horizon gradient, optional clouds
@@ -191,9 +201,10 @@ def make_look(camera: PinholeCamera, rng: np.random.Generator, options: RenderOp
     col = (top[None, :] * (1 - t) + hor[None, :] * t)
     col[H:] = hor
     sky = np.repeat(col[:, None, :], W, axis=1).astype(np.float32)
-    if kind != "bright" and rng.random() < 0.6:
-        cl = np.clip(_noise(rng, 2 * H, W, (40, 160), (0.6, 1.0)), 0, None)[:, :, None]
-        sky = sky * (1 - np.clip(cl, 0, 0.8)) + 245 * np.clip(cl, 0, 0.8)
+    if kind != "bright" and rng.random() < 0.5:  # soft clouds
+        cl = cv2.GaussianBlur(_noise(rng, 2 * H, W, (60, 240), (0.4, 1.0)), (0, 0), 0.02 * W)
+        cl = np.clip(cl * rng.uniform(0.8, 2.0) - 0.3, 0, 0.7)[:, :, None]
+        sky = sky * (1 - cl) + np.float32(rng.uniform(225, 250)) * cl
     sky = np.clip(sky, 0, 255).astype(np.uint8)
 
     pano, alpha, below, far_m = _make_pano(rng, f, camera.pose.height_m)
@@ -558,7 +569,7 @@ class Renderer:
         H, W = self.H, self.W
         # exposure, white balance, gamma in one LUT
         gain = float(np.exp(rng.uniform(np.log(0.6), np.log(1.6))))
-        wb = rng.uniform(0.88, 1.12, 3)
+        wb = rng.uniform(0.92, 1.08, 3)
         gamma = float(rng.uniform(0.8, 1.25))
         x = np.arange(256, dtype=np.float64)[:, None] / 255.0
         lut = np.clip(255.0 * np.clip(x * gain * wb[None, :], 0, 1) ** gamma, 0, 255).astype(np.uint8)
