@@ -333,6 +333,14 @@ _PLATE_FACES = [(4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4
 _PLATE_NORMALS = np.array([[0, 0, 1], [0, 1, 0], [-1, 0, 0], [0, -1, 0], [1, 0, 0]], float)
 
 
+def cone_vertices_W(track: Track, i: int) -> np.ndarray:
+    """(V, 3) track-frame vertices (m) of cone ``i``: 8 base-plate corners, then the body rings."""
+    verts, _, _ = _MESHES[int(track.cone_class[i])]
+    yaw = (i * 0.6180339) % (np.pi / 2)  # fixed plate yaw per cone
+    c, s = np.cos(yaw), np.sin(yaw)
+    return verts @ np.array([[c, s, 0], [-s, c, 0], [0, 0, 1]]) + np.array([track.cones_xy_m[i, 0], track.cones_xy_m[i, 1], 0.0])
+
+
 # ---------------------------------------------------------------- renderer
 
 
@@ -347,8 +355,9 @@ class Renderer:
         self._dist_map = None
         if camera.dist_coeffs.size and np.any(camera.dist_coeffs):
             uu, vv = np.meshgrid(np.arange(self.W, dtype=np.float32), np.arange(self.H, dtype=np.float32))
-            pts = np.stack([uu.ravel(), vv.ravel()], 1).reshape(-1, 1, 2)
-            und = cv2.undistortPoints(pts, camera.K, camera.dist_coeffs, P=camera.K).reshape(self.H, self.W, 2)
+            # pixel (x, y) of OpenCV is the continuous point (x + 0.5, y + 0.5) of our pixel-corner convention
+            pts = np.stack([uu.ravel(), vv.ravel()], 1).reshape(-1, 1, 2) + 0.5
+            und = cv2.undistortPoints(pts, camera.K, camera.dist_coeffs, P=camera.K).reshape(self.H, self.W, 2) - 0.5
             self._dist_map = (und[:, :, 0].copy(), und[:, :, 1].copy())
 
     def _make_sensor_noise(self) -> tuple[np.ndarray, np.ndarray]:
@@ -400,7 +409,7 @@ class Renderer:
 
     def _ground(self, look: Look, H_W_B: np.ndarray, v0: int, sc: SceneCamera) -> np.ndarray:
         W, H = self.W, self.H
-        M = np.diag([1 / look.tex_res_m, 1 / look.tex_res_m, 1.0]) @ H_W_B @ np.array([[1, 0, 0], [0, 1, v0], [0, 0, 1.0]])
+        M = np.diag([1 / look.tex_res_m, 1 / look.tex_res_m, 1.0]) @ H_W_B @ np.array([[1, 0, 0.5], [0, 1, v0 + 0.5], [0, 0, 1.0]])
         g = cv2.warpPerspective(look.texture, M, (W, H - v0), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_WRAP)
         # haze: blend the far rows towards the mean ground colour (hides texture aliasing)
         rows = np.arange(v0, H, dtype=np.float64) + 0.5
@@ -446,10 +455,7 @@ class Renderer:
         keep = (depth > 0.4) & (uv[:, 0] > -m) & (uv[:, 0] < self.W + m) & (uv[:, 1] < self.H + m)
         out = []
         for i in cand[keep]:
-            verts, _, _ = _MESHES[int(track.cone_class[i])]
-            yaw = (i * 0.6180339) % (np.pi / 2)  # fixed plate yaw per cone
-            c, s = np.cos(yaw), np.sin(yaw)
-            V = verts @ np.array([[c, s, 0], [-s, c, 0], [0, 0, 1]]) + np.array([xy[i, 0], xy[i, 1], 0.0])
+            V = cone_vertices_W(track, int(i))
             uvv, dep = sc.project(V, distort=False)
             if np.any(~(dep > 0.1)):
                 continue
@@ -467,7 +473,7 @@ class Renderer:
             uv, dep = sc.project(G, distort=False)
             if np.any(~(dep > 0.1)):
                 continue
-            hull = cv2.convexHull(np.round(uv * 4).astype(np.int32))
+            hull = cv2.convexHull(_px4(uv))
             x, y, w, h = cv2.boundingRect(hull)
             x0, y0, x1, y1 = max(x // 4, 0), max(y // 4, v_ground), min((x + w) // 4 + 2, self.W), min((y + h) // 4 + 2, self.H)
             if x1 <= x0 or y1 <= y0:
@@ -487,7 +493,7 @@ class Renderer:
             cls = int(track.cone_class[i])
             model = CONE_MODELS[cls]
             _, zs, r = _MESHES[cls]
-            P = np.round(uv * 4).astype(np.int32)  # shift = 2 sub-pixel precision
+            P = _px4(uv)
             body = look.body_paint[cls]
             centre = V[8:8 + N_SEG].mean(0)
             size_px = float(np.ptp(uv[:, 1]))
@@ -533,7 +539,7 @@ class Renderer:
         for n_id, (i, V, uv, _) in enumerate(cones):
             if self._dist_map is not None:  # silhouette in distorted pixels
                 uvd, _ = sc.project(V, distort=True)
-                P = np.round(uvd * 4).astype(np.int32)
+                P = _px4(uvd)
                 hulls = [cv2.convexHull(P[:8]), cv2.convexHull(P[8:])]
             else:
                 hulls = polys[n_id]
@@ -595,6 +601,12 @@ class Renderer:
             ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, int(rng.integers(30, 90))])
             img = cv2.imdecode(buf, cv2.IMREAD_COLOR)
         return img
+
+
+def _px4(uv: np.ndarray) -> np.ndarray:
+    """(N, 2) continuous px (pixel c covers [c, c + 1)) -> int32 OpenCV drawing points with shift = 2
+    (OpenCV puts integer coordinates at pixel centres)."""
+    return np.round((uv - 0.5) * 4).astype(np.int32)
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
