@@ -28,6 +28,7 @@ from .scene import CarPose, SceneCamera
 from .track import Track
 
 NOSE_ID = 65535  # id-buffer value of the car nose (occluder)
+NEAR_GROUND_M = 15.0  # ground nearer than this comes from the fine texture mosaic
 
 
 @dataclass(frozen=True)
@@ -135,8 +136,11 @@ def _seamless(tex: np.ndarray) -> np.ndarray:
 class Look:
     """Randomised appearance of one scene (track): ground, sky, background, sun, paints, nose."""
 
-    texture: np.ndarray  # (T, T, 3) uint8 ground tile
-    tex_res_m: float  # m per texture px
+    near_mosaic: np.ndarray  # (3T, 3T, 3) uint8: 3 x 3 seamless ground tiles at tex_res_m
+    tex_res_m: float  # m per near texture px
+    far_mosaic: np.ndarray  # (9T/4, 9T/4, 3) uint8: 9 x 9 tiles at far_res_m
+    far_res_m: float
+    tile_m: float  # side of one tile in m
     haze_bgr: np.ndarray  # (3,) far-ground colour
     sky: np.ndarray  # (2H, W, 3) uint8 sky, horizon at row H
     pano: np.ndarray  # (hp, wp, 3) uint8 background band, px per rad = camera fx
@@ -171,7 +175,7 @@ def make_look(camera: PinholeCamera, rng: np.random.Generator, options: RenderOp
         tex += cv2.GaussianBlur(patch, (0, 0), 6)[:, :, None] * col
     for _ in range(int(rng.integers(0, 12))):  # tar cracks
         pts = np.cumsum(rng.normal(0, 12, (8, 2)), axis=0) + rng.integers(0, T, 2)
-        cv2.polylines(tex, [pts.astype(np.int32)], False, (grey * 0.45,) * 3, int(rng.integers(1, 3)), cv2.LINE_AA)
+        cv2.polylines(tex, [pts.astype(np.int32)], False, (grey * 0.7,) * 3, 1, cv2.LINE_AA)
     if rng.random() < 0.7:  # painted lines (parking lot markings), white or yellow, worn
         line_col = (235, 235, 235) if rng.random() < 0.8 else (60, 200, 230)
         wear = np.clip(_noise(rng, T, T, (4, 30), (0.5, 0.6)) + 0.6, 0, 1)
@@ -216,7 +220,8 @@ def make_look(camera: PinholeCamera, rng: np.random.Generator, options: RenderOp
         "black": np.array([28, 28, 30], float) + rng.uniform(0, 15),
     }
     body_paint = {c: np.clip(np.array(v, float) + rng.normal(0, 10, 3), 0, 255) for c, v in _PAINT.items()}
-    look = Look(tex, res, haze, sky, pano, alpha, below, far_m, sun, float(rng.uniform(0.35, 0.6)), paints, body_paint)
+    far_tile = cv2.resize(tex, (T // 4, T // 4), interpolation=cv2.INTER_AREA)
+    look = Look(np.tile(tex, (3, 3, 1)), res, np.tile(far_tile, (9, 9, 1)), res * 4, T * res, haze, sky, pano, alpha, below, far_m, sun, float(rng.uniform(0.35, 0.6)), paints, body_paint)
     if rng.random() < options.nose_prob:
         look.nose, look.nose_mask, look.nose_top = _make_nose(rng, W, H)
     return look
@@ -408,16 +413,37 @@ class Renderer:
         return look.sky[off : off + self.H].copy()
 
     def _ground(self, look: Look, H_W_B: np.ndarray, v0: int, sc: SceneCamera) -> np.ndarray:
+        """Rows ``v0..H`` of the ground: near rows from the fine mosaic, far rows from the coarse one.
+
+        The tile is seamless, so shifting the texture by whole tiles changes nothing: each mosaic is
+        placed with the camera in its middle tile and warped with a constant border (several times
+        faster than ``BORDER_WRAP``).
+        """
         W, H = self.W, self.H
-        M = np.diag([1 / look.tex_res_m, 1 / look.tex_res_m, 1.0]) @ H_W_B @ np.array([[1, 0, 0.5], [0, 1, v0 + 0.5], [0, 0, 1.0]])
-        g = cv2.warpPerspective(look.texture, M, (W, H - v0), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_WRAP)
+        cam = sc.position_W()
+        rows = np.arange(v0, H, dtype=np.float64) + 0.5
+        p = np.column_stack([np.full_like(rows, W / 2), rows, np.ones_like(rows)]) @ H_W_B.T
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xy = p[:, :2] / p[:, 2:3]
+        d = np.where(p[:, 2] > 0, np.hypot(xy[:, 0] - cam[0], xy[:, 1] - cam[1]), np.inf)
+        n_far = int(np.count_nonzero(d > NEAR_GROUND_M))  # rows are ordered far (top) to near (bottom)
+        g = np.empty((H - v0, W, 3), np.uint8)
+        for mosaic, res, r0, r1 in ((look.far_mosaic, look.far_res_m, 0, n_far), (look.near_mosaic, look.tex_res_m, n_far, H - v0)):
+            if r1 <= r0:
+                continue
+            tile_px = look.tile_m / res
+            k = np.floor(cam[:2] / look.tile_m) - (mosaic.shape[0] // tile_px - 1) // 2  # first tile of the mosaic
+            T_tex_W = np.array([[1 / res, 0, -k[0] * tile_px], [0, 1 / res, -k[1] * tile_px], [0, 0, 1.0]])
+            M = T_tex_W @ H_W_B @ np.array([[1, 0, 0.5], [0, 1, v0 + r0 + 0.5], [0, 0, 1.0]])
+            cv2.warpPerspective(
+                mosaic, M, (W, r1 - r0), dst=g[r0:r1], flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                borderMode=cv2.BORDER_CONSTANT, borderValue=tuple(float(c) for c in look.haze_bgr),
+            )
         # haze: blend the far rows towards the mean ground colour (hides texture aliasing)
         rows = np.arange(v0, H, dtype=np.float64) + 0.5
         p = np.column_stack([np.full_like(rows, W / 2), rows, np.ones_like(rows)]) @ H_W_B.T
         with np.errstate(divide="ignore", invalid="ignore"):
             xy = p[:, :2] / p[:, 2:3]
-        cam = sc.position_W()
-        d = np.where(p[:, 2] > 0, np.hypot(xy[:, 0] - cam[0], xy[:, 1] - cam[1]), np.inf)
         alpha = np.clip((d - 12.0) / 40.0, 0.0, 0.85)
         n = int(np.count_nonzero(alpha > 0.01))
         if n:
