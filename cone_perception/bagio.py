@@ -177,14 +177,18 @@ def read_messages(path: str | os.PathLike, topics: str | Iterable[str] | None = 
         reader.close()
 
 
+def ensure_writable_dir(path: Path) -> None:
+    """Create ``path`` (and parents) if needed; :class:`ConfigError` unless it is a writable directory."""
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise ConfigError(str(path), None, f"cannot create directory: {e.strerror}") from None
+    if not os.access(path, os.W_OK | os.X_OK):
+        raise ConfigError(str(path), None, "directory is not writable")
+
+
 def check_new_output(path: Path, what: str) -> None:
     """Raise :class:`ConfigError` unless ``path`` does not exist and its parent is (or can be made) writable."""
     if path.exists():
         raise ConfigError(str(path), None, f"{what} output already exists; remove it or choose another path")
-    parent = path.parent
-    try:
-        parent.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise ConfigError(str(parent), None, f"cannot create directory: {e.strerror}") from None
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise ConfigError(str(parent), None, "directory is not writable")
+    ensure_writable_dir(path.parent)

@@ -18,7 +18,6 @@ pixels wide and high and whose visible fraction is at least
 from __future__ import annotations
 
 import json
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -34,6 +33,7 @@ from ..bagio import (
     PointCloud2,
     PointField,
     check_new_output,
+    ensure_writable_dir,
     compressed_msg_from_bgr,
     header,
     image_msg_from_bgr,
@@ -165,12 +165,7 @@ def check_writable_dir(path: Path, what: str) -> None:
         raise ConfigError(str(path), None, f"{what} output exists and is not a directory")
     if path.is_dir() and any(path.iterdir()):
         raise ConfigError(str(path), None, f"{what} output directory is not empty; choose a new one")
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise ConfigError(str(path), None, f"cannot create directory: {e.strerror}") from None
-    if not os.access(path, os.W_OK | os.X_OK):
-        raise ConfigError(str(path), None, "directory is not writable")
+    ensure_writable_dir(path)
 
 
 def yolo_lines(truths: list[ConeTruth], width: int, height: int) -> list[str]:
@@ -341,12 +336,7 @@ def write_preview(cfg: SynthConfig, out: Path, n: int = 8, cols: int = 2, thumb_
     out = Path(out)
     if out.suffix.lower() != ".png":
         raise ConfigError(str(out), None, "preview output must be a .png file")
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise ConfigError(str(out.parent), None, f"cannot create directory: {e.strerror}") from None
-    if not os.access(out.parent, os.W_OK):
-        raise ConfigError(str(out.parent), None, "directory is not writable")
+    ensure_writable_dir(out.parent)
     renderer = cfg.renderer()
     rng = np.random.default_rng(cfg.seed)
     thumbs = []
