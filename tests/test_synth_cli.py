@@ -133,3 +133,24 @@ def test_unwritable_output_is_refused(tmp_path, capsys):
     (tmp_path / "bag").mkdir()
     assert main(["synth", "bag", "--seconds", "0.1", "--out", str(tmp_path / "bag"), *SMALL]) == 2
     assert "already exists" in capsys.readouterr().err
+
+
+def test_vary_mount_records_each_frames_camera(tmp_path):
+    from cone_perception.camera import MountPose, PinholeCamera
+    from cone_perception.geometry import GroundMapper
+
+    out = tmp_path / "vm"
+    args = ["synth", "dataset", "--n", "3", "--frames-per-track", "1", "--vary-mount", "--no-jitter", "--out", str(out), *SMALL]
+    assert main(args) == 0
+    records = [json.loads(line) for line in (out / "gt.jsonl").read_text().splitlines()]
+    hfovs = set()
+    for rec in records:
+        cam = rec["camera"]
+        K = np.array(cam["K"])
+        hfovs.add(round(float(K[0, 0]), 3))
+        pc = PinholeCamera(K, rec["width"], rec["height"], MountPose(**cam["mount"]))
+        full = [c for c in rec["cones"] if c["visible_fraction"] >= 0.999]
+        xy, ok = GroundMapper(pc.H_F_B(), 1e3).map_pixels(np.array([c["foot_px"] for c in full]).reshape(-1, 2))
+        assert np.all(ok)
+        assert np.hypot(*(xy - np.array([[c["x_m"], c["y_m"]] for c in full]).reshape(-1, 2)).T).max() < 0.02
+    assert len(hfovs) == 3  # each track got its own viewpoint

@@ -44,6 +44,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, required=True, help="output directory (new or empty)")
     p.add_argument("--frames-per-track", type=int, default=20, help="frames per random track and look (default 20)")
     p.add_argument("--val-frac", type=float, default=0.1, help="fraction of tracks in the val split (default 0.1)")
+    p.add_argument(
+        "--vary-mount",
+        action="store_true",
+        help="new random viewpoint per track (hfov 70-115, pitch +-6 deg, height +-0.3 m) for detector training; "
+        "calib.yaml then holds the nominal mount only, each gt.jsonl line its own camera",
+    )
     _common(p)
     p = sub.add_parser("bag", help="rosbag2 (MCAP): camera images + /cones_gt, calibration YAML beside it")
     p.add_argument("--seconds", type=float, required=True, help="length of the recording in s")
@@ -81,6 +87,7 @@ def config_from_args(args: argparse.Namespace):
         track_kinds=tuple(k.strip() for k in args.tracks.split(",") if k.strip()),
         missing_frac=args.missing,
         stray=args.stray,
+        vary_mount=getattr(args, "vary_mount", False),
     )
 
 

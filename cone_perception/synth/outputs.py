@@ -18,7 +18,7 @@ pixels wide and high and whose visible fraction is at least
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import cv2
@@ -74,6 +74,7 @@ class SynthConfig:
     track_kinds: tuple[str, ...] = TRACK_KINDS
     missing_frac: float = 0.0
     stray: int = 0
+    vary_mount: bool = False  # datasets: new hfov / pitch / height per track (calib.yaml is then the nominal only)
 
     def validate(self) -> None:
         """Raise :class:`ConfigError` for impossible parameters, before any work."""
@@ -138,6 +139,32 @@ class SynthConfig:
     def renderer(self, **opts) -> Renderer:
         return Renderer(self.camera(), RenderOptions(nose_prob=self.nose_prob, photometric=self.photometric, **opts))
 
+    def varied(self, rng: np.random.Generator) -> "SynthConfig":
+        """A copy with a random viewpoint near this one: hfov 70..115 deg, pitch +-6 deg, height +-0.3 m."""
+        m = self.mount
+        for _ in range(20):
+            cfg = replace(
+                self,
+                hfov_deg=float(rng.uniform(70.0, 115.0)),
+                mount=replace(
+                    m,
+                    pitch_deg=float(m.pitch_deg + rng.uniform(-6.0, 6.0)),
+                    height_m=float(max(m.height_m + rng.uniform(-0.3, 0.3), 0.5)),
+                ),
+            )
+            if ground_visible(cfg.camera(), 60.0):
+                return cfg
+        return self
+
+    def camera_record(self) -> dict:
+        """Camera of a frame for gt.jsonl: K and mount."""
+        m = self.mount
+        return {
+            "K": [[round(float(x), 6) for x in row] for row in self.camera().K],
+            "dist_coeffs": [self.k1, self.k2, 0.0, 0.0, 0.0],
+            "mount": {"x_m": m.x_m, "y_m": m.y_m, "height_m": m.height_m, "pitch_deg": m.pitch_deg, "roll_deg": m.roll_deg, "yaw_deg": m.yaw_deg},
+        }
+
     def track(self, index: int, rng: np.random.Generator) -> Track:
         kind = self.track_kinds[0] if len(self.track_kinds) == 1 else rng.choice(
             self.track_kinds, p=_kind_weights(self.track_kinds)
@@ -188,6 +215,7 @@ def gt_record(image: str, cfg: SynthConfig, track: Track, pose: CarPose, truths:
         "height": cfg.height,
         "track": {"kind": track.kind, "seed": track.seed},
         "pose": pose.to_dict(),
+        "camera": cfg.camera_record(),
         "cones": [t.to_dict() for t in truths],
     }
 
@@ -237,6 +265,7 @@ def write_dataset(
         encoding="utf-8",
     )
     renderer = cfg.renderer()
+    frame_cfg = cfg
     rng = np.random.default_rng(cfg.seed)
     counts = {"train": 0, "val": 0, "labels": 0, "cones": 0}
     with open(out / "gt.jsonl", "w", encoding="utf-8") as gt, _progress(n, "synth dataset", progress) as bar:
@@ -244,6 +273,9 @@ def write_dataset(
             t = k // frames_per_track
             if k % frames_per_track == 0:
                 track = cfg.track(t, rng)
+                if cfg.vary_mount:
+                    frame_cfg = cfg.varied(rng)
+                    renderer = frame_cfg.renderer()
                 look = renderer.new_look(rng)
             split = "val" if t >= n_tracks - n_val else "train"
             pose = random_pose(track, rng, cfg.jitter)
@@ -253,7 +285,7 @@ def write_dataset(
             cv2.imwrite(str(out / rel), img, [cv2.IMWRITE_JPEG_QUALITY, 93])
             lines = yolo_lines(truths, cfg.width, cfg.height)
             (out / "labels" / split / f"{name}.txt").write_text("".join(x + "\n" for x in lines), encoding="utf-8")
-            gt.write(json.dumps(gt_record(rel, cfg, track, pose, truths)) + "\n")
+            gt.write(json.dumps(gt_record(rel, frame_cfg, track, pose, truths)) + "\n")
             counts[split] += 1
             counts["labels"] += len(lines)
             counts["cones"] += len(truths)

@@ -18,6 +18,7 @@ the image).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import cv2
 import numpy as np
@@ -106,7 +107,7 @@ class ConeTruth:
             "distance_m": round(self.distance_m, 4),
             "box": [round(float(b), 2) for b in self.box],
             "visible_fraction": round(self.visible_fraction, 4),
-            "foot_px": [round(float(f), 2) for f in self.foot_px],
+            "foot_px": [round(float(f), 4) for f in self.foot_px],
         }
 
 
@@ -366,9 +367,7 @@ class Renderer:
             self._dist_map = (und[:, :, 0].copy(), und[:, :, 1].copy())
 
     def _make_sensor_noise(self) -> tuple[np.ndarray, np.ndarray]:
-        rng = np.random.default_rng(12345)
-        n = rng.normal(0, 8.0, (self.H + 32, self.W + 32, 3)).astype(np.float32)
-        return np.clip(n, 0, 255).astype(np.uint8), np.clip(-n, 0, 255).astype(np.uint8)
+        return _sensor_noise(self.H, self.W)
 
     def new_look(self, rng: np.random.Generator) -> Look:
         return make_look(self.camera, rng, self.options)
@@ -633,6 +632,14 @@ def _px4(uv: np.ndarray) -> np.ndarray:
     """(N, 2) continuous px (pixel c covers [c, c + 1)) -> int32 OpenCV drawing points with shift = 2
     (OpenCV puts integer coordinates at pixel centres)."""
     return np.round((uv - 0.5) * 4).astype(np.int32)
+
+
+@lru_cache(maxsize=2)
+def _sensor_noise(H: int, W: int) -> tuple[np.ndarray, np.ndarray]:
+    """Fixed Gaussian noise field (sigma 8) split in positive and negative parts, (H + 32, W + 32, 3) uint8 each."""
+    rng = np.random.default_rng(12345)
+    n = rng.normal(0, 8.0, (H + 32, W + 32, 3)).astype(np.float32)
+    return np.clip(n, 0, 255).astype(np.uint8), np.clip(-n, 0, 255).astype(np.uint8)
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
