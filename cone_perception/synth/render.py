@@ -294,28 +294,46 @@ def _make_pano(rng: np.random.Generator, f: float, cam_h_m: float) -> tuple[np.n
 
 
 def _make_nose(rng: np.random.Generator, W: int, H: int) -> tuple[np.ndarray, np.ndarray, int]:
-    """Car nose, front wheels and suspension in image space (fixed to the car)."""
+    """Car nose, cockpit rim, front wheels and wishbones in image space (fixed to the car)."""
     img = np.zeros((H, W, 3), np.uint8)
     mask = np.zeros((H, W), np.uint8)
-    top = int(H * rng.uniform(0.72, 0.9))
-    half_b, half_t = W * rng.uniform(0.18, 0.3), W * rng.uniform(0.06, 0.12)
+
+    def fill(poly_or_fn, colour):
+        poly_or_fn(img, tuple(int(c) for c in colour))
+        poly_or_fn(mask, 1)
+
+    top = int(H * rng.uniform(0.6, 0.9))
+    half_b, half_t = W * rng.uniform(0.18, 0.32), W * rng.uniform(0.05, 0.12)
     cx = W / 2 + rng.uniform(-0.02, 0.02) * W
     body = np.array([[cx - half_b, H], [cx - half_t, top], [cx + half_t, top], [cx + half_b, H]], np.int32)
-    col = rng.choice([[40, 25, 20], [25, 25, 25], [90, 40, 20], [30, 30, 140], [200, 200, 200]]) + rng.integers(-10, 10, 3)
-    for layer in (img, mask):
-        cv2.fillConvexPoly(layer, body, tuple(int(c) for c in col) if layer is img else 1)
+    col = np.array(rng.choice([[40, 25, 20], [25, 25, 25], [90, 40, 20], [30, 30, 140], [200, 200, 200], [20, 70, 20]]), float)
+    col += rng.integers(-10, 10, 3)
+    fill(lambda im, c: cv2.fillConvexPoly(im, body, c), col)
+    # shading across the nose (lighter towards the sky-facing middle), stickers, centre seam
+    xs = np.arange(W, dtype=np.float32)
+    shade = 0.75 + 0.35 * np.exp(-(((xs - cx) / max(half_t * 1.5, 1.0)) ** 2))
+    img[top:] = np.clip(img[top:] * shade[None, :, None], 0, 255).astype(np.uint8)
+    for _ in range(int(rng.integers(0, 4))):
+        y0 = int(rng.uniform(top, H))
+        h = int(H * rng.uniform(0.01, 0.04))
+        f0 = (y0 - top) / max(H - top, 1)
+        hw = half_t + (half_b - half_t) * f0
+        sticker = np.array([[cx - hw * 0.9, y0], [cx + hw * 0.9, y0], [cx + hw * 0.9, y0 + h], [cx - hw * 0.9, y0 + h]], np.int32)
+        cv2.fillConvexPoly(img, sticker, tuple(int(c) for c in rng.integers(0, 255, 3)))
+        img[mask == 0] = 0
     cv2.line(img, (int(cx), H), (int(cx), top), tuple(int(c * 0.6 + 60) for c in col), max(W // 200, 2))
-    if rng.random() < 0.7:  # front wheels and wishbones
-        wr = int(H * rng.uniform(0.12, 0.2))
+    if rng.random() < 0.5:  # cockpit rim / steering wheel at the very bottom
+        axes = (int(half_b * 0.7), int(H * rng.uniform(0.08, 0.15)))
+        fill(lambda im, c: cv2.ellipse(im, (int(cx), H), axes, 0, 180, 360, c, -1), (18, 18, 18))
+    if rng.random() < 0.8:  # front wheels and wishbones
+        wr = int(H * rng.uniform(0.12, 0.25))
         for s in (-1, 1):
-            wc = (int(cx + s * W * rng.uniform(0.33, 0.42)), int(H + wr * 0.3))
-            cv2.ellipse(img, wc, (int(wr * 0.8), wr), 0, 0, 360, (22, 22, 22), -1)
-            cv2.ellipse(mask, wc, (int(wr * 0.8), wr), 0, 0, 360, 1, -1)
+            wc = (int(cx + s * W * rng.uniform(0.3, 0.42)), int(H - wr * rng.uniform(0.0, 0.6)))
+            fill(lambda im, c: cv2.ellipse(im, wc, (int(wr * 0.55), wr), 0, 0, 360, c, -1), (22, 22, 22))
             for dy in (0, int(H * 0.04)):
                 p0 = (int(cx + s * half_t * 1.5), top + dy + int(H * 0.03))
-                cv2.line(img, p0, wc, (50, 50, 50), max(W // 300, 2))
-                cv2.line(mask, p0, wc, 1, max(W // 300, 2))
-    return img, mask.astype(bool), int(min(top, np.flatnonzero(mask.any(1))[0]))
+                fill(lambda im, c: cv2.line(im, p0, wc, c, max(W // 300, 2)), (50, 50, 50))
+    return img, mask.astype(bool), int(np.flatnonzero(mask.any(1))[0])
 
 
 # ---------------------------------------------------------------- cone meshes
