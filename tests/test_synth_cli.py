@@ -82,6 +82,7 @@ def test_bag_round_trip_and_calibration(tmp_path, compressed):
         assert len(cones) == len(gt["cones"]) > 0
         assert np.allclose(cones["x"], [c["x_m"] for c in gt["cones"]], atol=1e-4)
         assert np.array_equal(cones["class_id"], [c["class_id"] for c in gt["cones"]])
+        assert np.allclose(cones["score"], [c["visible_fraction"] for c in gt["cones"]], atol=1e-4)  # score = visible fraction
 
 
 def test_preview_writes_a_contact_sheet(tmp_path):

@@ -7,7 +7,8 @@
   track on both sides).
 * Bag: rosbag2 (MCAP) with ``/camera/image_raw`` (``yuv422_yuy2``) or
   ``/camera/image_raw/compressed`` (JPEG), and ``/cones_gt`` (PointCloud2 in the
-  ``/cones`` schema, frame ``rear_axle``, same stamps); beside it
+  ``/cones`` schema, frame ``rear_axle``, same stamps, every cone with a visible
+  pixel, ``score`` = its visible fraction); beside it
   ``<bag>_calib.yaml`` and ``<bag>_gt.jsonl``.
 
 YOLO labels hold only cones whose box is at least :data:`MIN_LABEL_BOX_PX`
@@ -221,12 +222,12 @@ def gt_record(image: str, cfg: SynthConfig, track: Track, pose: CarPose, truths:
 
 
 def truths_to_records(truths: list[ConeTruth]) -> np.ndarray:
-    """Ground truth -> :data:`CONE_DTYPE` records (``rear_axle`` m, score 1, zero covariance)."""
+    """Ground truth -> :data:`CONE_DTYPE` records (``rear_axle`` m, ``score`` = visible fraction, zero covariance)."""
     rec = np.zeros(len(truths), dtype=CONE_DTYPE)
     rec["x"] = [t.x_m for t in truths]
     rec["y"] = [t.y_m for t in truths]
     rec["class_id"] = [t.class_id for t in truths]
-    rec["score"] = 1.0
+    rec["score"] = [t.visible_fraction for t in truths]
     return rec
 
 
