@@ -47,7 +47,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--vary-mount",
         action="store_true",
-        help="new random viewpoint per track (hfov 70-115, pitch +-6 deg, height +-0.3 m) for detector training; "
+        help="new random viewpoint per track (hfov 70-120, pitch -4..+16 deg around --pitch, height +-0.3 m) for detector training; "
         "calib.yaml then holds the nominal mount only, each gt.jsonl line its own camera",
     )
     _common(p)

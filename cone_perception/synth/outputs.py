@@ -141,15 +141,19 @@ class SynthConfig:
         return Renderer(self.camera(), RenderOptions(nose_prob=self.nose_prob, photometric=self.photometric, **opts))
 
     def varied(self, rng: np.random.Generator) -> "SynthConfig":
-        """A copy with a random viewpoint near this one: hfov 70..115 deg, pitch +-6 deg, height +-0.3 m."""
+        """A copy with a random viewpoint: hfov 70..120 deg, pitch -4..+16 deg around this one, height +-0.3 m.
+
+        Real on-board cameras look further down than the nominal mount (horizon 15-25 % below the
+        top of the frame), hence the asymmetric pitch range.
+        """
         m = self.mount
         for _ in range(20):
             cfg = replace(
                 self,
-                hfov_deg=float(rng.uniform(70.0, 115.0)),
+                hfov_deg=float(rng.uniform(70.0, 120.0)),
                 mount=replace(
                     m,
-                    pitch_deg=float(m.pitch_deg + rng.uniform(-6.0, 6.0)),
+                    pitch_deg=float(m.pitch_deg + rng.uniform(-4.0, 16.0)),
                     height_m=float(max(m.height_m + rng.uniform(-0.3, 0.3), 0.5)),
                 ),
             )

@@ -231,7 +231,7 @@ def make_look(camera: PinholeCamera, rng: np.random.Generator, options: RenderOp
 def _make_pano(rng: np.random.Generator, f: float, cam_h_m: float) -> tuple[np.ndarray, np.ndarray, int, float]:
     """360-degree background band at ``f`` px/rad: trees, buildings, fences, tyre walls, poles, far grass."""
     wp = int(np.ceil(2 * np.pi * f))
-    above = int(0.16 * f)  # ~9 degrees above the horizon
+    above = int(0.32 * f)  # ~18 degrees above the horizon
     dv_deg = rng.uniform(0.9, 1.7)
     below = int(np.ceil(np.radians(dv_deg) * f)) + 2
     far_m = float(cam_h_m / np.tan(np.radians(dv_deg)))
@@ -250,8 +250,10 @@ def _make_pano(rng: np.random.Generator, f: float, cam_h_m: float) -> tuple[np.n
         wdt = int(rng.uniform(0.05, 0.35) * f) if kind != "pole" else int(0.01 * f) + 2
         x1 = min(x + wdt, wp)
         if kind == "trees":
-            h = rng.uniform(0.03, 0.14) * f
-            prof = h * (0.7 + 0.3 * np.clip(_noise(rng, 1, x1 - x, (6, 30), (0.4, 0.8))[0] + 0.6, 0, 1))
+            h = rng.uniform(0.03, 0.3) * f
+            xs = (np.arange(x1 - x) + 0.5) / (x1 - x)
+            crowns = np.clip(_noise(rng, 1, x1 - x, (16, 48), (0.25, 0.5))[0] + 0.75, 0.3, 1.2)
+            prof = h * crowns * np.sin(np.pi * xs) ** 0.4  # rounded ends
             col = np.array([40, 90, 60], float) * rng.uniform(0.6, 1.3) + rng.uniform(-10, 10, 3)
             for i, ph in enumerate(prof):
                 y0 = max(int(hz - ph), 0)
@@ -259,7 +261,7 @@ def _make_pano(rng: np.random.Generator, f: float, cam_h_m: float) -> tuple[np.n
                 a[y0:hz, x + i] = 1.0
             img[:hz, x:x1] += _noise(rng, hz, x1 - x, (2, 6), (10, 10))[:, :, None] * a[:hz, x:x1, None]
         elif kind == "building":
-            h = int(rng.uniform(0.03, 0.15) * f)
+            h = int(rng.uniform(0.03, 0.25) * f)
             col = rng.choice([[200, 200, 200], [170, 190, 210], [120, 120, 130], [230, 230, 225]]) + rng.uniform(-20, 20, 3)
             y0 = max(hz - h, 0)
             img[y0:hz, x:x1] = col
@@ -302,11 +304,13 @@ def _make_nose(rng: np.random.Generator, W: int, H: int) -> tuple[np.ndarray, np
         poly_or_fn(img, tuple(int(c) for c in colour))
         poly_or_fn(mask, 1)
 
-    top = int(H * rng.uniform(0.6, 0.9))
-    half_b, half_t = W * rng.uniform(0.18, 0.32), W * rng.uniform(0.05, 0.12)
+    top = int(H * rng.uniform(0.5, 0.9))
+    half_b, half_t = W * rng.uniform(0.18, 0.35), W * rng.uniform(0.05, 0.14)
     cx = W / 2 + rng.uniform(-0.02, 0.02) * W
     body = np.array([[cx - half_b, H], [cx - half_t, top], [cx + half_t, top], [cx + half_b, H]], np.int32)
-    col = np.array(rng.choice([[40, 25, 20], [25, 25, 25], [90, 40, 20], [30, 30, 140], [200, 200, 200], [20, 70, 20]]), float)
+    dark = [[40, 25, 20], [25, 25, 25], [50, 30, 25], [35, 35, 40]]  # carbon, navy, black: most cars
+    bright = [[90, 40, 20], [30, 30, 140], [200, 200, 200], [20, 70, 20]]
+    col = np.array(dark[int(rng.integers(len(dark)))] if rng.random() < 0.75 else bright[int(rng.integers(len(bright)))], float)
     col += rng.integers(-10, 10, 3)
     fill(lambda im, c: cv2.fillConvexPoly(im, body, c), col)
     # shading across the nose (lighter towards the sky-facing middle), stickers, centre seam
@@ -618,7 +622,8 @@ class Renderer:
         H, W = self.H, self.W
         # exposure, white balance, gamma in one LUT
         gain = float(np.exp(rng.uniform(np.log(0.6), np.log(1.6))))
-        wb = rng.uniform(0.92, 1.08, 3)
+        temp, tint = rng.uniform(-0.08, 0.08), rng.uniform(-0.02, 0.02)
+        wb = np.array([1.0 - temp, 1.0 + tint, 1.0 + temp])  # B G R: colour temperature, little green/magenta
         gamma = float(rng.uniform(0.8, 1.25))
         x = np.arange(256, dtype=np.float64)[:, None] / 255.0
         lut = np.clip(255.0 * np.clip(x * gain * wb[None, :], 0, 1) ** gamma, 0, 255).astype(np.uint8)
@@ -630,9 +635,14 @@ class Renderer:
         # motion blur at speed (vertical, lower image part where the ground flows fastest)
         speed = o.speed_mps if o.speed_mps > 0 else rng.uniform(0, 15)
         klen = int(np.clip(speed * rng.uniform(1.0, 5.0) * 1e-3 * 0.3 * H, 1, 25))
-        if klen >= 3:
-            v0 = int(np.clip((v_hc + H) / 2, 0, H - 1))
-            img[v0:] = cv2.blur(img[v0:], (1, klen))
+        if klen >= 3:  # growing towards the bottom in 4 bands, so no visible step
+            v_top = int(np.clip(v_hc + 0.2 * (H - v_hc), 0, H - 1))
+            edges = np.linspace(v_top, H, 5).astype(int)
+            for b in range(4):
+                k = max(int(round(klen * (b + 1) / 4)), 1)
+                if k >= 2:
+                    r0, r1 = max(edges[b] - k, 0), edges[b + 1]
+                    img[edges[b] : r1] = cv2.blur(img[r0:r1], (1, k))[edges[b] - r0 :]
         sigma = float(rng.uniform(0.3, 1.2)) * H / 1080
         img = cv2.GaussianBlur(img, (0, 0), sigma)
         # sensor noise from a fixed noise field at a random offset and strength
