@@ -66,6 +66,7 @@ def test_bag_round_trip_and_calibration(tmp_path, compressed):
     gt_lines = [json.loads(x) for x in (tmp_path / "scene_gt.jsonl").read_text().splitlines()]
     calib = load_calibration(tmp_path / "scene_calib.yaml")
     assert (calib.image_width, calib.image_height) == (320, 180)
+    means = []
     for k, (im, cl, gt) in enumerate(zip(images, clouds, gt_lines)):
         stamp = bagio.stamp_ns(im.msg.header)
         assert stamp == bagio.stamp_ns(cl.msg.header) == im.log_stamp_ns == gt["stamp_ns"]
@@ -78,11 +79,14 @@ def test_bag_round_trip_and_calibration(tmp_path, compressed):
             name, view = raw_frame_view(im.msg.encoding, im.msg.width, im.msg.height, im.msg.step, im.msg.data)
             bgr = crop_raw_to_bgr(name, view, CropSpec.full_image(320, 180))
         assert bgr.shape == (180, 320, 3) and bgr.std() > 5
+        means.append(bgr.reshape(-1, 3).mean(0))
         cones = from_pointcloud2(cl.msg, CONE_DTYPE)
         assert len(cones) == len(gt["cones"]) > 0
         assert np.allclose(cones["x"], [c["x_m"] for c in gt["cones"]], atol=1e-4)
         assert np.array_equal(cones["class_id"], [c["class_id"] for c in gt["cones"]])
         assert np.allclose(cones["score"], [c["visible_fraction"] for c in gt["cones"]], atol=1e-4)  # score = visible fraction
+    # a recording keeps its camera settings: no exposure / white-balance flicker between frames
+    assert np.abs(np.array(means) - means[0]).max() < 6
 
 
 def test_preview_writes_a_contact_sheet(tmp_path):

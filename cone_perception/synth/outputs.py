@@ -332,7 +332,7 @@ def write_scene_bag(
     n = max(int(round(seconds * fps)), 1)
     rng = np.random.default_rng(cfg.seed)
     track = make_track(track_kind, int(rng.integers(0, 2**31)), cfg.missing_frac, cfg.stray)
-    renderer = cfg.renderer(jpeg_prob=0.0, speed_mps=max(speed_mps, 1e-3), fps=fps)
+    renderer = cfg.renderer(jpeg_prob=0.0, speed_mps=max(speed_mps, 1e-3), fps=fps, steady_photometric=True)
     look = renderer.new_look(rng)
     poses = drive_poses(track, n, fps, speed_mps, rng, cfg.jitter)
     img_topic = COMPRESSED_TOPIC if compressed else IMAGE_TOPIC

@@ -83,6 +83,7 @@ class RenderOptions:
     jpeg_prob: float = 0.5
     speed_mps: float = 0.0  # for motion blur; 0 = random per frame in dataset mode
     fps: float = 20.0
+    steady_photometric: bool = False  # camera settings fixed per look (videos / bags) instead of per frame
 
 
 @dataclass
@@ -155,6 +156,7 @@ class Look:
     nose: np.ndarray | None = None  # (H, W, 3) uint8
     nose_mask: np.ndarray | None = None  # (H, W) bool
     nose_top: int = 0
+    photo_seed: int = 0  # camera settings of a steady (video) look
 
 
 def make_look(camera: PinholeCamera, rng: np.random.Generator, options: RenderOptions) -> Look:
@@ -223,6 +225,7 @@ def make_look(camera: PinholeCamera, rng: np.random.Generator, options: RenderOp
     body_paint = {c: np.clip(np.array(v, float) + rng.normal(0, 10, 3), 0, 255) for c, v in _PAINT.items()}
     far_tile = cv2.resize(tex, (T // 4, T // 4), interpolation=cv2.INTER_AREA)
     look = Look(np.tile(tex, (3, 3, 1)), res, np.tile(far_tile, (9, 9, 1)), res * 4, T * res, haze, sky, pano, alpha, below, far_m, sun, float(rng.uniform(0.35, 0.6)), paints, body_paint)
+    look.photo_seed = int(rng.integers(0, 2**31))
     if rng.random() < options.nose_prob:
         look.nose, look.nose_mask, look.nose_top = _make_nose(rng, W, H)
     return look
@@ -426,7 +429,7 @@ class Renderer:
             idbuf = cv2.remap(idbuf, *self._dist_map, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
         truths = self._truth(idbuf, cones, polys, track, sc)
         if self.options.photometric:
-            img = self._photometric(img, rng, v_hc)
+            img = self._photometric(img, rng, v_hc, look)
         return img, truths
 
     def _sky(self, look: Look, v_hc: float) -> np.ndarray:
@@ -617,24 +620,28 @@ class Renderer:
             )
         return out
 
-    def _photometric(self, img: np.ndarray, rng: np.random.Generator, v_hc: float) -> np.ndarray:
+    def _photometric(self, img: np.ndarray, rng: np.random.Generator, v_hc: float, look: Look) -> np.ndarray:
+        """Camera effects. The settings (exposure, white balance, gamma, saturation, blur, noise level,
+        exposure time) come from ``rng``, or with ``steady_photometric`` from the look (a video keeps
+        its settings); the noise pattern and JPEG always vary per frame."""
         o = self.options
         H, W = self.H, self.W
+        cam_rng = np.random.default_rng(look.photo_seed) if o.steady_photometric else rng
         # exposure, white balance, gamma in one LUT
-        gain = float(np.exp(rng.uniform(np.log(0.6), np.log(1.6))))
-        temp, tint = rng.uniform(-0.08, 0.08), rng.uniform(-0.02, 0.02)
+        gain = float(np.exp(cam_rng.uniform(np.log(0.6), np.log(1.6))))
+        temp, tint = cam_rng.uniform(-0.08, 0.08), cam_rng.uniform(-0.02, 0.02)
         wb = np.array([1.0 - temp, 1.0 + tint, 1.0 + temp])  # B G R: colour temperature, little green/magenta
-        gamma = float(rng.uniform(0.8, 1.25))
+        gamma = float(cam_rng.uniform(0.8, 1.25))
         x = np.arange(256, dtype=np.float64)[:, None] / 255.0
         lut = np.clip(255.0 * np.clip(x * gain * wb[None, :], 0, 1) ** gamma, 0, 255).astype(np.uint8)
         img = cv2.LUT(img, lut.reshape(256, 1, 3))
-        sat = float(rng.uniform(0.6, 1.15))
+        sat = float(cam_rng.uniform(0.6, 1.15))
         if abs(sat - 1) > 0.03:
             g = cv2.cvtColor(cv2.cvtColor(img, cv2.COLOR_BGR2GRAY), cv2.COLOR_GRAY2BGR)
             img = cv2.addWeighted(img, sat, g, 1 - sat, 0)
         # motion blur at speed (vertical, lower image part where the ground flows fastest)
-        speed = o.speed_mps if o.speed_mps > 0 else rng.uniform(0, 15)
-        klen = int(np.clip(speed * rng.uniform(1.0, 5.0) * 1e-3 * 0.3 * H, 1, 25))
+        speed = o.speed_mps if o.speed_mps > 0 else cam_rng.uniform(0, 15)
+        klen = int(np.clip(speed * cam_rng.uniform(1.0, 5.0) * 1e-3 * 0.3 * H, 1, 25))
         if klen >= 3:  # growing towards the bottom in 4 bands, so no visible step
             v_top = int(np.clip(v_hc + 0.2 * (H - v_hc), 0, H - 1))
             edges = np.linspace(v_top, H, 5).astype(int)
@@ -643,10 +650,10 @@ class Renderer:
                 if k >= 2:
                     r0, r1 = max(edges[b] - k, 0), edges[b + 1]
                     img[edges[b] : r1] = cv2.blur(img[r0:r1], (1, k))[edges[b] - r0 :]
-        sigma = float(rng.uniform(0.3, 1.2)) * H / 1080
+        sigma = float(cam_rng.uniform(0.3, 1.2)) * H / 1080
         img = cv2.GaussianBlur(img, (0, 0), sigma)
         # sensor noise from a fixed noise field at a random offset and strength
-        ns = float(rng.uniform(0.1, 0.7))
+        ns = float(cam_rng.uniform(0.1, 0.7))
         oy, ox = (int(v) for v in rng.integers(0, 32, 2))
         img = cv2.add(img, cv2.multiply(self._noise_pos[oy : oy + H, ox : ox + W], ns, dtype=cv2.CV_8U))
         img = cv2.subtract(img, cv2.multiply(self._noise_neg[oy : oy + H, ox : ox + W], ns, dtype=cv2.CV_8U))
