@@ -159,3 +159,14 @@ def test_vary_mount_records_each_frames_camera(tmp_path):
         assert np.all(ok)
         assert np.hypot(*(xy - np.array([[c["x_m"], c["y_m"]] for c in full]).reshape(-1, 2)).T).max() < 0.02
     assert len(hfovs) == 3  # each track got its own viewpoint
+
+
+def test_mapcheck_shows_the_jitter_error(capsys):
+    from cone_perception.synth.outputs import mapping_check
+
+    off = mapping_check(SynthConfig(width=960, height=540, jitter=False, nose_prob=0.0, photometric=False), 6)
+    on = mapping_check(SynthConfig(width=960, height=540, jitter=True, nose_prob=0.0, photometric=False), 6)
+    assert off[0]["n"] > 5 and off[0]["median_m"] < 0.4  # perfect boxes, near cones: foot-point rule only
+    assert on[1]["median_m"] > 2 * off[1]["median_m"]  # +-1 deg pitch matters at 10-20 m
+    assert main(["synth", "mapcheck", "--frames", "1", *SMALL]) == 0
+    assert "median" in capsys.readouterr().out

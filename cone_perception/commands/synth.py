@@ -2,7 +2,7 @@
 
 Actions: ``dataset`` (images + YOLO labels + gt.jsonl + calib.yaml), ``bag``
 (rosbag2 MCAP with camera images and /cones_gt), ``preview`` (contact sheet
-PNG), ``bench`` (render speed).
+PNG), ``mapcheck`` (mapping error with perfect boxes), ``bench`` (render speed).
 """
 
 from __future__ import annotations
@@ -63,6 +63,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, required=True, help="PNG file to write")
     p.add_argument("--n", type=int, default=8, help="number of frames (default 8)")
     _common(p)
+    p = sub.add_parser(
+        "mapcheck", help="map exact boxes through the exact calibration: error left by the foot-point rule and jitter"
+    )
+    p.add_argument("--frames", type=int, default=30, help="frames to render (default 30)")
+    _common(p)
     p = sub.add_parser("bench", help="measure render speed (frames/s) at the given size")
     p.add_argument("--frames", type=int, default=30, help="frames to time (default 30)")
     _common(p)
@@ -104,6 +109,13 @@ def run(args: argparse.Namespace) -> int:
         print(f"wrote {args.out}: " + ", ".join(f"{t} {k}" for t, k in c.items()) + f"; calibration {calib}; ground truth {gt}")
     elif args.action == "preview":
         print(f"wrote {outputs.write_preview(cfg, args.out, args.n)}")
+    elif args.action == "mapcheck":
+        rows = outputs.mapping_check(cfg, args.frames)
+        print(f"exact boxes of fully visible cones -> foot-point rule -> H_F_B ({args.frames} frames, "
+              f"{cfg.width}x{cfg.height}, jitter {'on' if cfg.jitter else 'off'}): position error in m")
+        print("  range      n  median    p95    max")
+        for r in rows:
+            print(f"  {r['lo_m']:2.0f}-{r['hi_m']:2.0f} m {r['n']:5d} {r['median_m']:7.3f} {r['p95_m']:6.3f} {r['max_m']:6.3f}")
     else:
         return _bench(cfg, args.frames)
     return 0
