@@ -1,0 +1,74 @@
+"""Test helper: a chessboard (or any texture) lying on the ground, rendered through a known camera.
+
+The ideal (pinhole) image is ``cv2.warpPerspective`` of the board texture with
+the exact ground -> image homography ``PinholeCamera.H_B_F() @ T_F_board @ A``;
+with lens distortion the ideal image is resampled at the undistorted position
+of every raw pixel (``geometry.undistort_pixels``), so the corners sit where the
+lens model puts them.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from cone_perception.camera import PinholeCamera
+from cone_perception.calibration import planar_transform
+from cone_perception.geometry import undistort_pixels
+
+
+def board_texture(cols: int, rows: int, px_per_square: int, margin_squares: int = 1) -> np.ndarray:
+    """Grey-level chessboard with ``cols`` x ``rows`` inner corners and a white margin."""
+    s = px_per_square
+    n_u, n_v = cols + 1 + 2 * margin_squares, rows + 1 + 2 * margin_squares
+    tex = np.full((n_v * s, n_u * s), 245, np.uint8)
+    for i in range(rows + 1):
+        for j in range(cols + 1):
+            if (i + j) % 2 == 0:
+                v0, u0 = (i + margin_squares) * s, (j + margin_squares) * s
+                tex[v0 : v0 + s, u0 : u0 + s] = 15
+    return tex
+
+
+def texture_to_local(tex_shape: tuple[int, int], m_per_px: float) -> np.ndarray:
+    """3x3: texture px (pixel centres at integers) -> board-local metres, origin at the texture centre."""
+    th, tw = tex_shape
+    return np.array([[m_per_px, 0, (0.5 - tw / 2) * m_per_px], [0, m_per_px, (0.5 - th / 2) * m_per_px], [0, 0, 1.0]])
+
+
+def distortion_maps(cam: PinholeCamera) -> tuple[np.ndarray, np.ndarray] | None:
+    """remap() maps: for each raw pixel, where it lies in the ideal image (None without distortion)."""
+    if not cam.dist_coeffs.size:
+        return None
+    u, v = np.meshgrid(np.arange(cam.width, dtype=np.float64), np.arange(cam.height, dtype=np.float64))
+    und = undistort_pixels(np.column_stack([u.ravel(), v.ravel()]), cam.K, cam.dist_coeffs)
+    return (
+        und[:, 0].reshape(cam.height, cam.width).astype(np.float32),
+        und[:, 1].reshape(cam.height, cam.width).astype(np.float32),
+    )
+
+
+def render_on_ground(
+    cam: PinholeCamera,
+    texture: np.ndarray,
+    m_per_px: float,
+    board_x_m: float,
+    board_y_m: float = 0.0,
+    board_yaw_deg: float = 0.0,
+    background: int = 100,
+    maps: tuple[np.ndarray, np.ndarray] | None = None,
+) -> np.ndarray:
+    """(H, W, 3) uint8 BGR raw camera image of ``texture`` lying centred at (x, y, yaw) in rear_axle."""
+    T_F_local = planar_transform(board_x_m, board_y_m, board_yaw_deg)
+    Hw = cam.H_B_F() @ T_F_local @ texture_to_local(texture.shape, m_per_px)
+    size = (cam.width, cam.height)
+    img = cv2.warpPerspective(texture, Hw, size, flags=cv2.INTER_AREA, borderValue=background)
+    if maps is None and cam.dist_coeffs.size:
+        maps = distortion_maps(cam)
+    if maps is not None:
+        img = cv2.remap(img, maps[0], maps[1], cv2.INTER_LINEAR, borderValue=background)
+    # horizon and sky: nothing of the ground plane above the horizon
+    v_h = cam.horizon_v()
+    if np.isfinite(v_h) and v_h > 0:
+        img[: int(min(v_h, cam.height))] = 200
+    return cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
