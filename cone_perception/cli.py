@@ -17,6 +17,7 @@ import sys
 COMMANDS: dict[str, tuple[str, str]] = {
     "map": ("map", "map pixels or boxes to rear_axle metres with a calibration"),
     "bench": ("bench", "benchmark the per-frame stages on real-size frames"),
+    "calibrate": ("calibrate", "calibrate a camera to the rear axle (chessboard / points / mount pose) with report and pictures"),
 }
 
 
