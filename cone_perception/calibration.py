@@ -309,6 +309,7 @@ class Intrinsics:
     dist: np.ndarray
     source: str
     rms_px: float | None = None  # of cv2.calibrateCamera, when estimated here
+    image_size: tuple[int, int] | None = None  # (width, height) the model was made for, when known
 
     @property
     def has_distortion(self) -> bool:
@@ -503,7 +504,8 @@ def calibrate_intrinsics(
         )
     assert shape is not None
     rms, K, dist, _, _ = cv2.calibrateCamera(obj, img, (shape[1], shape[0]), None, None)
-    return Intrinsics(K, dist.ravel(), f"{len(obj)} chessboard views (cv2.calibrateCamera)", float(rms)), missed
+    src = f"{len(obj)} chessboard views (cv2.calibrateCamera)"
+    return Intrinsics(K, dist.ravel(), src, float(rms), (int(shape[1]), int(shape[0]))), missed
 
 
 # -- quality report ------------------------------------------------------------------------------

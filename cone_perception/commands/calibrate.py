@@ -119,7 +119,6 @@ def run(args: argparse.Namespace) -> int:
     existing = load_calibration(out) if out.is_file() else None
     size = parse_size(args.size, "--size") if args.size else None
 
-    intr = _intrinsics(args, existing, out)
     image, image_name = _read_input_image(args)
     if image is not None:
         img_size = (image.shape[1], image.shape[0])
@@ -129,8 +128,7 @@ def run(args: argparse.Namespace) -> int:
     if size is None:
         size = (existing.image_width, existing.image_height) if existing else (1920, 1080)
     W, H = size
-    if args.hfov is not None and intr is None:
-        intr = Intrinsics(default_intrinsics(W, H, args.hfov), np.zeros(0), f"--hfov {args.hfov:g} (square pixels, centred)")
+    intr = _intrinsics(args, existing, out, size)
 
     T_F_S = planar_transform(args.x_offset, args.y_offset, args.yaw)
     if args.from_pose:
@@ -303,12 +301,32 @@ def _read_intrinsics_file(path: Path) -> Intrinsics:
     d = np.zeros(0) if d is None else d
     if d.size not in (0, 4, 5, 8, 12, 14):
         raise ConfigError(src, "dist_coeffs", f"must be 4, 5, 8, 12 or 14 numbers (OpenCV model), got {d.size}")
-    return Intrinsics(K.reshape(3, 3), d, src)
+    size = None
+    w, h = data.get("image_width"), data.get("image_height")
+    if isinstance(w, int) and isinstance(h, int):
+        size = (w, h)
+    return Intrinsics(K.reshape(3, 3), d, src, image_size=size)
 
 
-def _intrinsics(args: argparse.Namespace, existing: Calibration | None, out: Path) -> Intrinsics | None:
-    if args.views and args.intrinsics:
-        raise ConfigError("calibrate", "--views/--intrinsics", "give one of them, not both")
+def _intrinsics(args: argparse.Namespace, existing: Calibration | None, out: Path, size: tuple[int, int]) -> Intrinsics | None:
+    """K and lens model, first of: --views, --intrinsics, --hfov, the existing --out file; else None."""
+    intr = _intrinsics_source(args, existing, out, size)
+    if intr is not None and intr.image_size is not None and tuple(intr.image_size) != tuple(size):
+        raise ConfigError(
+            intr.source, "image size",
+            f"intrinsics are for {intr.image_size[0]}x{intr.image_size[1]} images, the calibration image is {size[0]}x{size[1]}",
+        )
+    return intr
+
+
+def _intrinsics_source(args: argparse.Namespace, existing: Calibration | None, out: Path, size: tuple[int, int]) -> Intrinsics | None:
+    if sum(x is not None and x is not False for x in (args.views, args.intrinsics, args.hfov)) > 1:
+        raise ConfigError("calibrate", "--views/--intrinsics/--hfov", "give only one source of intrinsics")
+    if args.hfov is not None:
+        if not 1.0 < args.hfov < 179.0:
+            raise ConfigError("calibrate", "--hfov", f"must be between 1 and 179 degrees, got {args.hfov:g}")
+        K = default_intrinsics(size[0], size[1], args.hfov)
+        return Intrinsics(K, np.zeros(0), f"--hfov {args.hfov:g} (square pixels, centred)")
     if args.views:
         if not (args.board and args.square):
             raise ConfigError("calibrate", "--views", "needs --board COLSxROWS and --square M of the board in the views")
