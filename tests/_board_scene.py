@@ -72,3 +72,21 @@ def render_on_ground(
     if np.isfinite(v_h) and v_h > 0:
         img[: int(min(v_h, cam.height))] = 200
     return cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+
+
+def render_views(cam: PinholeCamera, cols: int, rows: int, square_m: float, seed: int = 3) -> list[np.ndarray]:
+    """Six grey views of a chessboard held tilted at different places in front of ``cam`` (lens applied)."""
+    maps = distortion_maps(cam)
+    tex = board_texture(cols, rows, 30)
+    A = texture_to_local(tex.shape, square_m / 30)
+    rng = np.random.default_rng(seed)
+    views = []
+    for tx, ty, tz in [(0, 0, 0.9), (-0.25, -0.12, 1.0), (0.25, 0.12, 1.0), (0.22, -0.14, 0.8), (-0.22, 0.14, 0.8),
+                       (0.0, 0.15, 1.1)]:
+        R, _ = cv2.Rodrigues(rng.normal(0, 0.35, 3))
+        Hv = cam.K @ np.column_stack([R[:, 0], R[:, 1], [tx, ty, tz]]) @ A
+        img = cv2.warpPerspective(tex, Hv, (cam.width, cam.height), flags=cv2.INTER_LINEAR, borderValue=120)
+        if maps is not None:
+            img = cv2.remap(img, maps[0], maps[1], cv2.INTER_LINEAR, borderValue=120)
+        views.append(img)
+    return views

@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 import pytest
 import yaml
-from _board_scene import board_texture, render_on_ground
+from _board_scene import board_texture, render_on_ground, render_views
 
 from cone_perception.calib import load_calibration
 from cone_perception.camera import MountPose, PinholeCamera, default_intrinsics
@@ -119,6 +119,24 @@ def test_from_pose_writes_the_synthetic_cameras_homography(tmp_path):
     assert _mapped_errors(out, _camera()).max() < 1e-5  # float32 records
     # the shipped example is this very command (see calib/README.md)
     np.testing.assert_allclose(load_calibration("example_mainhoop").H_F_B, calib.H_F_B, rtol=1e-9, atol=1e-12)
+
+
+def test_views_estimate_the_lens_into_the_yaml(tmp_path):
+    w, h = 1280, 720
+    cam = PinholeCamera(default_intrinsics(w, h, 85.0), w, h, MountPose(), DIST)
+    paths = []
+    for k, img in enumerate(render_views(cam, 9, 6, 0.04)):
+        paths.append(tmp_path / f"v{k}.png")
+        cv2.imwrite(str(paths[-1]), img)
+    out = tmp_path / "lens.yaml"
+    rc = main(["calibrate", "--from-pose", "--views", *map(str, paths), "--views-board", "9x6", "--views-square", "0.04",
+               "--height", "1.2", "--pitch", "10", "--out", str(out)])
+    assert rc == 0
+    calib = load_calibration(out)
+    assert (calib.image_width, calib.image_height) == (w, h)  # the size of the views
+    assert calib.camera_matrix[0, 0] == pytest.approx(cam.K[0, 0], rel=0.02)
+    assert calib.dist_coeffs[0] == pytest.approx(DIST[0], abs=0.05)
+    assert "calibrateCamera RMS" in (tmp_path / "lens.report.txt").read_text()
 
 
 def test_bag_frame(files, tmp_path):

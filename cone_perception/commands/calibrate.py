@@ -95,6 +95,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="YAML with camera_matrix (3x3) and dist_coeffs (OpenCV), e.g. another calibration YAML or ROS ost.yaml",
     )
     lens.add_argument("--views", type=Path, nargs="+", metavar="IMG", help="chessboard views (>= 3, tilted) -> cv2.calibrateCamera")
+    lens.add_argument("--views-board", metavar="COLSxROWS", help="board of the --views if not the --board on the ground")
+    lens.add_argument("--views-square", type=float, metavar="M", help="square size of the --views board (default --square)")
     lens.add_argument("--no-intrinsics", action="store_true", help="drop camera_matrix/dist_coeffs kept from an existing --out")
 
     pose = p.add_argument_group("from a known mount pose (--from-pose)")
@@ -125,10 +127,12 @@ def run(args: argparse.Namespace) -> int:
         if size is not None and size != img_size:
             raise ConfigError(image_name, None, f"image is {img_size[0]}x{img_size[1]} but --size says {size[0]}x{size[1]}")
         size = img_size
-    if size is None:
-        size = (existing.image_width, existing.image_height) if existing else (1920, 1080)
-    W, H = size
+    if size is None and existing is not None:
+        size = (existing.image_width, existing.image_height)
     intr = _intrinsics(args, existing, out, size)
+    if size is None:  # from-pose without --size: the size of the views / intrinsics file, else full HD
+        size = intr.image_size if intr is not None and intr.image_size is not None else (1920, 1080)
+    W, H = size
 
     T_F_S = planar_transform(args.x_offset, args.y_offset, args.yaw)
     if args.from_pose:
@@ -308,10 +312,17 @@ def _read_intrinsics_file(path: Path) -> Intrinsics:
     return Intrinsics(K.reshape(3, 3), d, src, image_size=size)
 
 
-def _intrinsics(args: argparse.Namespace, existing: Calibration | None, out: Path, size: tuple[int, int]) -> Intrinsics | None:
-    """K and lens model, first of: --views, --intrinsics, --hfov, the existing --out file; else None."""
-    intr = _intrinsics_source(args, existing, out, size)
-    if intr is not None and intr.image_size is not None and tuple(intr.image_size) != tuple(size):
+def _intrinsics(
+    args: argparse.Namespace, existing: Calibration | None, out: Path, size: tuple[int, int] | None
+) -> Intrinsics | None:
+    """K and lens model, first of: --views, --intrinsics, --hfov, the existing --out file; else None.
+
+    ``size``: the calibration image size when already known (image, --size, existing file).
+    """
+    intr = _intrinsics_source(args, existing, out, size or (1920, 1080))
+    if intr is not None and intr.image_size is None and args.hfov is not None:
+        intr.image_size = size or (1920, 1080)
+    if size is not None and intr is not None and intr.image_size is not None and tuple(intr.image_size) != tuple(size):
         raise ConfigError(
             intr.source, "image size",
             f"intrinsics are for {intr.image_size[0]}x{intr.image_size[1]} images, the calibration image is {size[0]}x{size[1]}",
@@ -328,12 +339,13 @@ def _intrinsics_source(args: argparse.Namespace, existing: Calibration | None, o
         K = default_intrinsics(size[0], size[1], args.hfov)
         return Intrinsics(K, np.zeros(0), f"--hfov {args.hfov:g} (square pixels, centred)")
     if args.views:
-        if not (args.board and args.square):
-            raise ConfigError("calibrate", "--views", "needs --board COLSxROWS and --square M of the board in the views")
+        board, square = args.views_board or args.board, args.views_square or args.square
+        if not (board and square):
+            raise ConfigError("calibrate", "--views", "needs the board in the views: --views-board/--board and --views-square/--square")
         from tqdm import tqdm
 
         views = [(str(v), _read_image(v)) for v in tqdm(args.views, desc="reading views", unit="img", disable=len(args.views) < 4)]
-        intr, missed = calibrate_intrinsics(views, parse_size(args.board), args.square)
+        intr, missed = calibrate_intrinsics(views, parse_size(board, "--views-board"), square)
         if missed:
             print(f"board not found in {len(missed)} view(s), not used: {', '.join(missed)}", file=sys.stderr)
         return intr
