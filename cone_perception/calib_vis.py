@@ -86,7 +86,7 @@ def draw_grid(img: np.ndarray, res: CalibrationResult, max_x_m: float = 25.0, ha
     for x, v, gap in x_lines:
         major = abs(x % 5) < 1e-9
         _polyline_raw(img, res, np.column_stack([np.full_like(ys, x), ys]), GRID_BGR, thick * (2 if major else 1))
-        if 0 <= v < H and (gap >= 22 * scale / 0.6 or (major and gap >= 8)):
+        if 0 <= v < H - 30 * scale and (gap >= 22 * scale / 0.6 or (major and gap >= 8)):
             px, _ = res.ground_to_raw_px(np.array([[x, 0.0]]))
             _text(img, f"{x:g} m", (px[0, 0] + 6, px[0, 1] - 3), scale * 0.85, GRID_BGR)
     x_max_drawn = x_lines[-1][0] if x_lines else max_x_m
@@ -138,11 +138,12 @@ def points_picture(
                 cv2.arrowedLine(img, p, (int(round(tip[0])), int(round(tip[1]))), ARROW_BGR, 1, cv2.LINE_AA, tipLength=0.3)
             if not res.pairs.is_board[k]:
                 _text(img, res.pairs.labels[k], (p[0] + 2 * r, p[1] - 2 * r), scale * 0.7, EXTRA_BGR)
-    lines = [
-        ("cyan: 1 m grid of rear_axle (x forward, y left), orange: y = 0", GRID_BGR),
-        ("green: board corners   magenta: extra points   red x: outliers", (255, 255, 255)),
-        (f"yellow arrows: residual x{arrow_scale:g} (measured -> where H puts the true point)", ARROW_BGR),
-    ]
+    lines = [("cyan: 1 m grid of rear_axle (x forward, y left), orange: y = 0", GRID_BGR)]
+    if len(res.pairs):
+        lines += [
+            ("green: board corners   magenta: extra points   red x: outliers", (255, 255, 255)),
+            (f"yellow arrows: residual x{arrow_scale:g} (measured -> where H puts the true point)", ARROW_BGR),
+        ]
     if report is not None and "rms_reproj_px" in report:
         lines.append(
             (

@@ -63,14 +63,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "the car), y left. T_F_S: S -> rear_axle from --x-offset/--y-offset/--yaw."
     )
     src = p.add_argument_group("input image")
-    src.add_argument("--image", type=Path, help="calibration image (full camera resolution, as the camera delivers it)")
-    src.add_argument("--bag", type=Path, help="rosbag2 folder or file to take the calibration image from")
-    src.add_argument("--frame", type=int, default=0, help="index of the image message in --bag (0 = first; default 0)")
-    src.add_argument("--topic", help="image topic in --bag (default: the only sensor_msgs Image/CompressedImage topic)")
+    src.add_argument("--image", type=Path, metavar="IMG", help="calibration image (full camera resolution, as the camera delivers it)")
+    src.add_argument("--bag", type=Path, metavar="BAG", help="rosbag2 folder or file to take the calibration image from")
+    src.add_argument("--frame", type=int, metavar="N", default=0, help="index of the image message in --bag (0 = first; default 0)")
+    src.add_argument("--topic", metavar="TOPIC", help="image topic in --bag (default: the only sensor_msgs Image/CompressedImage topic)")
 
     pts = p.add_argument_group("reference points (frame S, metres)")
-    pts.add_argument("--board", help="chessboard size in INNER corners COLSxROWS, e.g. 9x6")
-    pts.add_argument("--square", type=float, help="chessboard square size in metres, e.g. 0.2")
+    pts.add_argument("--board", metavar="COLSxROWS", help="chessboard size in INNER corners COLSxROWS, e.g. 9x6")
+    pts.add_argument("--square", type=float, metavar="M", help="chessboard square size in metres, e.g. 0.2")
     pts.add_argument(
         "--board-pose",
         default="0,0,0",
@@ -79,18 +79,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "(S is the board frame). Which way round the board lies is found from the image",
     )
     pts.add_argument(
-        "--points", type=Path, help="CSV of extra pairs u,v,x_s,y_s (raw image px, metres in S), e.g. cones at measured spots"
+        "--points", type=Path, metavar="FILE.csv", help="CSV of extra pairs u,v,x_s,y_s (raw image px, metres in S), e.g. cones at measured spots"
     )
-    pts.add_argument("--ransac-px", type=float, default=3.0, help="RANSAC inlier threshold in pixels (default 3)")
+    pts.add_argument("--ransac-px", type=float, metavar="PX", default=3.0, help="RANSAC inlier threshold in pixels (default 3)")
 
     tf = p.add_argument_group("S -> rear_axle (T_F_S)")
-    tf.add_argument("--x-offset", type=float, default=0.0, help="x of S's origin in rear_axle (m, forward); thesis: board distance")
-    tf.add_argument("--y-offset", type=float, default=0.0, help="y of S's origin in rear_axle (m, left)")
-    tf.add_argument("--yaw", type=float, default=0.0, help="angle of S's x axis from rear_axle's x axis (deg, counter-clockwise)")
+    tf.add_argument("--x-offset", type=float, metavar="M", default=0.0, help="x of S's origin in rear_axle (m, forward); thesis: board distance")
+    tf.add_argument("--y-offset", type=float, metavar="M", default=0.0, help="y of S's origin in rear_axle (m, left)")
+    tf.add_argument("--yaw", type=float, metavar="DEG", default=0.0, help="angle of S's x axis from rear_axle's x axis (deg, counter-clockwise)")
 
     lens = p.add_argument_group("lens (optional; H is then estimated on undistorted points)")
     lens.add_argument(
         "--intrinsics",
+        metavar="FILE",
         type=Path,
         help="YAML with camera_matrix (3x3) and dist_coeffs (OpenCV), e.g. another calibration YAML or ROS ost.yaml",
     )
@@ -101,19 +102,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
     pose = p.add_argument_group("from a known mount pose (--from-pose)")
     pose.add_argument("--from-pose", action="store_true", help="H from K and the mount pose instead of an image")
-    pose.add_argument("--size", help="image size WxH (default: from --image, --out or 1920x1080)")
-    pose.add_argument("--hfov", type=float, help="horizontal field of view (deg) for a square-pixel K centred in the image")
-    pose.add_argument("--cam-x", type=float, default=0.0, help="camera x in rear_axle (m, forward)")
-    pose.add_argument("--cam-y", type=float, default=0.0, help="camera y in rear_axle (m, left)")
-    pose.add_argument("--height", type=float, help="camera height above the ground (m)")
-    pose.add_argument("--pitch", type=float, help="camera pitch (deg, positive looks down)")
-    pose.add_argument("--roll", type=float, default=0.0, help="camera roll (deg, positive lowers the right side)")
-    pose.add_argument("--cam-yaw", type=float, default=0.0, help="camera yaw (deg, positive looks left)")
+    pose.add_argument("--size", metavar="WxH", help="image size WxH (default: from --image, --out or 1920x1080)")
+    pose.add_argument("--hfov", type=float, metavar="DEG", help="horizontal field of view (deg) for a square-pixel K centred in the image")
+    pose.add_argument("--cam-x", type=float, metavar="M", default=0.0, help="camera x in rear_axle (m, forward)")
+    pose.add_argument("--cam-y", type=float, metavar="M", default=0.0, help="camera y in rear_axle (m, left)")
+    pose.add_argument("--height", type=float, metavar="M", help="camera height above the ground (m)")
+    pose.add_argument("--pitch", type=float, metavar="DEG", help="camera pitch (deg, positive looks down)")
+    pose.add_argument("--roll", type=float, metavar="DEG", default=0.0, help="camera roll (deg, positive lowers the right side)")
+    pose.add_argument("--cam-yaw", type=float, metavar="DEG", default=0.0, help="camera yaw (deg, positive looks left)")
 
     out = p.add_argument_group("output")
-    out.add_argument("--camera", help="camera name (default: the --out file's stem)")
-    out.add_argument("--out", type=Path, help="calibration YAML to write (default calib/CAMERA.yaml)")
-    out.add_argument("--far-m", type=float, default=10.0, help="warn when no point lies this far ahead (default 10 m)")
+    out.add_argument("--camera", metavar="NAME", help="camera name (default: the --out file's stem)")
+    out.add_argument("--out", type=Path, metavar="FILE.yaml", help="calibration YAML to write (default calib/CAMERA.yaml)")
+    out.add_argument("--far-m", type=float, metavar="M", default=10.0, help="warn when no point lies this far ahead (default 10 m)")
 
 
 def run(args: argparse.Namespace) -> int:
