@@ -90,3 +90,32 @@ def render_views(cam: PinholeCamera, cols: int, rows: int, square_m: float, seed
             img = cv2.remap(img, maps[0], maps[1], cv2.INTER_LINEAR, borderValue=120)
         views.append(img)
     return views
+
+
+def write_example(out_dir: str) -> None:
+    """The README's example inputs: the synthetic main-hoop camera (1920x1080, 90 deg, 1.2 m, pitch 10 deg)
+    seeing a 9x6 x 0.2 m board 4 m ahead of the rear axle, plus 8 cones at measured spots (exact pixels);
+    the same with a wide-angle lens (``*_wide``) and its ``lens.yaml``."""
+    from pathlib import Path
+
+    import yaml
+
+    from cone_perception.camera import MountPose, default_intrinsics
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    cones = np.array([[x, y] for x in (7.0, 10.0, 13.0) for y in (-3.0, 3.0)] + [[5.0, -4.5], [5.0, 4.5]])
+    dist = np.array([-0.25, 0.07, 0.0005, -0.0003, -0.01])
+    for suffix, d in (("", np.zeros(0)), ("_wide", dist)):
+        cam = PinholeCamera(default_intrinsics(1920, 1080, 90.0), 1920, 1080, MountPose(), d)
+        cv2.imwrite(str(out / f"board{suffix}.png"), render_on_ground(cam, board_texture(9, 6, 40), 0.2 / 40, 4.0))
+        uv, _ = cam.project(np.column_stack([cones, np.zeros(len(cones))]))
+        rows = [f"{u:.2f},{v:.2f},{x - 4.0:.3f},{y:.3f}" for (u, v), (x, y) in zip(uv, cones)]
+        (out / f"cones{suffix}.csv").write_text("u,v,x_s,y_s\n" + "\n".join(rows) + "\n")
+    (out / "lens.yaml").write_text(yaml.safe_dump({"camera_matrix": cam.K.tolist(), "dist_coeffs": dist.tolist()}))
+
+
+if __name__ == "__main__":
+    import sys
+
+    write_example(sys.argv[1] if len(sys.argv) > 1 else "calib_example")
