@@ -255,7 +255,9 @@ def read_bag_image(bag: Path, index: int, topic: str | None = None) -> tuple[np.
             raise ConfigError(str(bag), "--topic", f"bag has {len(topics)} image topics ({', '.join(topics) or 'none'}): choose one")
         if index < 0:
             raise ConfigError(str(bag), "--frame", f"must be >= 0, got {index}")
+        count = 0
         for k, (conn, _, raw) in enumerate(reader.messages(connections=conns)):
+            count = k + 1
             if k < index:
                 continue
             msg = reader.deserialize(raw, conn.msgtype)
@@ -268,7 +270,7 @@ def read_bag_image(bag: Path, index: int, topic: str | None = None) -> tuple[np.
             except FrameError as e:
                 raise ConfigError(str(bag), "--frame", f"image message {index} on {conn.topic}: {e}") from None
             return img, f"{bag}#{conn.topic}[{index}]"
-        raise ConfigError(str(bag), "--frame", f"frame {index} not in the bag: it has {k + 1 if conns else 0} image messages")
+        raise ConfigError(str(bag), "--frame", f"frame {index} not in the bag: it has {count} image messages on {', '.join(topics)}")
     finally:
         reader.close()
 
