@@ -95,8 +95,12 @@ def draw_grid(img: np.ndarray, res: CalibrationResult, max_x_m: float = 25.0, ha
     placed: list[tuple[float, float]] = []
     for y in np.arange(-half_width_m, half_width_m + 1e-9, 1.0):
         color = AXIS_BGR if abs(y) < 1e-9 else GRID_BGR
-        px = _polyline_raw(img, res, np.column_stack([xs, np.full_like(xs, y)]), color, thick * (2 if abs(y) < 1e-9 else 1))
-        vis = np.flatnonzero(np.isfinite(px[:, 0]) & (px[:, 0] >= 0) & (px[:, 0] < W) & (px[:, 1] >= 0) & (px[:, 1] < H))
+        px = _polyline_raw(
+            img, res, np.column_stack([xs, np.full_like(xs, y)]), color, thick * (2 if abs(y) < 1e-9 else 1)
+        )
+        vis = np.flatnonzero(
+            np.isfinite(px[:, 0]) & (px[:, 0] >= 0) & (px[:, 0] < W) & (px[:, 1] >= 0) & (px[:, 1] < H)
+        )
         if vis.size:
             u, v = px[vis[np.argmax(px[vis, 1])]]  # lowest visible point of the line: label there
             if any(abs(u - a) < 60 * scale and abs(v - b) < 24 * scale for a, b in placed):
@@ -108,7 +112,10 @@ def draw_grid(img: np.ndarray, res: CalibrationResult, max_x_m: float = 25.0, ha
 
 
 def points_picture(
-    image_bgr: np.ndarray, res: CalibrationResult, report: dict | None = None, arrow_scale: float = 20.0,
+    image_bgr: np.ndarray,
+    res: CalibrationResult,
+    report: dict | None = None,
+    arrow_scale: float = 20.0,
     max_x_m: float = 25.0,
 ) -> np.ndarray:
     """The calibration image with the 1 m grid, the points, and their residuals (arrows x ``arrow_scale``).
@@ -132,10 +139,14 @@ def points_picture(
                 _text(img, res.pairs.labels[k], (p[0] + 2 * r, p[1] - 2 * r), scale * 0.7, OUTLIER_BGR)
                 continue
             color = BOARD_BGR if res.pairs.is_board[k] else EXTRA_BGR
-            cv2.circle(img, p, r if res.pairs.is_board[k] else 2 * r, color, 1 if res.pairs.is_board[k] else 2, cv2.LINE_AA)
+            cv2.circle(
+                img, p, r if res.pairs.is_board[k] else 2 * r, color, 1 if res.pairs.is_board[k] else 2, cv2.LINE_AA
+            )
             if front[k] and np.all(np.isfinite(proj[k])):
                 tip = res.pairs.uv_px[k] + arrow_scale * (proj[k] - res.pairs.uv_px[k])
-                cv2.arrowedLine(img, p, (int(round(tip[0])), int(round(tip[1]))), ARROW_BGR, 1, cv2.LINE_AA, tipLength=0.3)
+                cv2.arrowedLine(
+                    img, p, (int(round(tip[0])), int(round(tip[1]))), ARROW_BGR, 1, cv2.LINE_AA, tipLength=0.3
+                )
             if not res.pairs.is_board[k]:
                 _text(img, res.pairs.labels[k], (p[0] + 2 * r, p[1] - 2 * r), scale * 0.7, EXTRA_BGR)
     lines = [("cyan: 1 m grid of rear_axle (x forward, y left), orange: y = 0", GRID_BGR)]
@@ -206,7 +217,9 @@ def birdseye_picture(
     return _with_header(out, lines, scale)
 
 
-def not_found_picture(image_bgr: np.ndarray, corners_px: np.ndarray | None, size: tuple[int, int], hint: str) -> np.ndarray:
+def not_found_picture(
+    image_bgr: np.ndarray, corners_px: np.ndarray | None, size: tuple[int, int], hint: str
+) -> np.ndarray:
     """The image with whatever corners were found (red) and the reason the board was not accepted."""
     img = image_bgr.copy() if image_bgr.ndim == 3 else cv2.cvtColor(image_bgr, cv2.COLOR_GRAY2BGR)
     scale = _font_scale(img.shape[1])

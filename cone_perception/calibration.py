@@ -32,9 +32,9 @@ from typing import Sequence
 import cv2
 import numpy as np
 
-from .camera import _R_OPT_FROM_BODY, MountPose, PinholeCamera
+from .camera import MountPose, PinholeCamera
 from .errors import ConfigError
-from .geometry import apply_homography, distort_pixels, fix_homography_sign, homography_jacobian, undistort_pixels
+from .geometry import GroundMapper, apply_homography, distort_pixels, fix_homography_sign, undistort_pixels
 
 REPORT_DISTANCES_M = (5.0, 10.0, 15.0, 20.0)
 DEFAULT_RANSAC_PX = 3.0
@@ -112,11 +112,15 @@ def read_points_csv(path: str | Path) -> PointPairs:
         if lineno == 1 and cells and not _is_number(cells[0]):
             continue  # header
         if len(cells) != 4:
-            raise ConfigError(src, f"line {lineno}", f"needs 4 values u,v,x_s,y_s, got {len(cells)}: {','.join(cells)!r}")
+            raise ConfigError(
+                src, f"line {lineno}", f"needs 4 values u,v,x_s,y_s, got {len(cells)}: {','.join(cells)!r}"
+            )
         try:
             vals = [float(c) for c in cells]
         except ValueError:
-            raise ConfigError(src, f"line {lineno}", f"values must be numbers u,v,x_s,y_s, got {','.join(cells)!r}") from None
+            raise ConfigError(
+                src, f"line {lineno}", f"values must be numbers u,v,x_s,y_s, got {','.join(cells)!r}"
+            ) from None
         if not all(math.isfinite(v) for v in vals):
             raise ConfigError(src, f"line {lineno}", f"values must be finite, got {','.join(cells)!r}")
         uv.append(vals[:2])
@@ -124,7 +128,9 @@ def read_points_csv(path: str | Path) -> PointPairs:
         labels.append(f"{path.name}:{lineno}")
     if not labels:
         raise ConfigError(src, None, "point file has no point lines (u,v,x_s,y_s)")
-    return PointPairs(np.array(uv, dtype=np.float64), np.array(xy, dtype=np.float64), labels, np.zeros(len(labels), bool))
+    return PointPairs(
+        np.array(uv, dtype=np.float64), np.array(xy, dtype=np.float64), labels, np.zeros(len(labels), bool)
+    )
 
 
 def _is_number(s: str) -> bool:
@@ -395,7 +401,9 @@ def fit_calibration(
     try:
         H_S_B = fix_homography_sign(H_S_B, ref)
     except ValueError as e:
-        raise ConfigError(source, "H", f"the horizon of the fitted H runs through the bottom of the image ({e})") from None
+        raise ConfigError(
+            source, "H", f"the horizon of the fitted H runs through the bottom of the image ({e})"
+        ) from None
     H_F_B = fix_homography_sign(T_F_S @ H_S_B, ref)
     _, w = apply_homography(H_F_B, uv_und[inl])
     if np.any(w <= 0):
@@ -461,11 +469,7 @@ def pose_from_homography(H_F_B: np.ndarray, K: np.ndarray) -> PoseEstimate:
         U, _, Vt = np.linalg.svd(R)
         R = U @ Vt
         C = -R.T @ t
-    R_F_body = R.T @ _R_OPT_FROM_BODY  # R_F_C = R_F_body @ R_OPT_FROM_BODY^T
-    yaw = math.degrees(math.atan2(R_F_body[1, 0], R_F_body[0, 0]))
-    pitch = math.degrees(math.asin(float(np.clip(-R_F_body[2, 0], -1.0, 1.0))))
-    roll = math.degrees(math.atan2(R_F_body[2, 1], R_F_body[2, 2]))
-    pose = MountPose(x_m=float(C[0]), y_m=float(C[1]), height_m=float(C[2]), pitch_deg=pitch, roll_deg=roll, yaw_deg=yaw)
+    pose = MountPose.from_R_F_C(R.T, C)
     return PoseEstimate(pose, float(n1 / n2), angle)
 
 
@@ -488,7 +492,9 @@ def calibrate_intrinsics(
         if shape is None:
             shape = hw
         elif hw != shape:
-            raise ConfigError(name, None, f"view size {hw[1]}x{hw[0]} differs from the first view's {shape[1]}x{shape[0]}")
+            raise ConfigError(
+                name, None, f"view size {hw[1]}x{hw[0]} differs from the first view's {shape[1]}x{shape[0]}"
+            )
         corners = detect_board(image, size)
         if corners is None:
             missed.append(name)
@@ -519,8 +525,6 @@ def quality_report(res: CalibrationResult, far_m: float = 10.0, max_range_m: flo
     (warnings when missing). Predicted ground error for a 1-px error at
     :data:`REPORT_DISTANCES_M` ahead. Pose from H when K is known.
     """
-    from .geometry import GroundMapper  # one Jacobian (lens included) for the whole package
-
     W, Hh = res.width, res.height
     rep: dict = {"image_size": [W, Hh]}
     warnings = list(res.warnings)
@@ -599,18 +603,20 @@ def _point_stats(res: CalibrationResult, rep: dict, warnings: list[str], far_m: 
         }
         for k in range(len(res.pairs))
     ]
-    rep.update({
-        "n_points": len(res.pairs),
-        "n_board": int(res.pairs.is_board.sum()),
-        "n_extra": int((~res.pairs.is_board).sum()),
-        "n_inliers": int(inl.sum()),
-        "outliers": [res.pairs.labels[k] for k in np.flatnonzero(~inl)],
-        "rms_reproj_px": float(np.sqrt(np.mean(reproj[inl] ** 2))),
-        "max_reproj_px": float(reproj[inl].max()),
-        "rms_ground_m": float(np.sqrt(np.mean(ground[inl] ** 2))),
-        "max_ground_m": float(ground[inl].max()),
-        "points": points,
-    })
+    rep.update(
+        {
+            "n_points": len(res.pairs),
+            "n_board": int(res.pairs.is_board.sum()),
+            "n_extra": int((~res.pairs.is_board).sum()),
+            "n_inliers": int(inl.sum()),
+            "outliers": [res.pairs.labels[k] for k in np.flatnonzero(~inl)],
+            "rms_reproj_px": float(np.sqrt(np.mean(reproj[inl] ** 2))),
+            "max_reproj_px": float(reproj[inl].max()),
+            "rms_ground_m": float(np.sqrt(np.mean(ground[inl] ** 2))),
+            "max_ground_m": float(ground[inl].max()),
+            "points": points,
+        }
+    )
 
     # coverage of the usable image: grid of raw pixels below the horizon and within range
     gu, gv = np.meshgrid(np.linspace(0, W - 1, 96), np.linspace(0, Hh - 1, 54))
@@ -658,7 +664,9 @@ def format_report(rep: dict, title: str = "calibration report", max_points: int 
     """The report as text for ``<name>.report.txt`` (all points) and the terminal (``max_points`` worst)."""
     L = [title, "=" * len(title)]
     if "n_points" not in rep:
-        L.append(f"no point pairs (homography from the mount pose); image {rep['image_size'][0]}x{rep['image_size'][1]}")
+        L.append(
+            f"no point pairs (homography from the mount pose); image {rep['image_size'][0]}x{rep['image_size'][1]}"
+        )
     else:
         _format_points_summary(L, rep)
     L.append("")

@@ -12,8 +12,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from cone_perception.camera import PinholeCamera
 from cone_perception.calibration import planar_transform
+from cone_perception.camera import PinholeCamera
 from cone_perception.geometry import undistort_pixels
 
 
@@ -81,8 +81,14 @@ def render_views(cam: PinholeCamera, cols: int, rows: int, square_m: float, seed
     A = texture_to_local(tex.shape, square_m / 30)
     rng = np.random.default_rng(seed)
     views = []
-    for tx, ty, tz in [(0, 0, 0.9), (-0.25, -0.12, 1.0), (0.25, 0.12, 1.0), (0.22, -0.14, 0.8), (-0.22, 0.14, 0.8),
-                       (0.0, 0.15, 1.1)]:
+    for tx, ty, tz in [
+        (0, 0, 0.9),
+        (-0.25, -0.12, 1.0),
+        (0.25, 0.12, 1.0),
+        (0.22, -0.14, 0.8),
+        (-0.22, 0.14, 0.8),
+        (0.0, 0.15, 1.1),
+    ]:
         R, _ = cv2.Rodrigues(rng.normal(0, 0.35, 3))
         Hv = cam.K @ np.column_stack([R[:, 0], R[:, 1], [tx, ty, tz]]) @ A
         img = cv2.warpPerspective(tex, Hv, (cam.width, cam.height), flags=cv2.INTER_LINEAR, borderValue=120)

@@ -48,7 +48,9 @@ def files(tmp_path_factory):
     cv2.imwrite(str(d / "board_dist.png"), render_on_ground(camd, board_texture(9, 6, 40), 0.2 / 40, BOARD_X_M))
     _write_points(d / "cones_dist.csv", camd, CONES_F)
     (d / "lens.yaml").write_text(
-        yaml.safe_dump({"camera_matrix": camd.K.tolist(), "dist_coeffs": DIST.tolist(), "image_width": W, "image_height": H})
+        yaml.safe_dump(
+            {"camera_matrix": camd.K.tolist(), "dist_coeffs": DIST.tolist(), "image_width": W, "image_height": H}
+        )
     )
     return d
 
@@ -67,8 +69,20 @@ def _mapped_errors(yaml_path: Path, cam: PinholeCamera) -> np.ndarray:
 
 def test_image_board_and_points_round_trip_through_the_mapper(files, tmp_path, capsys):
     out = tmp_path / "cam.yaml"
-    rc = main(["calibrate", "--image", str(files / "board.png"), *BASE, "--points", str(files / "cones.csv"),
-               "--hfov", "90", "--out", str(out)])
+    rc = main(
+        [
+            "calibrate",
+            "--image",
+            str(files / "board.png"),
+            *BASE,
+            "--points",
+            str(files / "cones.csv"),
+            "--hfov",
+            "90",
+            "--out",
+            str(out),
+        ]
+    )
     assert rc == 0
     assert _mapped_errors(out, _camera()).max() < 0.01
     text = capsys.readouterr().out
@@ -87,8 +101,18 @@ def test_image_board_and_points_round_trip_through_the_mapper(files, tmp_path, c
     d["foot_points"]["blue"] = "bottom_center"
     d["team_note"] = "mount re-torqued"
     out.write_text(yaml.safe_dump(d, sort_keys=False))
-    rc = main(["calibrate", "--image", str(files / "board.png"), *BASE, "--points", str(files / "cones.csv"),
-               "--out", str(out)])
+    rc = main(
+        [
+            "calibrate",
+            "--image",
+            str(files / "board.png"),
+            *BASE,
+            "--points",
+            str(files / "cones.csv"),
+            "--out",
+            str(out),
+        ]
+    )
     assert rc == 0
     again = load_calibration(out)
     assert (again.crop.v0, again.crop.v1, again.pixel_sigma_u, again.pixel_sigma_v) == (400, 1000, 2.5, 3.0)
@@ -99,8 +123,20 @@ def test_image_board_and_points_round_trip_through_the_mapper(files, tmp_path, c
 
 def test_lens_distortion_end_to_end_with_intrinsics_file(files, tmp_path):
     out = tmp_path / "wide.yaml"
-    rc = main(["calibrate", "--image", str(files / "board_dist.png"), *BASE, "--points", str(files / "cones_dist.csv"),
-               "--intrinsics", str(files / "lens.yaml"), "--out", str(out)])
+    rc = main(
+        [
+            "calibrate",
+            "--image",
+            str(files / "board_dist.png"),
+            *BASE,
+            "--points",
+            str(files / "cones_dist.csv"),
+            "--intrinsics",
+            str(files / "lens.yaml"),
+            "--out",
+            str(out),
+        ]
+    )
     assert rc == 0
     calib = load_calibration(out)
     np.testing.assert_allclose(calib.dist_coeffs, DIST)
@@ -109,8 +145,26 @@ def test_lens_distortion_end_to_end_with_intrinsics_file(files, tmp_path):
 
 def test_from_pose_writes_the_synthetic_cameras_homography(tmp_path):
     out = tmp_path / "pose.yaml"
-    rc = main(["calibrate", "--from-pose", "--hfov", "90", "--size", "1920x1080", "--cam-x", "0.5", "--height", "1.2",
-               "--pitch", "10", "--x-offset", "3", "--out", str(out)])
+    rc = main(
+        [
+            "calibrate",
+            "--from-pose",
+            "--hfov",
+            "90",
+            "--size",
+            "1920x1080",
+            "--cam-x",
+            "0.5",
+            "--height",
+            "1.2",
+            "--pitch",
+            "10",
+            "--x-offset",
+            "3",
+            "--out",
+            str(out),
+        ]
+    )
     assert rc == 0
     calib = load_calibration(out)
     np.testing.assert_allclose(calib.H_F_B, _camera().H_F_B(), rtol=1e-9, atol=1e-12)
@@ -129,8 +183,24 @@ def test_views_estimate_the_lens_into_the_yaml(tmp_path):
         paths.append(tmp_path / f"v{k}.png")
         cv2.imwrite(str(paths[-1]), img)
     out = tmp_path / "lens.yaml"
-    rc = main(["calibrate", "--from-pose", "--views", *map(str, paths), "--views-board", "9x6", "--views-square", "0.04",
-               "--height", "1.2", "--pitch", "10", "--out", str(out)])
+    rc = main(
+        [
+            "calibrate",
+            "--from-pose",
+            "--views",
+            *map(str, paths),
+            "--views-board",
+            "9x6",
+            "--views-square",
+            "0.04",
+            "--height",
+            "1.2",
+            "--pitch",
+            "10",
+            "--out",
+            str(out),
+        ]
+    )
     assert rc == 0
     calib = load_calibration(out)
     assert (calib.image_width, calib.image_height) == (w, h)  # the size of the views
@@ -146,7 +216,9 @@ def test_bag_frame(files, tmp_path):
     from cone_perception.adapter import bgr_to_yuyv
 
     ts = get_typestore(Stores.ROS2_JAZZY)
-    Image, Header, Time = (ts.types[n] for n in ("sensor_msgs/msg/Image", "std_msgs/msg/Header", "builtin_interfaces/msg/Time"))
+    Image, Header, Time = (
+        ts.types[n] for n in ("sensor_msgs/msg/Image", "std_msgs/msg/Header", "builtin_interfaces/msg/Time")
+    )
     bag = tmp_path / "bag"
     board = cv2.imread(str(files / "board.png"))
     with Writer(bag, version=9) as w:
@@ -180,7 +252,12 @@ def test_board_not_found(files, tmp_path, capsys):
     _fails(["--image", str(blank), *BASE], out, capsys, "no 9x6 chessboard found", "board_not_found.png")
     assert (tmp_path / "c.board_not_found.png").is_file()
     # a wrong size gets a hint at the size that is there
-    _fails(["--image", str(files / "board.png"), "--board", "10x6", "--square", "0.2"], out, capsys, "9x6 board was found instead")
+    _fails(
+        ["--image", str(files / "board.png"), "--board", "10x6", "--square", "0.2"],
+        out,
+        capsys,
+        "9x6 board was found instead",
+    )
 
 
 def test_bad_point_sets(files, tmp_path, capsys):

@@ -63,10 +63,23 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "the car), y left. T_F_S: S -> rear_axle from --x-offset/--y-offset/--yaw."
     )
     src = p.add_argument_group("input image")
-    src.add_argument("--image", type=Path, metavar="IMG", help="calibration image (full camera resolution, as the camera delivers it)")
-    src.add_argument("--bag", type=Path, metavar="BAG", help="rosbag2 folder or file to take the calibration image from")
-    src.add_argument("--frame", type=int, metavar="N", default=0, help="index of the image message in --bag (0 = first; default 0)")
-    src.add_argument("--topic", metavar="TOPIC", help="image topic in --bag (default: the only sensor_msgs Image/CompressedImage topic)")
+    src.add_argument(
+        "--image",
+        type=Path,
+        metavar="IMG",
+        help="calibration image (full camera resolution, as the camera delivers it)",
+    )
+    src.add_argument(
+        "--bag", type=Path, metavar="BAG", help="rosbag2 folder or file to take the calibration image from"
+    )
+    src.add_argument(
+        "--frame", type=int, metavar="N", default=0, help="index of the image message in --bag (0 = first; default 0)"
+    )
+    src.add_argument(
+        "--topic",
+        metavar="TOPIC",
+        help="image topic in --bag (default: the only sensor_msgs Image/CompressedImage topic)",
+    )
 
     pts = p.add_argument_group("reference points (frame S, metres)")
     pts.add_argument("--board", metavar="COLSxROWS", help="chessboard size in INNER corners COLSxROWS, e.g. 9x6")
@@ -79,14 +92,31 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "(S is the board frame). Which way round the board lies is found from the image",
     )
     pts.add_argument(
-        "--points", type=Path, metavar="FILE.csv", help="CSV of extra pairs u,v,x_s,y_s (raw image px, metres in S), e.g. cones at measured spots"
+        "--points",
+        type=Path,
+        metavar="FILE.csv",
+        help="CSV of extra pairs u,v,x_s,y_s (raw image px, metres in S), e.g. cones at measured spots",
     )
-    pts.add_argument("--ransac-px", type=float, metavar="PX", default=3.0, help="RANSAC inlier threshold in pixels (default 3)")
+    pts.add_argument(
+        "--ransac-px", type=float, metavar="PX", default=3.0, help="RANSAC inlier threshold in pixels (default 3)"
+    )
 
     tf = p.add_argument_group("S -> rear_axle (T_F_S)")
-    tf.add_argument("--x-offset", type=float, metavar="M", default=0.0, help="x of S's origin in rear_axle (m, forward); thesis: board distance")
+    tf.add_argument(
+        "--x-offset",
+        type=float,
+        metavar="M",
+        default=0.0,
+        help="x of S's origin in rear_axle (m, forward); thesis: board distance",
+    )
     tf.add_argument("--y-offset", type=float, metavar="M", default=0.0, help="y of S's origin in rear_axle (m, left)")
-    tf.add_argument("--yaw", type=float, metavar="DEG", default=0.0, help="angle of S's x axis from rear_axle's x axis (deg, counter-clockwise)")
+    tf.add_argument(
+        "--yaw",
+        type=float,
+        metavar="DEG",
+        default=0.0,
+        help="angle of S's x axis from rear_axle's x axis (deg, counter-clockwise)",
+    )
 
     lens = p.add_argument_group("lens (optional; H is then estimated on undistorted points)")
     lens.add_argument(
@@ -95,26 +125,45 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         type=Path,
         help="YAML with camera_matrix (3x3) and dist_coeffs (OpenCV), e.g. another calibration YAML or ROS ost.yaml",
     )
-    lens.add_argument("--views", type=Path, nargs="+", metavar="IMG", help="chessboard views (>= 3, tilted) -> cv2.calibrateCamera")
-    lens.add_argument("--views-board", metavar="COLSxROWS", help="board of the --views if not the --board on the ground")
-    lens.add_argument("--views-square", type=float, metavar="M", help="square size of the --views board (default --square)")
-    lens.add_argument("--no-intrinsics", action="store_true", help="drop camera_matrix/dist_coeffs kept from an existing --out")
+    lens.add_argument(
+        "--views", type=Path, nargs="+", metavar="IMG", help="chessboard views (>= 3, tilted) -> cv2.calibrateCamera"
+    )
+    lens.add_argument(
+        "--views-board", metavar="COLSxROWS", help="board of the --views if not the --board on the ground"
+    )
+    lens.add_argument(
+        "--views-square", type=float, metavar="M", help="square size of the --views board (default --square)"
+    )
+    lens.add_argument(
+        "--no-intrinsics", action="store_true", help="drop camera_matrix/dist_coeffs kept from an existing --out"
+    )
 
     pose = p.add_argument_group("from a known mount pose (--from-pose)")
     pose.add_argument("--from-pose", action="store_true", help="H from K and the mount pose instead of an image")
     pose.add_argument("--size", metavar="WxH", help="image size WxH (default: from --image, --out or 1920x1080)")
-    pose.add_argument("--hfov", type=float, metavar="DEG", help="horizontal field of view (deg) for a square-pixel K centred in the image")
+    pose.add_argument(
+        "--hfov",
+        type=float,
+        metavar="DEG",
+        help="horizontal field of view (deg) for a square-pixel K centred in the image",
+    )
     pose.add_argument("--cam-x", type=float, metavar="M", default=0.0, help="camera x in rear_axle (m, forward)")
     pose.add_argument("--cam-y", type=float, metavar="M", default=0.0, help="camera y in rear_axle (m, left)")
     pose.add_argument("--height", type=float, metavar="M", help="camera height above the ground (m)")
     pose.add_argument("--pitch", type=float, metavar="DEG", help="camera pitch (deg, positive looks down)")
-    pose.add_argument("--roll", type=float, metavar="DEG", default=0.0, help="camera roll (deg, positive lowers the right side)")
+    pose.add_argument(
+        "--roll", type=float, metavar="DEG", default=0.0, help="camera roll (deg, positive lowers the right side)"
+    )
     pose.add_argument("--cam-yaw", type=float, metavar="DEG", default=0.0, help="camera yaw (deg, positive looks left)")
 
     out = p.add_argument_group("output")
     out.add_argument("--camera", metavar="NAME", help="camera name (default: the --out file's stem)")
-    out.add_argument("--out", type=Path, metavar="FILE.yaml", help="calibration YAML to write (default calib/CAMERA.yaml)")
-    out.add_argument("--far-m", type=float, metavar="M", default=10.0, help="warn when no point lies this far ahead (default 10 m)")
+    out.add_argument(
+        "--out", type=Path, metavar="FILE.yaml", help="calibration YAML to write (default calib/CAMERA.yaml)"
+    )
+    out.add_argument(
+        "--far-m", type=float, metavar="M", default=10.0, help="warn when no point lies this far ahead (default 10 m)"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -126,7 +175,9 @@ def run(args: argparse.Namespace) -> int:
     if image is not None:
         img_size = (image.shape[1], image.shape[0])
         if size is not None and size != img_size:
-            raise ConfigError(image_name, None, f"image is {img_size[0]}x{img_size[1]} but --size says {size[0]}x{size[1]}")
+            raise ConfigError(
+                image_name, None, f"image is {img_size[0]}x{img_size[1]} but --size says {size[0]}x{size[1]}"
+            )
         size = img_size
     if size is None and existing is not None:
         size = (existing.image_width, existing.image_height)
@@ -144,17 +195,26 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError("calibrate", "--image", "give --image IMG or --bag BAG --frame N (or --from-pose)")
         pairs = _collect_pairs(args, image, image_name, T_F_S, out)
         res = fit_calibration(pairs, W, H, T_F_S, intr, args.ransac_px, image_name)
-        extra = {"calibration": {"method": "chessboard" if args.board else "points", "image": image_name,
-                                 "date": datetime.date.today().isoformat()}}
+        extra = {
+            "calibration": {
+                "method": "chessboard" if args.board else "points",
+                "image": image_name,
+                "date": datetime.date.today().isoformat(),
+            }
+        }
         title = f"calibration report: {camera} ({image_name})"
     max_range = existing.max_range_m if existing else 30.0
     rep = quality_report(res, args.far_m, max_range)
     if not args.from_pose and "pose_from_H" in rep:
-        extra["mount_estimate"] = {k: round(float(v), 4) for k, v in rep["pose_from_H"].items()
-                                   if k in ("x_m", "y_m", "height_m", "pitch_deg", "roll_deg", "yaw_deg")}
+        extra["mount_estimate"] = {
+            k: round(float(v), 4)
+            for k, v in rep["pose_from_H"].items()
+            if k in ("x_m", "y_m", "height_m", "pitch_deg", "roll_deg", "yaw_deg")
+        }
     if "rms_reproj_px" in rep:
-        extra["calibration"].update(rms_reproj_px=round(rep["rms_reproj_px"], 4), n_points=rep["n_points"],
-                                    n_inliers=rep["n_inliers"])
+        extra["calibration"].update(
+            rms_reproj_px=round(rep["rms_reproj_px"], 4), n_points=rep["n_points"], n_inliers=rep["n_inliers"]
+        )
 
     calib = _build_calibration(camera, res, existing, extra, out)
     save_calibration(calib, out, header=f"written by: {command_line(args)}")
@@ -250,9 +310,13 @@ def read_bag_image(bag: Path, index: int, topic: str | None = None) -> tuple[np.
         if topic is not None:
             conns = [c for c in conns if c.topic == topic]
             if not conns:
-                raise ConfigError(str(bag), "--topic", f"no image topic {topic!r}; image topics: {', '.join(topics) or 'none'}")
+                raise ConfigError(
+                    str(bag), "--topic", f"no image topic {topic!r}; image topics: {', '.join(topics) or 'none'}"
+                )
         elif len(topics) != 1:
-            raise ConfigError(str(bag), "--topic", f"bag has {len(topics)} image topics ({', '.join(topics) or 'none'}): choose one")
+            raise ConfigError(
+                str(bag), "--topic", f"bag has {len(topics)} image topics ({', '.join(topics) or 'none'}): choose one"
+            )
         if index < 0:
             raise ConfigError(str(bag), "--frame", f"must be >= 0, got {index}")
         count = 0
@@ -270,7 +334,9 @@ def read_bag_image(bag: Path, index: int, topic: str | None = None) -> tuple[np.
             except FrameError as e:
                 raise ConfigError(str(bag), "--frame", f"image message {index} on {conn.topic}: {e}") from None
             return img, f"{bag}#{conn.topic}[{index}]"
-        raise ConfigError(str(bag), "--frame", f"frame {index} not in the bag: it has {count} image messages on {', '.join(topics)}")
+        raise ConfigError(
+            str(bag), "--frame", f"frame {index} not in the bag: it has {count} image messages on {', '.join(topics)}"
+        )
     finally:
         reader.close()
 
@@ -327,13 +393,16 @@ def _intrinsics(
         intr.image_size = size or (1920, 1080)
     if size is not None and intr is not None and intr.image_size is not None and tuple(intr.image_size) != tuple(size):
         raise ConfigError(
-            intr.source, "image size",
+            intr.source,
+            "image size",
             f"intrinsics are for {intr.image_size[0]}x{intr.image_size[1]} images, the calibration image is {size[0]}x{size[1]}",
         )
     return intr
 
 
-def _intrinsics_source(args: argparse.Namespace, existing: Calibration | None, out: Path, size: tuple[int, int]) -> Intrinsics | None:
+def _intrinsics_source(
+    args: argparse.Namespace, existing: Calibration | None, out: Path, size: tuple[int, int]
+) -> Intrinsics | None:
     if sum(x is not None and x is not False for x in (args.views, args.intrinsics, args.hfov)) > 1:
         raise ConfigError("calibrate", "--views/--intrinsics/--hfov", "give only one source of intrinsics")
     if args.hfov is not None:
@@ -344,10 +413,17 @@ def _intrinsics_source(args: argparse.Namespace, existing: Calibration | None, o
     if args.views:
         board, square = args.views_board or args.board, args.views_square or args.square
         if not (board and square):
-            raise ConfigError("calibrate", "--views", "needs the board in the views: --views-board/--board and --views-square/--square")
+            raise ConfigError(
+                "calibrate",
+                "--views",
+                "needs the board in the views: --views-board/--board and --views-square/--square",
+            )
         from tqdm import tqdm
 
-        views = [(str(v), _read_image(v)) for v in tqdm(args.views, desc="reading views", unit="img", disable=len(args.views) < 4)]
+        views = [
+            (str(v), _read_image(v))
+            for v in tqdm(args.views, desc="reading views", unit="img", disable=len(args.views) < 4)
+        ]
         intr, missed = calibrate_intrinsics(views, parse_size(board, "--views-board"), square)
         if missed:
             print(f"board not found in {len(missed)} view(s), not used: {', '.join(missed)}", file=sys.stderr)
@@ -360,7 +436,9 @@ def _intrinsics_source(args: argparse.Namespace, existing: Calibration | None, o
     return None
 
 
-def _collect_pairs(args: argparse.Namespace, image: np.ndarray, image_name: str, T_F_S: np.ndarray, out: Path) -> PointPairs:
+def _collect_pairs(
+    args: argparse.Namespace, image: np.ndarray, image_name: str, T_F_S: np.ndarray, out: Path
+) -> PointPairs:
     pairs = PointPairs.empty()
     if args.board:
         if not args.square or args.square <= 0:
@@ -369,7 +447,9 @@ def _collect_pairs(args: argparse.Namespace, image: np.ndarray, image_name: str,
         try:
             bx, by, byaw = (float(v) for v in args.board_pose.split(","))
         except ValueError:
-            raise ConfigError("calibrate", "--board-pose", f"must be X,Y,YAW (m, m, deg), got {args.board_pose!r}") from None
+            raise ConfigError(
+                "calibrate", "--board-pose", f"must be X,Y,YAW (m, m, deg), got {args.board_pose!r}"
+            ) from None
         corners = detect_board(image, size)
         if corners is None:
             hint, found = board_not_found_hint(image, size)
@@ -381,7 +461,9 @@ def _collect_pairs(args: argparse.Namespace, image: np.ndarray, image_name: str,
     if args.points:
         pairs = pairs + read_points_csv(args.points)
     if not len(pairs):
-        raise ConfigError("calibrate", "--board/--points", "give a chessboard (--board, --square) and/or --points FILE.csv")
+        raise ConfigError(
+            "calibrate", "--board/--points", "give a chessboard (--board, --square) and/or --points FILE.csv"
+        )
     return pairs
 
 
@@ -416,24 +498,41 @@ def _default_crop(res: CalibrationResult) -> CropSpec:
     return CropSpec(v0, v1, 0, W - W % 2, ds)
 
 
-def _build_calibration(camera: str, res: CalibrationResult, existing: Calibration | None, extra: dict, out: Path) -> Calibration:
+def _build_calibration(
+    camera: str, res: CalibrationResult, existing: Calibration | None, extra: dict, out: Path
+) -> Calibration:
     intr = res.intrinsics
     K = None if intr is None else intr.K
     dist = None if intr is None or not intr.dist.size else intr.dist
     if existing is not None:
         if (existing.image_width, existing.image_height) != (res.width, res.height):
             raise ConfigError(
-                str(out), "image_width/image_height",
+                str(out),
+                "image_width/image_height",
                 f"existing file is for {existing.image_width}x{existing.image_height}, the new calibration for "
                 f"{res.width}x{res.height}: write to a new --out or fix the file",
             )
         kept = {k: v for k, v in existing.extra.items() if k not in _OWNED_EXTRA}
-        calib = dataclasses.replace(existing, camera=camera, H_S_B=res.H_S_B, T_F_S=res.T_F_S, camera_matrix=K,
-                                    dist_coeffs=dist, extra={**kept, **extra})
+        calib = dataclasses.replace(
+            existing,
+            camera=camera,
+            H_S_B=res.H_S_B,
+            T_F_S=res.T_F_S,
+            camera_matrix=K,
+            dist_coeffs=dist,
+            extra={**kept, **extra},
+        )
     else:
         calib = Calibration(
-            camera=camera, image_width=res.width, image_height=res.height, H_S_B=res.H_S_B, T_F_S=res.T_F_S,
-            crop=_default_crop(res), foot_points=tuple(DEFAULT_FOOT_POINTS[n] for n in CLASS_NAMES),
-            camera_matrix=K, dist_coeffs=dist, extra=extra,
+            camera=camera,
+            image_width=res.width,
+            image_height=res.height,
+            H_S_B=res.H_S_B,
+            T_F_S=res.T_F_S,
+            crop=_default_crop(res),
+            foot_points=tuple(DEFAULT_FOOT_POINTS[n] for n in CLASS_NAMES),
+            camera_matrix=K,
+            dist_coeffs=dist,
+            extra=extra,
         )
     return calibration_from_dict(calib.to_dict(), str(out))  # the file we write must load
