@@ -222,7 +222,7 @@ def run(args: argparse.Namespace) -> int:
     text = format_report(rep, title)
     stem = out.with_suffix("")
     Path(f"{stem}.report.txt").write_text(text, encoding="utf-8")
-    Path(f"{stem}.report.json").write_text(json.dumps(rep, indent=1), encoding="utf-8")
+    Path(f"{stem}.report.json").write_text(json.dumps(_json_safe(rep), indent=1, allow_nan=False), encoding="utf-8")
     print(format_report(rep, title, max_points=8), end="")
     written = [out, Path(f"{stem}.report.txt"), Path(f"{stem}.report.json")]
     if image is not None:
@@ -234,6 +234,17 @@ def run(args: argparse.Namespace) -> int:
 
 
 # -- pieces ------------------------------------------------------------------------------------
+def _json_safe(v):
+    """inf/nan (e.g. the error of a point H puts behind the camera) -> None, so the JSON is standard."""
+    if isinstance(v, dict):
+        return {k: _json_safe(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_json_safe(x) for x in v]
+    if isinstance(v, float) and not np.isfinite(v):
+        return None
+    return v
+
+
 def command_line(args: argparse.Namespace) -> str:
     """The ``cone-perception calibrate`` command that reproduces ``args`` (options that differ from defaults)."""
     p = argparse.ArgumentParser()
