@@ -17,6 +17,8 @@ import sys
 COMMANDS: dict[str, tuple[str, str]] = {
     "map": ("map", "map pixels or boxes to rear_axle metres with a calibration"),
     "bench": ("bench", "benchmark the per-frame stages on real-size frames"),
+    "detect": ("detect", "run the detector over images, a folder or a rosbag -> JSON lines"),
+    "replay": ("replay", "run the full pipeline over a rosbag, offline or through live nodes"),
 }
 
 
