@@ -147,6 +147,12 @@ class GroundMapper:
         xy[~valid] = np.nan
         return xy, valid
 
+    def ground_to_pixels(self, xy_m: np.ndarray) -> np.ndarray:
+        """(N, 2) ground points (m, ``rear_axle``) -> (N, 2) undistorted full-image px (NaN behind the camera)."""
+        uv, w = apply_homography(np.linalg.inv(self.H), np.asarray(xy_m, dtype=np.float64).reshape(-1, 2))
+        uv[w <= 0] = np.nan
+        return uv
+
     def jacobian(self, uv_px: np.ndarray) -> np.ndarray:
         """d(x, y)/d(u, v) at raw pixels, (N, 2, 2), including the lens model."""
         uv = np.asarray(uv_px, dtype=np.float64).reshape(-1, 2)
