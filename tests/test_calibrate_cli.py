@@ -69,20 +69,8 @@ def _mapped_errors(yaml_path: Path, cam: PinholeCamera) -> np.ndarray:
 
 def test_image_board_and_points_round_trip_through_the_mapper(files, tmp_path, capsys):
     out = tmp_path / "cam.yaml"
-    rc = main(
-        [
-            "calibrate",
-            "--image",
-            str(files / "board.png"),
-            *BASE,
-            "--points",
-            str(files / "cones.csv"),
-            "--hfov",
-            "90",
-            "--out",
-            str(out),
-        ]
-    )
+    board_and_cones = ["calibrate", "--image", str(files / "board.png"), *BASE, "--points", str(files / "cones.csv")]
+    rc = main([*board_and_cones, "--hfov", "90", "--out", str(out)])
     assert rc == 0
     assert _mapped_errors(out, _camera()).max() < 0.01
     text = capsys.readouterr().out
@@ -101,18 +89,7 @@ def test_image_board_and_points_round_trip_through_the_mapper(files, tmp_path, c
     d["foot_points"]["blue"] = "bottom_center"
     d["team_note"] = "mount re-torqued"
     out.write_text(yaml.safe_dump(d, sort_keys=False))
-    rc = main(
-        [
-            "calibrate",
-            "--image",
-            str(files / "board.png"),
-            *BASE,
-            "--points",
-            str(files / "cones.csv"),
-            "--out",
-            str(out),
-        ]
-    )
+    rc = main([*board_and_cones, "--out", str(out)])  # K now comes from the file
     assert rc == 0
     again = load_calibration(out)
     assert (again.crop.v0, again.crop.v1, again.pixel_sigma_u, again.pixel_sigma_v) == (400, 1000, 2.5, 3.0)
