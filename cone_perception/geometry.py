@@ -148,9 +148,13 @@ class GroundMapper:
         return xy, valid
 
     def ground_to_pixels(self, xy_m: np.ndarray) -> np.ndarray:
-        """(N, 2) ground points (m, ``rear_axle``) -> (N, 2) undistorted full-image px (NaN behind the camera)."""
+        """(N, 2) ground points (m, ``rear_axle``) -> (N, 2) raw full-image px (lens model applied;
+        NaN behind the camera). The inverse of :meth:`map_pixels`."""
         uv, w = apply_homography(np.linalg.inv(self.H), np.asarray(xy_m, dtype=np.float64).reshape(-1, 2))
         uv[w <= 0] = np.nan
+        if self.dist is not None and self.K is not None and uv.shape[0]:
+            ok = np.all(np.isfinite(uv), axis=1)
+            uv[ok] = distort_pixels(uv[ok], self.K, self.dist)
         return uv
 
     def jacobian(self, uv_px: np.ndarray) -> np.ndarray:

@@ -147,6 +147,7 @@ def test_lens_distortion_is_undone_on_foot_points() -> None:
     xy_lens, _ = lens.map_pixels(uv)
     np.testing.assert_allclose(xy_lens, pts[:, :2], atol=1e-3)
     assert np.abs(xy_plain - pts[:, :2]).max() > 0.3  # without the lens model it is far off
+    np.testing.assert_allclose(lens.ground_to_pixels(pts[:, :2]), uv, atol=1e-3)  # and back to raw pixels
 
 
 @pytest.mark.parametrize(
