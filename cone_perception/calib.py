@@ -176,6 +176,8 @@ def load_calibration(name_or_path: str | os.PathLike = DEFAULT_CAMERA) -> Calibr
         text = path.read_text(encoding="utf-8")
     except OSError as e:
         raise ConfigError(src, None, f"cannot read: {e.strerror}") from None
+    except UnicodeDecodeError:
+        raise ConfigError(src, None, "is not UTF-8 text (binary file?)") from None
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as e:

@@ -52,6 +52,10 @@ class ConeMapper:
         b, _, c = boxes_to_arrays(records)
         return foot_points(b, c, self._u_weights)
 
+    def ground_to_pixels(self, xy_m: np.ndarray) -> np.ndarray:
+        """(N, 2) ground points (m) -> (N, 2) full-image px where the camera sees them."""
+        return self.ground.ground_to_pixels(xy_m)
+
     def map_boxes(self, records: np.ndarray) -> np.ndarray:
         """Validated :data:`BOX_DTYPE` records -> :data:`CONE_DTYPE` records.
 
