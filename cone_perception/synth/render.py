@@ -361,7 +361,6 @@ def _mesh(model: ConeModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 _MESHES = {c: _mesh(m) for c, m in CONE_MODELS.items()}
 _PLATE_FACES = [(4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)]  # top, 4 sides
-_PLATE_NORMALS = np.array([[0, 0, 1], [0, 1, 0], [-1, 0, 0], [0, -1, 0], [1, 0, 0]], float)
 
 
 def cone_vertices_W(track: Track, i: int) -> np.ndarray:
@@ -517,8 +516,7 @@ class Renderer:
         L = look.sun_W
         k = float(0.35 + 0.4 * look.ambient)
         for i, V, _, _ in cones:
-            G = V[8:] - (V[8:, 2:3] / L[2]) * L  # body rings along the sun onto the ground
-            G = np.concatenate([G, V[:4]])
+            G = V - (V[:, 2:3] / L[2]) * L  # every vertex along the sun onto the ground
             G[:, 2] = 0.0
             uv, dep = sc.project(G, distort=False)
             if np.any(~(dep > 0.1)):
@@ -534,7 +532,11 @@ class Renderer:
             np.copyto(roi, (roi * k).astype(np.uint8), where=mask[:, :, None].astype(bool))
 
     def _draw_cones(self, img, idbuf, cones, track: Track, sc: SceneCamera, look: Look) -> dict[int, list[np.ndarray]]:
-        """Draw cones far to near into ``img`` and ``idbuf`` (value = index + 1). Returns silhouette hulls (px*4)."""
+        """Draw cones far to near into ``img`` and ``idbuf`` (value = index + 1). Returns silhouette hulls (px*4).
+
+        Facet normals come from the posed vertices, so upright, rotated and knocked-over cones shade
+        and cull alike; visible facets of one convex piece never overlap, so their order is free.
+        """
         cam = sc.position_W()
         L = look.sun_W
         amb = look.ambient
@@ -542,23 +544,18 @@ class Renderer:
         for n_id, (i, V, uv, _) in enumerate(cones):
             cls = int(track.cone_class[i])
             model = CONE_MODELS[cls]
-            _, zs, r = _MESHES[cls]
             P = _px4(uv)
             body = look.body_paint[cls]
-            centre = V[8:8 + N_SEG].mean(0)
-            size_px = float(np.ptp(uv[:, 1]))
-            # base plate
-            plate_col = body * 0.75
-            for f, nrm in zip(_PLATE_FACES, _PLATE_NORMALS):
-                yaw_nrm = nrm.copy()
-                yaw_nrm[:2] = (V[f[0], :2] + V[f[2], :2]) / 2 - centre[:2] if nrm[2] == 0 else 0.0
-                fc = V[list(f)].mean(0)
-                if np.dot(yaw_nrm if nrm[2] == 0 else nrm, cam - fc) <= 0:
-                    continue
-                shade = amb + (1 - amb) * max(0.0, float(np.dot(_unit(yaw_nrm if nrm[2] == 0 else nrm), L)))
-                cv2.fillConvexPoly(img, P[list(f)], _col(plate_col * shade), cv2.LINE_8, 2)
+            size_px = float(max(np.ptp(uv[:, 1]), np.ptp(uv[:, 0])))
+            # base plate: 5 faces (top and sides; the bottom is never seen from above)
+            faces = np.array(_PLATE_FACES)
+            nrm, fc = _quad_normals(V[faces], V[:8].mean(0))
+            vis = np.einsum("ij,ij->i", nrm, cam - fc) > 0
+            shade = amb + (1 - amb) * np.clip(nrm @ L, 0, None)
+            for f, sh in zip(faces[vis], shade[vis]):
+                cv2.fillConvexPoly(img, P[f], _col(body * 0.75 * sh), cv2.LINE_8, 2)
             # body bands
-            slope = (model.r_bottom_m - model.r_top_m) / (model.height_m - zs[0])
+            j = np.arange(N_SEG)
             for b, (_, _, paint) in enumerate(model.bands):
                 col = body if paint == "body" else look.paints[paint]
                 r0 = 8 + b * N_SEG
@@ -567,17 +564,14 @@ class Renderer:
                     hull = cv2.convexHull(P[r0 : r1 + N_SEG])
                     cv2.fillConvexPoly(img, hull, _col(col * (amb + (1 - amb) * 0.6)), cv2.LINE_8, 2)
                     continue
-                for j in range(N_SEG):
-                    j1 = (j + 1) % N_SEG
-                    th = (_THETA[j] + np.pi / N_SEG)
-                    nrm = np.array([np.cos(th), np.sin(th), slope])
-                    fc = (V[r0 + j] + V[r1 + j1]) / 2
-                    if np.dot(nrm, cam - fc) <= 0:
-                        continue
-                    lam = max(0.0, float(np.dot(_unit(nrm), L)))
-                    shade = amb + (1 - amb) * lam + 0.08 * lam**8  # small highlight
-                    quad = P[[r0 + j, r0 + j1, r1 + j1, r1 + j]]
-                    cv2.fillConvexPoly(img, quad, _col(col * shade), cv2.LINE_8, 2)
+                quads = np.stack([r0 + j, r0 + (j + 1) % N_SEG, r1 + (j + 1) % N_SEG, r1 + j], axis=1)
+                axis_mid = (V[r0:r1].mean(0) + V[r1 : r1 + N_SEG].mean(0)) / 2
+                nrm, fc = _quad_normals(V[quads], axis_mid)
+                vis = np.einsum("ij,ij->i", nrm, cam - fc) > 0
+                lam = np.clip(nrm @ L, 0, None)
+                shade = amb + (1 - amb) * lam + 0.08 * lam**8  # small highlight
+                for q, sh in zip(quads[vis], shade[vis]):
+                    cv2.fillConvexPoly(img, P[q], _col(col * sh), cv2.LINE_8, 2)
             hulls = [cv2.convexHull(P[:8]), cv2.convexHull(P[8:])]
             for h in hulls:
                 cv2.fillConvexPoly(idbuf, h, n_id + 1, cv2.LINE_8, 2)
@@ -677,8 +671,13 @@ def _sensor_noise(H: int, W: int) -> tuple[np.ndarray, np.ndarray]:
     return np.clip(n, 0, 255).astype(np.uint8), np.clip(-n, 0, 255).astype(np.uint8)
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.linalg.norm(v)
+def _quad_normals(Q: np.ndarray, inside: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(F, 4, 3) quads -> ((F, 3) unit normals pointing away from ``inside`` (3,), (F, 3) face centres)."""
+    n = np.cross(Q[:, 2] - Q[:, 0], Q[:, 3] - Q[:, 1])
+    fc = Q.mean(1)
+    n *= np.where(np.einsum("ij,ij->i", n, fc - inside) < 0, -1.0, 1.0)[:, None]
+    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12), fc
+
 
 
 def _col(c: np.ndarray) -> tuple[float, float, float]:
