@@ -135,3 +135,26 @@ def test_cone_pixels_have_the_class_colour():
                 assert r > b + 20 and gr > b + 20
             seen[g.class_id] += 1
     assert seen[BLUE] >= 2 and seen[YELLOW] >= 2
+
+
+def test_knocked_over_cones_lie_on_the_ground():
+    from cone_perception.synth.render import CONE_MODELS
+
+    xy = np.array([[6.0, 1.0], [6.0, -1.0]])
+    up = Track("t", 0, 3.0, xy, np.array([BLUE, BLUE]), np.zeros((2, 2)))
+    down = Track("t", 0, 3.0, xy.copy(), np.array([BLUE, BLUE]), np.zeros((2, 2)), cone_fallen=np.array([True, True]))
+    for i in range(2):
+        V = cone_vertices_W(down, i)
+        assert V[:, 2].min() == pytest.approx(0.0, abs=1e-9)
+        assert V[:, 2].max() < 0.75 * CONE_MODELS[BLUE].height_m  # lying: as high as its base is wide
+        assert np.hypot(*(V[:, :2].mean(0) - xy[i])) < 0.15  # around its track position
+    cfg = SynthConfig(width=W, height=H, photometric=False, nose_prob=0.0, jitter=False)
+    r = cfg.renderer()
+    look = r.new_look(np.random.default_rng(0))
+    _, g_up = r.render(up, CarPose(0.0, 0.0, 0.0), look, np.random.default_rng(0))
+    _, g_down = r.render(down, CarPose(0.0, 0.0, 0.0), look, np.random.default_rng(0))
+    for a, b in zip(sorted(g_up, key=lambda t: t.track_index), sorted(g_down, key=lambda t: t.track_index)):
+        assert (a.x_m, a.y_m) == (b.x_m, b.y_m) and b.visible_fraction == pytest.approx(1.0)
+        assert b.box[1] > a.box[1] + 2  # no tip sticking up: the box top is lower
+        assert (b.box[2] - b.box[0]) / (b.box[3] - b.box[1]) > (a.box[2] - a.box[0]) / (a.box[3] - a.box[1])  # flatter
+    assert make_track("autocross", 1, knocked_frac=0.3).cone_fallen.mean() == pytest.approx(0.3, abs=0.1)

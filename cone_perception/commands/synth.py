@@ -34,6 +34,7 @@ def _common(p: argparse.ArgumentParser) -> None:
     )
     g.add_argument("--missing", type=float, default=0.0, help="fraction of cones removed from each track (default 0)")
     g.add_argument("--stray", type=int, default=0, help="stray cones placed off the track per track (default 0)")
+    g.add_argument("--knocked", type=float, default=0.0, help="fraction of cones knocked over, lying on their side (default 0)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -92,6 +93,7 @@ def config_from_args(args: argparse.Namespace):
         track_kinds=tuple(k.strip() for k in args.tracks.split(",") if k.strip()),
         missing_frac=args.missing,
         stray=args.stray,
+        knocked_frac=args.knocked,
         vary_mount=getattr(args, "vary_mount", False),
     )
 

@@ -75,6 +75,7 @@ class SynthConfig:
     track_kinds: tuple[str, ...] = TRACK_KINDS
     missing_frac: float = 0.0
     stray: int = 0
+    knocked_frac: float = 0.0
     vary_mount: bool = False  # datasets: new hfov / pitch / height per track (calib.yaml is then the nominal only)
 
     def validate(self) -> None:
@@ -92,6 +93,11 @@ class SynthConfig:
         for k in self.track_kinds:
             if k not in TRACK_KINDS:
                 raise ConfigError("--tracks", None, f"unknown track kind {k!r}; known: {', '.join(TRACK_KINDS)}")
+        for name, v in (("--missing", self.missing_frac), ("--knocked", self.knocked_frac)):
+            if not 0.0 <= v <= 1.0:
+                raise ConfigError(name, None, f"must be a fraction within 0..1, got {v}")
+        if self.stray < 0:
+            raise ConfigError("--stray", None, f"must be >= 0, got {self.stray}")
         if not self.track_kinds:
             raise ConfigError("--tracks", None, "need at least one track kind")
         if not ground_visible(self.camera(), 60.0):
@@ -174,7 +180,7 @@ class SynthConfig:
         kind = self.track_kinds[0] if len(self.track_kinds) == 1 else rng.choice(
             self.track_kinds, p=_kind_weights(self.track_kinds)
         )
-        return make_track(str(kind), int(rng.integers(0, 2**31)), self.missing_frac, self.stray)
+        return make_track(str(kind), int(rng.integers(0, 2**31)), self.missing_frac, self.stray, self.knocked_frac)
 
 
 def _kind_weights(kinds: tuple[str, ...]) -> np.ndarray:
@@ -331,7 +337,7 @@ def write_scene_bag(
             raise ConfigError(str(p), None, "exists; remove it or choose another bag path")
     n = max(int(round(seconds * fps)), 1)
     rng = np.random.default_rng(cfg.seed)
-    track = make_track(track_kind, int(rng.integers(0, 2**31)), cfg.missing_frac, cfg.stray)
+    track = make_track(track_kind, int(rng.integers(0, 2**31)), cfg.missing_frac, cfg.stray, cfg.knocked_frac)
     renderer = cfg.renderer(jpeg_prob=0.0, speed_mps=max(speed_mps, 1e-3), fps=fps, steady_photometric=True)
     look = renderer.new_look(rng)
     poses = drive_poses(track, n, fps, speed_mps, rng, cfg.jitter)

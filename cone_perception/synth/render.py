@@ -364,9 +364,20 @@ _PLATE_FACES = [(4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4
 
 
 def cone_vertices_W(track: Track, i: int) -> np.ndarray:
-    """(V, 3) track-frame vertices (m) of cone ``i``: 8 base-plate corners, then the body rings."""
+    """(V, 3) track-frame vertices (m) of cone ``i``: 8 base-plate corners, then the body rings.
+
+    A knocked-over cone lies on its side (plate edge and body flank on the ground, tip pointing
+    in a fixed random direction) around its track position.
+    """
     verts, _, _ = _MESHES[int(track.cone_class[i])]
     yaw = (i * 0.6180339) % (np.pi / 2)  # fixed plate yaw per cone
+    if track.fallen(i):
+        model = CONE_MODELS[int(track.cone_class[i])]
+        tilt = np.pi / 2 - np.arctan((model.r_bottom_m - model.r_top_m) / (model.height_m - model.plate_h_m))
+        Rx = np.array([[1, 0, 0], [0, np.cos(tilt), -np.sin(tilt)], [0, np.sin(tilt), np.cos(tilt)]])
+        verts = verts @ Rx.T
+        verts = verts - np.array([0.0, verts[:, 1].mean(), verts[:, 2].min()])  # rest on the ground, centred
+        yaw = (i * 2.3999632) % (2 * np.pi)
     c, s = np.cos(yaw), np.sin(yaw)
     return verts @ np.array([[c, s, 0], [-s, c, 0], [0, 0, 1]]) + np.array([track.cones_xy_m[i, 0], track.cones_xy_m[i, 1], 0.0])
 

@@ -42,6 +42,10 @@ class Track:
     centerline_m: np.ndarray
     boundaries: list[np.ndarray] = field(default_factory=list)
     straights_m: list[float] = field(default_factory=list)
+    cone_fallen: np.ndarray | None = None  # (N,) bool: knocked over, lying on its side (None = all upright)
+
+    def fallen(self, i: int) -> bool:
+        return bool(self.cone_fallen is not None and self.cone_fallen[i])
 
     @property
     def length_m(self) -> float:
@@ -284,8 +288,8 @@ def skidpad(seed: int) -> Track:
     return Track("skidpad", seed, 3.0, np.concatenate(xy), np.concatenate(cls), center, [], path.straights_m())
 
 
-def make_track(kind: str, seed: int, missing_frac: float = 0.0, stray: int = 0) -> Track:
-    """A track of ``kind`` (:data:`TRACK_KINDS`), optionally with missing cones and stray (unknown) cones."""
+def make_track(kind: str, seed: int, missing_frac: float = 0.0, stray: int = 0, knocked_frac: float = 0.0) -> Track:
+    """A track of ``kind`` (:data:`TRACK_KINDS`), optionally with missing, stray (off-track) and knocked-over cones."""
     if kind == "autocross":
         tr = autocross(seed)
     elif kind == "acceleration":
@@ -305,4 +309,6 @@ def make_track(kind: str, seed: int, missing_frac: float = 0.0, stray: int = 0) 
         cand = cand[d > tr.width_m / 2 + 2.0][:stray]
         tr.cones_xy_m = np.concatenate([tr.cones_xy_m, cand])
         tr.cone_class = np.concatenate([tr.cone_class, rng.choice([BLUE, YELLOW, ORANGE], len(cand))])
+    if knocked_frac > 0:
+        tr.cone_fallen = rng.random(len(tr.cone_class)) < knocked_frac
     return tr
