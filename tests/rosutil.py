@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 from typing import Callable
 
+import pytest
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 
@@ -71,3 +72,21 @@ class RosFixture:
             n.destroy_node()
         self.executor.shutdown()
         rclpy.shutdown(context=self.context)
+
+
+class Inbox:
+    """A subscription callback that keeps every message it gets."""
+
+    def __init__(self) -> None:
+        self.msgs = []
+
+    def __call__(self, m) -> None:
+        self.msgs.append(m)
+
+
+@pytest.fixture
+def ros():
+    """A :class:`RosFixture` for one test (``from rosutil import ros`` makes it a fixture of the module)."""
+    r = RosFixture()
+    yield r
+    r.close()

@@ -27,7 +27,7 @@ from cone_perception.nodes.driver_adapter import DriverAdapterNode
 from cone_perception.nodes.mapping import MappingNode
 from cone_perception.records import boxes_from_arrays
 
-from rosutil import RosFixture, start_node_process, stop_process
+from rosutil import Inbox, RosFixture, ros, start_node_process, stop_process  # noqa: F401 (ros is a fixture)
 
 W, H = 1920, 1080
 CALIB = load_calibration("example_mainhoop")
@@ -51,21 +51,6 @@ def _boxes_msg(sec: int, boxes, classes) -> PointCloud2:
     msg.header.stamp.sec = sec
     msg.header.frame_id = "camera_optical"
     return msg
-
-
-class Inbox:
-    def __init__(self) -> None:
-        self.msgs = []
-
-    def __call__(self, m) -> None:
-        self.msgs.append(m)
-
-
-@pytest.fixture
-def ros():
-    r = RosFixture()
-    yield r
-    r.close()
 
 
 def test_adapter_node_yuyv_frame_to_band_and_camera_info(ros: RosFixture) -> None:

@@ -10,7 +10,6 @@ from __future__ import annotations
 import json
 
 import numpy as np
-import pytest
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import Image, PointCloud2
 
@@ -22,22 +21,7 @@ from cone_perception.nodes.mapping import MappingNode
 from cone_perception.records import CONE_DTYPE, boxes_from_arrays, from_pointcloud2
 from cone_perception.synth.outputs import SynthConfig, bag_side_paths, write_scene_bag
 
-from rosutil import RosFixture
-
-
-class Inbox:
-    def __init__(self) -> None:
-        self.msgs = []
-
-    def __call__(self, m) -> None:
-        self.msgs.append(m)
-
-
-@pytest.fixture
-def ros():
-    r = RosFixture()
-    yield r
-    r.close()
+from rosutil import Inbox, RosFixture, ros  # noqa: F401 (ros is a fixture)
 
 
 def _rclpy_image(m) -> Image:
