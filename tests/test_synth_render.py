@@ -4,7 +4,6 @@ import numpy as np
 import pytest
 
 from cone_perception.calib import load_calibration
-from cone_perception.camera import MountPose
 from cone_perception.classes import BLUE, YELLOW
 from cone_perception.geometry import GroundMapper
 from cone_perception.synth.outputs import SynthConfig
