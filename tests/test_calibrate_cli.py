@@ -56,9 +56,12 @@ def files(tmp_path_factory):
 
 
 def _mapped_errors(yaml_path: Path, cam: PinholeCamera) -> np.ndarray:
-    """Boxes whose bottom-centre foot points are the (raw) pixels of true cones -> ConeMapper error (m)."""
+    """Boxes whose bottom-centre foot points are the (raw) pixels of true cones -> ConeMapper error (m).
+
+    Boxes are in pixel-edge coordinates: the pixel-centre coordinate of a foot is its edge coordinate - 0.5."""
     xy = np.array([[x, y] for x in np.arange(3.0, 10.01, 1.0) for y in (-3.0, -1.0, 0.0, 1.5, 3.0)])
     uv, _ = cam.project(np.column_stack([xy, np.zeros(len(xy))]))
+    uv = uv + 0.5
     boxes = np.column_stack([uv[:, 0] - 10, uv[:, 1] - 30, uv[:, 0] + 10, uv[:, 1]])
     orange = CLASS_NAMES.index("orange")  # bottom-centre foot point
     recs = boxes_from_arrays(boxes, np.full(len(xy), 0.9), np.full(len(xy), orange))

@@ -82,8 +82,8 @@ def test_foot_point_per_class() -> None:
     mapper = ConeMapper(c)
     box = [100.0, 500.0, 140.0, 560.0]
     recs = boxes_from_arrays(np.array([box] * 5), np.full(5, 0.9), [BLUE, YELLOW, ORANGE, LARGE_ORANGE, UNKNOWN])
-    fp = mapper.foot_points(recs)
-    np.testing.assert_allclose(fp, [[140, 560], [100, 560], [120, 560], [120, 560], [120, 560]])
+    fp = mapper.foot_points(recs)  # pixel-centre coordinates: box edges - 0.5
+    np.testing.assert_allclose(fp, np.array([[140, 560], [100, 560], [120, 560], [120, 560], [120, 560]]) - 0.5)
 
 
 def test_foot_point_rule_is_configurable() -> None:
@@ -92,7 +92,7 @@ def test_foot_point_rule_is_configurable() -> None:
     c = _calib(np.linalg.inv(CAM.H_B_F()), np.eye(3))
     c.foot_points = tuple(rules)
     recs = boxes_from_arrays(np.array([[100.0, 500.0, 140.0, 560.0]]), [0.9], [BLUE])
-    np.testing.assert_allclose(ConeMapper(c).foot_points(recs), [[120, 560]])
+    np.testing.assert_allclose(ConeMapper(c).foot_points(recs), [[119.5, 559.5]])
 
 
 def test_map_boxes_positions_classes_scores_and_cuts() -> None:
@@ -101,6 +101,7 @@ def test_map_boxes_positions_classes_scores_and_cuts() -> None:
     # blue cone at (6, 1.8): its foot (box bottom-right) projects from that ground point
     truth = np.array([[6.0, 1.8, 0.0], [12.0, -1.7, 0.0], [40.0, 0.0, 0.0]])
     uv, _ = CAM.project(truth)
+    uv = uv + 0.5  # pixel-centre projection -> pixel-edge box coordinates
     boxes = np.array(
         [
             [uv[0, 0] - 30, uv[0, 1] - 60, uv[0, 0], uv[0, 1]],  # blue: bottom-right = foot

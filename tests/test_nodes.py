@@ -101,6 +101,7 @@ def test_mapping_node_boxes_to_cones_and_markers(ros: RosFixture) -> None:
     pub = t.create_publisher(PointCloud2, "cone_boxes", 10)
     cam = PinholeCamera(default_intrinsics(W, H, 90.0), W, H, MountPose())
     uv, _ = cam.project(np.array([[7.0, 2.0, 0.0], [9.0, -2.0, 0.0]]))
+    uv = uv + 0.5  # box edges
     boxes = [[uv[0, 0] - 20, uv[0, 1] - 40, uv[0, 0], uv[0, 1]], [uv[1, 0], uv[1, 1] - 30, uv[1, 0] + 15, uv[1, 1]]]
     msg = _boxes_msg(77, boxes, [BLUE, YELLOW])
     assert ros.spin_until(lambda: pub.get_subscription_count() > 0)

@@ -39,7 +39,7 @@ from ..bagio import (
     header,
     image_msg_from_bgr,
 )
-from ..calib import DEFAULT_FOOT_POINTS, Calibration, save_calibration
+from ..calib import RECOMMENDED_FOOT_OFFSET_M, RECOMMENDED_FOOT_POINTS, Calibration, save_calibration
 from ..camera import MountPose, PinholeCamera, default_intrinsics
 from ..classes import CLASS_BGR, CLASS_NAMES
 from ..crop import CropSpec
@@ -126,7 +126,8 @@ class SynthConfig:
             H_S_B=cam.H_F_B(),
             T_F_S=np.eye(3),
             crop=crop,
-            foot_points=tuple(DEFAULT_FOOT_POINTS[n] for n in CLASS_NAMES),
+            foot_points=tuple(RECOMMENDED_FOOT_POINTS[n] for n in CLASS_NAMES),
+            foot_offset_m=tuple(RECOMMENDED_FOOT_OFFSET_M[n] for n in CLASS_NAMES),
             max_range_m=30.0,
             pixel_sigma_u=1.5,
             pixel_sigma_v=1.5,
