@@ -32,7 +32,8 @@ def test_shipped_example_loads_by_name_and_by_path() -> None:
     np.testing.assert_array_equal(a.H_F_B, b.H_F_B)
     assert (a.crop.out_width, a.crop.out_height) == (960, 288)
     assert a.frame_id == "rear_axle"
-    assert a.foot_points[:2] == ("bottom_right", "bottom_left")
+    assert a.foot_points == ("bottom_center",) * 5  # bottom centre + foot offset, not the thesis corners
+    assert a.foot_offset_m == (0.15, 0.15, 0.15, 0.19, 0.15)
 
 
 def test_save_and_load_round_trip_keeps_everything(tmp_path: Path) -> None:

@@ -78,8 +78,7 @@ def test_horizon_and_range_cuts() -> None:
 
 
 def test_foot_point_per_class() -> None:
-    c = load_calibration("example_mainhoop")
-    mapper = ConeMapper(c)
+    mapper = ConeMapper(_calib(np.linalg.inv(CAM.H_B_F()), np.eye(3)))  # the thesis's rules (defaults)
     box = [100.0, 500.0, 140.0, 560.0]
     recs = boxes_from_arrays(np.array([box] * 5), np.full(5, 0.9), [BLUE, YELLOW, ORANGE, LARGE_ORANGE, UNKNOWN])
     fp = mapper.foot_points(recs)  # pixel-centre coordinates: box edges - 0.5
