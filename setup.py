@@ -40,6 +40,8 @@ setup(
             "cone-perception = cone_perception.cli:main",
             "driver_adapter = cone_perception.nodes.driver_adapter:main",
             "mapping = cone_perception.nodes.mapping:main",
+            "detection = cone_perception.nodes.detection:main",
+            "pipeline = cone_perception.nodes.pipeline:main",
         ],
     },
 )

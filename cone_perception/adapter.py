@@ -126,6 +126,12 @@ class DriverAdapter:
         return self.crop.camera_info_fields(self.image_width, self.image_height)
 
 
+# rows Y, U, V; columns B, G, R, offset
+_BGR_TO_YUV601_LIMITED = np.array(
+    [[0.098, 0.504, 0.257, 16.0], [0.439, -0.291, -0.148, 128.0], [-0.071, -0.368, 0.439, 128.0]], dtype=np.float64
+)
+
+
 def bgr_to_yuyv(bgr: np.ndarray) -> np.ndarray:
     """Full BGR image -> YUYV bytes as ``(H, W, 2) uint8`` (BT.601, as cameras send).
 
@@ -135,7 +141,8 @@ def bgr_to_yuyv(bgr: np.ndarray) -> np.ndarray:
     h, w = bgr.shape[:2]
     if w % 2:
         raise ValueError(f"YUYV needs an even width, got {w}")
-    yuv = cv2.cvtColor(bgr, cv2.COLOR_BGR2YUV).astype(np.uint16)
+    # BT.601 limited ("video") range, the inverse of OpenCV's COLOR_YUV2BGR_YUY2 used by crop_raw_to_bgr
+    yuv = cv2.transform(bgr, _BGR_TO_YUV601_LIMITED).astype(np.uint16)
     out = np.empty((h, w, 2), dtype=np.uint8)
     out[:, :, 0] = yuv[:, :, 0]
     u = ((yuv[:, 0::2, 1] + yuv[:, 1::2, 1] + 1) // 2).astype(np.uint8)

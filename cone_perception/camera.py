@@ -62,6 +62,16 @@ class MountPose:
     def position_F(self) -> np.ndarray:
         return np.array([self.x_m, self.y_m, self.height_m], dtype=np.float64)
 
+    @classmethod
+    def from_R_F_C(cls, R_F_C: np.ndarray, position_F: np.ndarray) -> "MountPose":
+        """Inverse of :meth:`R_F_C` / :meth:`position_F`: a rotation (3x3) and a position (m) -> pose."""
+        R = np.asarray(R_F_C, dtype=np.float64) @ _R_OPT_FROM_BODY  # = Rz(yaw) Ry(pitch) Rx(roll)
+        yaw = np.degrees(np.arctan2(R[1, 0], R[0, 0]))
+        pitch = np.degrees(np.arcsin(np.clip(-R[2, 0], -1.0, 1.0)))
+        roll = np.degrees(np.arctan2(R[2, 1], R[2, 2]))
+        x, y, z = (float(v) for v in np.asarray(position_F, dtype=np.float64).ravel())
+        return cls(x, y, z, float(pitch), float(roll), float(yaw))
+
 
 def intrinsics(fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
     """3x3 camera matrix K."""

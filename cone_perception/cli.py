@@ -15,8 +15,13 @@ import sys
 
 # name -> (module under cone_perception.commands, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
+    "demo": ("demo", "the main job: synthetic drive -> live ROS 2 pipeline -> summary and pictures"),
     "map": ("map", "map pixels or boxes to rear_axle metres with a calibration"),
     "bench": ("bench", "benchmark the per-frame stages on real-size frames"),
+    "synth": ("synth", "synthetic FS scenes with exact ground truth: dataset, bag, preview, mapcheck, bench"),
+    "detect": ("detect", "run the detector over images, a folder or a rosbag -> JSON lines"),
+    "replay": ("replay", "run the full pipeline over a rosbag, offline or through live nodes"),
+    "calibrate": ("calibrate", "calibrate a camera to the rear axle (chessboard / points / mount pose) with report and pictures"),
     "train": ("train", "train the cone detector on YOLO txt datasets"),
     "export": ("export", "export a detector checkpoint to TorchScript or ONNX, verified against eager"),
     "data": ("data", "dataset converters: fsoco-to-yolo, restore-aspect"),

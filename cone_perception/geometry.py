@@ -17,6 +17,7 @@ import numpy as np
 from .classes import NUM_CLASSES
 
 FOOT_RULES = ("bottom_left", "bottom_right", "bottom_center")
+_UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-10)
 _FOOT_U_WEIGHT = {"bottom_left": 0.0, "bottom_right": 1.0, "bottom_center": 0.5}
 
 
@@ -56,6 +57,33 @@ def homography_jacobian(H: np.ndarray, uv: np.ndarray) -> np.ndarray:
         for j in range(2):  # input u, v
             J[:, i, j] = (H[i, j] * w - p[:, i] * H[2, j]) / (w * w)
     return J
+
+
+def undistort_pixels(uv_px: np.ndarray, camera_matrix: np.ndarray, dist_coeffs: np.ndarray) -> np.ndarray:
+    """(N, 2) raw pixels -> (N, 2) undistorted pixels of the same K (points only, never the image).
+
+    Uses ``cv2.undistortPointsIter`` with 40 iterations: the default 5 of
+    ``cv2.undistortPoints`` leave errors of several pixels in the corners of a
+    wide-angle lens (k1 = -0.3: 12 px).
+    """
+    uv = np.asarray(uv_px, dtype=np.float64).reshape(-1, 2)
+    if uv.shape[0] == 0:
+        return uv
+    K = np.asarray(camera_matrix, dtype=np.float64)
+    d = np.asarray(dist_coeffs, dtype=np.float64)
+    return cv2.undistortPointsIter(uv.reshape(-1, 1, 2), K, d, None, K, _UNDISTORT_CRITERIA).reshape(-1, 2)
+
+
+def distort_pixels(uv_px: np.ndarray, camera_matrix: np.ndarray, dist_coeffs: np.ndarray) -> np.ndarray:
+    """(N, 2) undistorted pixels -> (N, 2) raw pixels (inverse of :func:`undistort_pixels`)."""
+    uv = np.asarray(uv_px, dtype=np.float64).reshape(-1, 2)
+    if uv.shape[0] == 0:
+        return uv
+    K = np.asarray(camera_matrix, dtype=np.float64)
+    rays = np.column_stack([(uv[:, 0] - K[0, 2]) / K[0, 0], (uv[:, 1] - K[1, 2]) / K[1, 1], np.ones(len(uv))])
+    rays[:, 0] -= K[0, 1] / K[0, 0] * rays[:, 1]  # skew, usually 0
+    pts, _ = cv2.projectPoints(rays.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), K, np.asarray(dist_coeffs, dtype=np.float64))
+    return pts.reshape(-1, 2)
 
 
 def foot_point_weights(rules: Sequence[str]) -> np.ndarray:
@@ -104,9 +132,9 @@ class GroundMapper:
     def undistort(self, uv: np.ndarray) -> np.ndarray:
         """(N, 2) raw pixels -> (N, 2) undistorted pixels (identity without a lens model)."""
         uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
-        if self.dist is None or self.K is None or uv.shape[0] == 0:
+        if self.dist is None or self.K is None:
             return uv
-        return cv2.undistortPoints(uv.reshape(-1, 1, 2), self.K, self.dist, P=self.K).reshape(-1, 2)
+        return undistort_pixels(uv, self.K, self.dist)
 
     def map_pixels(self, uv_px: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(N, 2) full-image px -> ((N, 2) x, y in m, (N,) bool valid).
@@ -118,6 +146,16 @@ class GroundMapper:
             valid = (w > 0) & np.all(np.isfinite(xy), axis=1) & (np.hypot(xy[:, 0], xy[:, 1]) <= self.max_range_m)
         xy[~valid] = np.nan
         return xy, valid
+
+    def ground_to_pixels(self, xy_m: np.ndarray) -> np.ndarray:
+        """(N, 2) ground points (m, ``rear_axle``) -> (N, 2) raw full-image px (lens model applied;
+        NaN behind the camera). The inverse of :meth:`map_pixels`."""
+        uv, w = apply_homography(np.linalg.inv(self.H), np.asarray(xy_m, dtype=np.float64).reshape(-1, 2))
+        uv[w <= 0] = np.nan
+        if self.dist is not None and self.K is not None and uv.shape[0]:
+            ok = np.all(np.isfinite(uv), axis=1)
+            uv[ok] = distort_pixels(uv[ok], self.K, self.dist)
+        return uv
 
     def jacobian(self, uv_px: np.ndarray) -> np.ndarray:
         """d(x, y)/d(u, v) at raw pixels, (N, 2, 2), including the lens model."""

@@ -2,7 +2,14 @@
 
 One call per frame: :meth:`ConeMapper.map_boxes` takes :data:`BOX_DTYPE`
 records, validates them, picks each class's foot point, maps it through the
-calibration's ``H_F_B`` and returns :data:`CONE_DTYPE` records with covariance.
+calibration's ``H_F_B``, moves it by the class's foot offset away from the
+camera along the viewing ray (from the base edge the camera sees to the cone's
+centre) and returns :data:`CONE_DTYPE` records with covariance.
+
+Pixel conventions: boxes are in pixel-EDGE coordinates (a box around pixel
+columns 10..19 has u1 = 10, u2 = 20, as detectors and YOLO labels use them);
+the calibration, like OpenCV, uses pixel-CENTRE coordinates (pixel 10 spans
+9.5..10.5). A foot point therefore moves by -0.5 px before it is mapped.
 """
 
 from __future__ import annotations
@@ -46,11 +53,27 @@ class ConeMapper:
             calib.dist_coeffs,
         )
         self._u_weights = foot_point_weights(calib.foot_points)
+        self._offset_m = np.asarray(calib.foot_offset_m, dtype=np.float64)
+        self._camera_xy = calib.camera_ground_xy() if np.any(self._offset_m) else np.zeros(2)
 
     def foot_points(self, records: np.ndarray) -> np.ndarray:
-        """(N, 2) foot pixels of :data:`BOX_DTYPE` records, by each box's class rule."""
+        """(N, 2) foot pixels (pixel-centre coordinates) of :data:`BOX_DTYPE` records, by each box's class rule."""
         b, _, c = boxes_to_arrays(records)
-        return foot_points(b, c, self._u_weights)
+        return foot_points(b, c, self._u_weights) - 0.5
+
+    def foot_offsets(self, xy_m: np.ndarray, class_ids: np.ndarray) -> np.ndarray:
+        """(N, 2) mapped foot points -> cone centres: moved by the class's foot offset along the
+        ground ray from the camera."""
+        off = self._offset_m[np.asarray(class_ids, dtype=np.intp)]
+        if not np.any(off):
+            return xy_m
+        d = xy_m - self._camera_xy
+        n = np.linalg.norm(d, axis=1, keepdims=True)
+        return xy_m + d / np.maximum(n, 1e-9) * off[:, None]
+
+    def ground_to_pixels(self, xy_m: np.ndarray) -> np.ndarray:
+        """(N, 2) ground points (m) -> (N, 2) full-image px where the camera sees them."""
+        return self.ground.ground_to_pixels(xy_m)
 
     def map_boxes(self, records: np.ndarray) -> np.ndarray:
         """Validated :data:`BOX_DTYPE` records -> :data:`CONE_DTYPE` records.
@@ -64,6 +87,7 @@ class ConeMapper:
             return np.zeros(0, dtype=CONE_DTYPE)
         uv = self.foot_points(records)
         xy, valid = self.ground.map_pixels(uv)
+        xy[valid] = self.foot_offsets(xy[valid], records["class_id"][valid])
         cov = self.ground.covariance(uv[valid])
         out = np.zeros(int(valid.sum()), dtype=CONE_DTYPE)
         out["x"] = xy[valid, 0]

@@ -1,8 +1,8 @@
 """Where the package's shipped files are: ``calib/``, ``models/``, ``launch_configs/``.
 
-Looked up in this order: the source checkout (editable install, tests), the
-install prefix's ``share/cone_perception`` (pip or colcon install), the ament
-index (a sourced ROS 2 workspace).
+Looked up in this order: the source checkout (editable install, tests), then
+``share/cone_perception`` under the install prefix (pip) or under any parent of
+the installed package (colcon: ``install/cone_perception/lib/pythonX.Y/site-packages``).
 """
 
 from __future__ import annotations
@@ -29,12 +29,6 @@ def share_dir() -> Path:
     for c in candidates:
         if (c / "calib").is_dir():
             return c
-    try:  # a sourced ROS 2 workspace
-        from ament_index_python.packages import get_package_share_directory
-
-        return Path(get_package_share_directory(PACKAGE_NAME))
-    except Exception:  # noqa: BLE001 - any failure means "not there"
-        pass
     raise FileNotFoundError(
         f"cannot find the {PACKAGE_NAME} share directory (calib/, models/); looked in {repo} and "
         + ", ".join(str(c) for c in candidates[:3])

@@ -1,0 +1,549 @@
+"""``cone-perception calibrate``: one camera's calibration to the rear axle (thesis ch. 4).
+
+From a picture of a chessboard lying on the ground in front of the car (and/or
+extra reference points), or from a known mount pose, write the calibration
+YAML (``H_S_B``, ``T_F_S``, optional lens model) plus a quality report and
+pictures beside it. See ``calib/README.md`` for the procedure at the track.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import datetime
+import json
+import shlex
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import yaml
+
+from ..calib import DEFAULT_FOOT_POINTS, Calibration, calibration_from_dict, load_calibration, save_calibration
+from ..calib_vis import birdseye_picture, not_found_picture, points_picture
+from ..calibration import (
+    Board,
+    CalibrationResult,
+    Intrinsics,
+    PointPairs,
+    board_not_found_hint,
+    board_pairs,
+    calibrate_intrinsics,
+    detect_board,
+    fit_calibration,
+    format_report,
+    from_pose,
+    parse_size,
+    planar_transform,
+    quality_report,
+    read_points_csv,
+)
+from ..camera import MountPose, default_intrinsics
+from ..classes import CLASS_NAMES
+from ..crop import CropSpec
+from ..errors import ConfigError
+from ..geometry import apply_homography
+
+# keys of the YAML's free part that this command owns (rewritten on every run)
+_OWNED_EXTRA = ("mount", "mount_estimate", "calibration")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.formatter_class = argparse.RawDescriptionHelpFormatter
+    p.description = (
+        "Calibrate one camera to the rear axle: image pixels -> ground metres (H_F_B = T_F_S @ H_S_B).\n\n"
+        "From an image:   calibrate --image calib.png --board 9x6 --square 0.2 --x-offset 4.0 --camera mainhoop\n"
+        "From a bag:      calibrate --bag run1 --frame 10 --board 9x6 --square 0.2 --x-offset 4.0 --camera mainhoop\n"
+        "From a CAD pose: calibrate --from-pose --hfov 90 --size 1920x1080 --cam-x 0.5 --height 1.2 --pitch 10 "
+        "--camera mainhoop\n\n"
+        "Writes calib/NAME.yaml (crop, foot points and pixel sigmas of an existing file are kept) and beside it\n"
+        "NAME.report.txt / .report.json (errors, coverage, predicted error) and NAME.points.png / NAME.birdseye.png.\n"
+        "Frame S: the board frame, origin at the centre of the board's inner-corner grid, x forward (away from\n"
+        "the car), y left. T_F_S: S -> rear_axle from --x-offset/--y-offset/--yaw."
+    )
+    src = p.add_argument_group("input image")
+    src.add_argument(
+        "--image",
+        type=Path,
+        metavar="IMG",
+        help="calibration image (full camera resolution, as the camera delivers it)",
+    )
+    src.add_argument(
+        "--bag", type=Path, metavar="BAG", help="rosbag2 folder or file to take the calibration image from"
+    )
+    src.add_argument(
+        "--frame", type=int, metavar="N", default=0, help="index of the image message in --bag (0 = first; default 0)"
+    )
+    src.add_argument(
+        "--topic",
+        metavar="TOPIC",
+        help="image topic in --bag (default: the only sensor_msgs Image/CompressedImage topic)",
+    )
+
+    pts = p.add_argument_group("reference points (frame S, metres)")
+    pts.add_argument("--board", metavar="COLSxROWS", help="chessboard size in INNER corners COLSxROWS, e.g. 9x6")
+    pts.add_argument("--square", type=float, metavar="M", help="chessboard square size in metres, e.g. 0.2")
+    pts.add_argument(
+        "--board-pose",
+        default="0,0,0",
+        metavar="X,Y,YAW",
+        help="centre of the board's inner-corner grid in S (m) and the angle of its lines (deg); default 0,0,0 "
+        "(S is the board frame). Which way round the board lies is found from the image",
+    )
+    pts.add_argument(
+        "--points",
+        type=Path,
+        metavar="FILE.csv",
+        help="CSV of extra pairs u,v,x_s,y_s (raw image px, metres in S), e.g. cones at measured spots",
+    )
+    pts.add_argument(
+        "--ransac-px", type=float, metavar="PX", default=3.0, help="RANSAC inlier threshold in pixels (default 3)"
+    )
+
+    tf = p.add_argument_group("S -> rear_axle (T_F_S)")
+    tf.add_argument(
+        "--x-offset",
+        type=float,
+        metavar="M",
+        default=0.0,
+        help="x of S's origin in rear_axle (m, forward); thesis: board distance",
+    )
+    tf.add_argument("--y-offset", type=float, metavar="M", default=0.0, help="y of S's origin in rear_axle (m, left)")
+    tf.add_argument(
+        "--yaw",
+        type=float,
+        metavar="DEG",
+        default=0.0,
+        help="angle of S's x axis from rear_axle's x axis (deg, counter-clockwise)",
+    )
+
+    lens = p.add_argument_group("lens (optional; H is then estimated on undistorted points)")
+    lens.add_argument(
+        "--intrinsics",
+        metavar="FILE",
+        type=Path,
+        help="YAML with camera_matrix (3x3) and dist_coeffs (OpenCV), e.g. another calibration YAML or ROS ost.yaml",
+    )
+    lens.add_argument(
+        "--views", type=Path, nargs="+", metavar="IMG", help="chessboard views (>= 3, tilted) -> cv2.calibrateCamera"
+    )
+    lens.add_argument(
+        "--views-board", metavar="COLSxROWS", help="board of the --views if not the --board on the ground"
+    )
+    lens.add_argument(
+        "--views-square", type=float, metavar="M", help="square size of the --views board (default --square)"
+    )
+    lens.add_argument(
+        "--no-intrinsics", action="store_true", help="drop camera_matrix/dist_coeffs kept from an existing --out"
+    )
+
+    pose = p.add_argument_group("from a known mount pose (--from-pose)")
+    pose.add_argument("--from-pose", action="store_true", help="H from K and the mount pose instead of an image")
+    pose.add_argument("--size", metavar="WxH", help="image size WxH (default: from --image, --out or 1920x1080)")
+    pose.add_argument(
+        "--hfov",
+        type=float,
+        metavar="DEG",
+        help="horizontal field of view (deg) for a square-pixel K centred in the image",
+    )
+    pose.add_argument("--cam-x", type=float, metavar="M", default=0.0, help="camera x in rear_axle (m, forward)")
+    pose.add_argument("--cam-y", type=float, metavar="M", default=0.0, help="camera y in rear_axle (m, left)")
+    pose.add_argument("--height", type=float, metavar="M", help="camera height above the ground (m)")
+    pose.add_argument("--pitch", type=float, metavar="DEG", help="camera pitch (deg, positive looks down)")
+    pose.add_argument(
+        "--roll", type=float, metavar="DEG", default=0.0, help="camera roll (deg, positive lowers the right side)"
+    )
+    pose.add_argument("--cam-yaw", type=float, metavar="DEG", default=0.0, help="camera yaw (deg, positive looks left)")
+
+    out = p.add_argument_group("output")
+    out.add_argument("--camera", metavar="NAME", help="camera name (default: the --out file's stem)")
+    out.add_argument(
+        "--out", type=Path, metavar="FILE.yaml", help="calibration YAML to write (default calib/CAMERA.yaml)"
+    )
+    out.add_argument(
+        "--far-m", type=float, metavar="M", default=10.0, help="warn when no point lies this far ahead (default 10 m)"
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    camera, out = _names(args)
+    existing = load_calibration(out) if out.is_file() else None
+    size = parse_size(args.size, "--size") if args.size else None
+
+    image, image_name = _read_input_image(args)
+    if image is not None:
+        img_size = (image.shape[1], image.shape[0])
+        if size is not None and size != img_size:
+            raise ConfigError(
+                image_name, None, f"image is {img_size[0]}x{img_size[1]} but --size says {size[0]}x{size[1]}"
+            )
+        size = img_size
+    if size is None and existing is not None:
+        size = (existing.image_width, existing.image_height)
+    intr = _intrinsics(args, existing, out, size)
+    if size is None:  # from-pose without --size: the size of the views / intrinsics file, else full HD
+        size = intr.image_size if intr is not None and intr.image_size is not None else (1920, 1080)
+    W, H = size
+
+    T_F_S = planar_transform(args.x_offset, args.y_offset, args.yaw)
+    if args.from_pose:
+        res, extra = _from_pose(args, intr, W, H, T_F_S)
+        title = f"calibration report: {camera} (from mount pose)"
+    else:
+        if image is None:
+            raise ConfigError("calibrate", "--image", "give --image IMG or --bag BAG --frame N (or --from-pose)")
+        pairs = _collect_pairs(args, image, image_name, T_F_S, out)
+        res = fit_calibration(pairs, W, H, T_F_S, intr, args.ransac_px, image_name)
+        extra = {
+            "calibration": {
+                "method": "chessboard" if args.board else "points",
+                "image": image_name,
+                "date": datetime.date.today().isoformat(),
+            }
+        }
+        title = f"calibration report: {camera} ({image_name})"
+    max_range = existing.max_range_m if existing else 30.0
+    rep = quality_report(res, args.far_m, max_range)
+    if not args.from_pose and "pose_from_H" in rep:
+        extra["mount_estimate"] = {
+            k: round(float(v), 4)
+            for k, v in rep["pose_from_H"].items()
+            if k in ("x_m", "y_m", "height_m", "pitch_deg", "roll_deg", "yaw_deg")
+        }
+    if "rms_reproj_px" in rep:
+        extra["calibration"].update(
+            rms_reproj_px=round(rep["rms_reproj_px"], 4), n_points=rep["n_points"], n_inliers=rep["n_inliers"]
+        )
+
+    calib = _build_calibration(camera, res, existing, extra, out)
+    save_calibration(calib, out, header=f"written by: {command_line(args)}")
+
+    text = format_report(rep, title)
+    stem = out.with_suffix("")
+    Path(f"{stem}.report.txt").write_text(text, encoding="utf-8")
+    Path(f"{stem}.report.json").write_text(json.dumps(_json_safe(rep), indent=1, allow_nan=False), encoding="utf-8")
+    print(format_report(rep, title, max_points=8), end="")
+    written = [out, Path(f"{stem}.report.txt"), Path(f"{stem}.report.json")]
+    if image is not None:
+        cv2.imwrite(f"{stem}.points.png", points_picture(image, res, rep if len(res.pairs) else None))
+        cv2.imwrite(f"{stem}.birdseye.png", birdseye_picture(image, res))
+        written += [Path(f"{stem}.points.png"), Path(f"{stem}.birdseye.png")]
+    print("wrote: " + ", ".join(str(p) for p in written))
+    return 0
+
+
+# -- pieces ------------------------------------------------------------------------------------
+def _json_safe(v):
+    """inf/nan (e.g. the error of a point H puts behind the camera) -> None, so the JSON is standard."""
+    if isinstance(v, dict):
+        return {k: _json_safe(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_json_safe(x) for x in v]
+    if isinstance(v, float) and not np.isfinite(v):
+        return None
+    return v
+
+
+def command_line(args: argparse.Namespace) -> str:
+    """The ``cone-perception calibrate`` command that reproduces ``args`` (options that differ from defaults)."""
+    p = argparse.ArgumentParser()
+    add_arguments(p)
+    defaults = vars(p.parse_args([]))
+    parts = ["cone-perception", "calibrate"]
+    for key, value in vars(args).items():
+        if key not in defaults or value == defaults[key]:
+            continue
+        opt = "--" + key.replace("_", "-")
+        if value is True:
+            parts.append(opt)
+        elif isinstance(value, list):
+            parts += [opt] + [str(v) for v in value]
+        else:
+            parts += [opt, f"{value:g}" if isinstance(value, float) else str(value)]
+    return " ".join(shlex.quote(x) for x in parts)
+
+
+def _names(args: argparse.Namespace) -> tuple[str, Path]:
+    if args.out is None and not args.camera:
+        raise ConfigError("calibrate", "--camera", "give --camera NAME or --out FILE.yaml")
+    out = args.out if args.out is not None else Path("calib") / f"{args.camera}.yaml"
+    if out.suffix not in (".yaml", ".yml"):
+        raise ConfigError(str(out), "--out", "must end in .yaml or .yml")
+    return (args.camera or out.stem), out
+
+
+def _read_image(path: Path) -> np.ndarray:
+    if not path.is_file():
+        raise ConfigError(str(path), None, "image file not found")
+    img = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if img is None:
+        raise ConfigError(str(path), None, "cannot decode the image (not a PNG/JPEG/...?)")
+    return img
+
+
+def _read_input_image(args: argparse.Namespace) -> tuple[np.ndarray | None, str]:
+    if args.image is not None and args.bag is not None:
+        raise ConfigError("calibrate", "--image/--bag", "give one of --image and --bag, not both")
+    if args.image is not None:
+        return _read_image(args.image), str(args.image)
+    if args.bag is not None:
+        img, where = read_bag_image(args.bag, args.frame, args.topic)
+        return img, where
+    return None, ""
+
+
+def read_bag_image(bag: Path, index: int, topic: str | None = None) -> tuple[np.ndarray, str]:
+    """The ``index``-th image message of a rosbag2 as a full BGR image, and a description.
+
+    Minimal reader for this command (``rosbags`` AnyReader; ``Image`` in the
+    adapter's encodings or ``CompressedImage``). To be replaced by the
+    package's general bag reader (``bagio``) when it lands: only this function
+    touches the bag.
+    """
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+
+    from ..adapter import crop_raw_to_bgr, decode_compressed, raw_frame_view
+    from ..errors import FrameError
+
+    if not bag.exists():
+        raise ConfigError(str(bag), None, "bag not found")
+    types = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
+    try:
+        reader = AnyReader([bag], default_typestore=get_typestore(Stores.ROS2_JAZZY))
+        reader.open()
+    except Exception as e:  # noqa: BLE001 - rosbags raises several types; all mean "cannot read"
+        raise ConfigError(str(bag), None, f"cannot open as a rosbag2: {e}") from None
+    try:
+        conns = [c for c in reader.connections if c.msgtype in types]
+        topics = sorted({c.topic for c in conns})
+        if topic is not None:
+            conns = [c for c in conns if c.topic == topic]
+            if not conns:
+                raise ConfigError(
+                    str(bag), "--topic", f"no image topic {topic!r}; image topics: {', '.join(topics) or 'none'}"
+                )
+        elif len(topics) != 1:
+            raise ConfigError(
+                str(bag), "--topic", f"bag has {len(topics)} image topics ({', '.join(topics) or 'none'}): choose one"
+            )
+        if index < 0:
+            raise ConfigError(str(bag), "--frame", f"must be >= 0, got {index}")
+        count = 0
+        for k, (conn, _, raw) in enumerate(reader.messages(connections=conns)):
+            count = k + 1
+            if k < index:
+                continue
+            msg = reader.deserialize(raw, conn.msgtype)
+            try:
+                if conn.msgtype.endswith("CompressedImage"):
+                    img = decode_compressed(msg.data)
+                else:
+                    name, view = raw_frame_view(msg.encoding, msg.width, msg.height, msg.step, msg.data)
+                    img = crop_raw_to_bgr(name, view, CropSpec.full_image(msg.width, msg.height))
+            except FrameError as e:
+                raise ConfigError(str(bag), "--frame", f"image message {index} on {conn.topic}: {e}") from None
+            return img, f"{bag}#{conn.topic}[{index}]"
+        raise ConfigError(
+            str(bag), "--frame", f"frame {index} not in the bag: it has {count} image messages on {', '.join(topics)}"
+        )
+    finally:
+        reader.close()
+
+
+def _read_intrinsics_file(path: Path) -> Intrinsics:
+    """camera_matrix + dist_coeffs from our calibration YAML or a ROS camera_calibration ``ost.yaml``."""
+    src = str(path)
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except OSError as e:
+        raise ConfigError(src, None, f"cannot read: {e.strerror}") from None
+    except yaml.YAMLError as e:
+        raise ConfigError(src, None, f"not valid YAML: {e}") from None
+    if not isinstance(data, dict):
+        raise ConfigError(src, None, "must be a YAML mapping with camera_matrix and dist_coeffs")
+
+    def values(key_names: tuple[str, ...], n: int | None) -> np.ndarray | None:
+        for k in key_names:
+            if k in data and data[k] is not None:
+                v = data[k]
+                v = v.get("data") if isinstance(v, dict) else v
+                try:
+                    a = np.asarray(v, dtype=np.float64).ravel()
+                except (TypeError, ValueError):
+                    raise ConfigError(src, k, "must be numbers (a list, rows, or a mapping with data:)") from None
+                if (n is not None and a.size != n) or not np.all(np.isfinite(a)):
+                    raise ConfigError(src, k, f"must be {n or 'some'} finite numbers, got {a.size}")
+                return a
+        return None
+
+    K = values(("camera_matrix",), 9)
+    if K is None:
+        raise ConfigError(src, "camera_matrix", "missing")
+    d = values(("dist_coeffs", "distortion_coefficients"), None)
+    d = np.zeros(0) if d is None else d
+    if d.size not in (0, 4, 5, 8, 12, 14):
+        raise ConfigError(src, "dist_coeffs", f"must be 4, 5, 8, 12 or 14 numbers (OpenCV model), got {d.size}")
+    size = None
+    w, h = data.get("image_width"), data.get("image_height")
+    if isinstance(w, int) and isinstance(h, int):
+        size = (w, h)
+    return Intrinsics(K.reshape(3, 3), d, src, image_size=size)
+
+
+def _intrinsics(
+    args: argparse.Namespace, existing: Calibration | None, out: Path, size: tuple[int, int] | None
+) -> Intrinsics | None:
+    """K and lens model, first of: --views, --intrinsics, --hfov, the existing --out file; else None.
+
+    ``size``: the calibration image size when already known (image, --size, existing file).
+    """
+    intr = _intrinsics_source(args, existing, out, size or (1920, 1080))
+    if intr is not None and intr.image_size is None and args.hfov is not None:
+        intr.image_size = size or (1920, 1080)
+    if size is not None and intr is not None and intr.image_size is not None and tuple(intr.image_size) != tuple(size):
+        raise ConfigError(
+            intr.source,
+            "image size",
+            f"intrinsics are for {intr.image_size[0]}x{intr.image_size[1]} images, the calibration image is {size[0]}x{size[1]}",
+        )
+    return intr
+
+
+def _intrinsics_source(
+    args: argparse.Namespace, existing: Calibration | None, out: Path, size: tuple[int, int]
+) -> Intrinsics | None:
+    if sum(x is not None and x is not False for x in (args.views, args.intrinsics, args.hfov)) > 1:
+        raise ConfigError("calibrate", "--views/--intrinsics/--hfov", "give only one source of intrinsics")
+    if args.hfov is not None:
+        if not 1.0 < args.hfov < 179.0:
+            raise ConfigError("calibrate", "--hfov", f"must be between 1 and 179 degrees, got {args.hfov:g}")
+        K = default_intrinsics(size[0], size[1], args.hfov)
+        return Intrinsics(K, np.zeros(0), f"--hfov {args.hfov:g} (square pixels, centred)")
+    if args.views:
+        board, square = args.views_board or args.board, args.views_square or args.square
+        if not (board and square):
+            raise ConfigError(
+                "calibrate",
+                "--views",
+                "needs the board in the views: --views-board/--board and --views-square/--square",
+            )
+        from tqdm import tqdm
+
+        views = [
+            (str(v), _read_image(v))
+            for v in tqdm(args.views, desc="reading views", unit="img", disable=len(args.views) < 4)
+        ]
+        intr, missed = calibrate_intrinsics(views, parse_size(board, "--views-board"), square)
+        if missed:
+            print(f"board not found in {len(missed)} view(s), not used: {', '.join(missed)}", file=sys.stderr)
+        return intr
+    if args.intrinsics:
+        return _read_intrinsics_file(args.intrinsics)
+    if existing is not None and existing.camera_matrix is not None and not args.no_intrinsics:
+        d = existing.dist_coeffs if existing.dist_coeffs is not None else np.zeros(0)
+        return Intrinsics(existing.camera_matrix, d, f"kept from {out}")
+    return None
+
+
+def _collect_pairs(
+    args: argparse.Namespace, image: np.ndarray, image_name: str, T_F_S: np.ndarray, out: Path
+) -> PointPairs:
+    pairs = PointPairs.empty()
+    if args.board:
+        if not args.square or args.square <= 0:
+            raise ConfigError("calibrate", "--square", "give the board's square size in metres (> 0) with --board")
+        size = parse_size(args.board)
+        try:
+            bx, by, byaw = (float(v) for v in args.board_pose.split(","))
+        except ValueError:
+            raise ConfigError(
+                "calibrate", "--board-pose", f"must be X,Y,YAW (m, m, deg), got {args.board_pose!r}"
+            ) from None
+        corners = detect_board(image, size)
+        if corners is None:
+            hint, found = board_not_found_hint(image, size)
+            pic = Path(f"{out.with_suffix('')}.board_not_found.png")
+            pic.parent.mkdir(parents=True, exist_ok=True)
+            cv2.imwrite(str(pic), not_found_picture(image, found, size, hint))
+            raise ConfigError(image_name, "--board", f"no {size[0]}x{size[1]} chessboard found; {hint}. Picture: {pic}")
+        pairs = board_pairs(corners, Board(size[0], size[1], args.square, bx, by, byaw), T_F_S)
+    if args.points:
+        pairs = pairs + read_points_csv(args.points)
+    if not len(pairs):
+        raise ConfigError(
+            "calibrate", "--board/--points", "give a chessboard (--board, --square) and/or --points FILE.csv"
+        )
+    return pairs
+
+
+def _from_pose(args: argparse.Namespace, intr: Intrinsics | None, W: int, H: int, T_F_S: np.ndarray):
+    if intr is None:
+        raise ConfigError("calibrate", "--from-pose", "needs K: --hfov DEG, --intrinsics FILE or --views IMG...")
+    if args.height is None or args.pitch is None:
+        raise ConfigError("calibrate", "--from-pose", "needs at least --height M and --pitch DEG of the camera")
+    if args.height <= 0:
+        raise ConfigError("calibrate", "--height", f"must be > 0 (camera above the ground), got {args.height}")
+    pose = MountPose(args.cam_x, args.cam_y, args.height, args.pitch, args.roll, args.cam_yaw)
+    H_F_B = from_pose(intr.K, W, H, pose)
+    _, w = apply_homography(H_F_B, np.array([[W / 2.0, H - 1.0]]))
+    if w[0] <= 0:
+        raise ConfigError("calibrate", "--pitch", "with this pose the bottom of the image does not see the ground")
+    H_S_B = np.linalg.inv(T_F_S) @ H_F_B
+    res = CalibrationResult(H_S_B, T_F_S, H_F_B, W, H, PointPairs.empty(), np.zeros(0, bool), np.zeros((0, 2)), intr)
+    mount = dataclasses.asdict(pose)
+    if args.hfov is not None:
+        mount["hfov_deg"] = args.hfov
+    return res, {"mount": mount, "calibration": {"method": "from_pose", "date": datetime.date.today().isoformat()}}
+
+
+def _default_crop(res: CalibrationResult) -> CropSpec:
+    """A new camera's band: from a little above the horizon to the bottom, full width, half resolution."""
+    W, H = res.width, res.height
+    h = res.H_F_B[2]
+    v_h = -(h[0] * W / 2.0 + h[2]) / h[1] if abs(h[1]) > 1e-12 else 0.0
+    v0 = int(np.clip(v_h - 0.03 * H, 0, H - 4)) // 4 * 4
+    v1 = H - (H - v0) % 2
+    ds = 2 if W % 4 == 0 and (v1 - v0) % 2 == 0 else 1
+    return CropSpec(v0, v1, 0, W - W % 2, ds)
+
+
+def _build_calibration(
+    camera: str, res: CalibrationResult, existing: Calibration | None, extra: dict, out: Path
+) -> Calibration:
+    intr = res.intrinsics
+    K = None if intr is None else intr.K
+    dist = None if intr is None or not intr.dist.size else intr.dist
+    if existing is not None:
+        if (existing.image_width, existing.image_height) != (res.width, res.height):
+            raise ConfigError(
+                str(out),
+                "image_width/image_height",
+                f"existing file is for {existing.image_width}x{existing.image_height}, the new calibration for "
+                f"{res.width}x{res.height}: write to a new --out or fix the file",
+            )
+        kept = {k: v for k, v in existing.extra.items() if k not in _OWNED_EXTRA}
+        calib = dataclasses.replace(
+            existing,
+            camera=camera,
+            H_S_B=res.H_S_B,
+            T_F_S=res.T_F_S,
+            camera_matrix=K,
+            dist_coeffs=dist,
+            extra={**kept, **extra},
+        )
+    else:
+        calib = Calibration(
+            camera=camera,
+            image_width=res.width,
+            image_height=res.height,
+            H_S_B=res.H_S_B,
+            T_F_S=res.T_F_S,
+            crop=_default_crop(res),
+            foot_points=tuple(DEFAULT_FOOT_POINTS[n] for n in CLASS_NAMES),
+            camera_matrix=K,
+            dist_coeffs=dist,
+            extra=extra,
+        )
+    return calibration_from_dict(calib.to_dict(), str(out))  # the file we write must load

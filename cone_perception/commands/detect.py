@@ -1,0 +1,140 @@
+"""``cone-perception detect``: run the detector over an image, a folder or a rosbag -> JSON lines.
+
+  cone-perception detect SOURCE --out FILE.jsonl [--model M] [--imgsz WxH] [--crop V0,V1[,U0,U1]]
+                                 [--downscale N] [--backend B] [--save-vis DIR]
+
+One line per image (see ``cone_perception/predictions.py``), boxes in the image's own pixels.
+Without ``--crop`` each image is letterboxed to the model input (``--imgsz``, default the
+model's); with ``--crop`` the band is cut (and downscaled by ``--downscale``) as the car does.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Iterator
+
+import cv2
+import numpy as np
+from tqdm import tqdm
+
+from ..crop import CropSpec
+from ..errors import ConfigError, FrameError
+
+IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp")
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(x) for x in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"size must be WxH, e.g. 960x288, got {text!r}") from None
+    return w, h
+
+
+def _crop(text: str) -> tuple[int, ...]:
+    try:
+        vals = tuple(int(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"crop must be V0,V1 or V0,V1,U0,U1 (integers), got {text!r}") from None
+    if len(vals) not in (2, 4):
+        raise argparse.ArgumentTypeError(f"crop must be V0,V1 or V0,V1,U0,U1, got {text!r}")
+    return vals
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.description = "Run the detector over an image, a folder of images or a rosbag's camera topic; write JSON lines."
+    p.add_argument("source", type=Path, help="image file, folder of images, or rosbag2 directory")
+    p.add_argument("--out", type=Path, required=True, help="JSON-lines output file")
+    p.add_argument("--model", default=None, help="model file (default: the shipped default model)")
+    p.add_argument("--backend", default="torch", choices=["torch", "torchscript", "onnx"], help="inference backend")
+    p.add_argument("--imgsz", type=_size, default=None, help="letterbox each image to this model input WxH")
+    p.add_argument("--crop", type=_crop, default=None, help="band V0,V1[,U0,U1] in image px, cut before the model")
+    p.add_argument("--downscale", type=int, default=1, choices=[1, 2, 4], help="with --crop: integer downscale")
+    p.add_argument("--conf", type=float, default=0.25, help="confidence threshold (default %(default)s)")
+    p.add_argument("--iou", type=float, default=0.45, help="NMS IoU threshold (default %(default)s)")
+    p.add_argument("--topic", default=None, help="rosbag: camera topic (default: the only image topic)")
+    p.add_argument("--save-vis", type=Path, default=None, metavar="DIR", help="write annotated images here")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def iter_source(source: Path, topic: str | None = None) -> Iterator[tuple[str, np.ndarray | None, str | None]]:
+    """``(name, bgr full image or None, error or None)`` for an image, a folder or a bag."""
+    if not source.exists():
+        raise ConfigError(str(source), None, "source does not exist")
+    if source.is_dir() and (source / "metadata.yaml").is_file():
+        yield from _iter_bag(source, topic)
+        return
+    files = [source] if source.is_file() else sorted(p for p in source.rglob("*") if p.suffix.lower() in IMAGE_SUFFIXES)
+    if not files:
+        raise ConfigError(str(source), None, f"no images ({', '.join(IMAGE_SUFFIXES)}) found")
+    for f in files:
+        img = cv2.imread(str(f), cv2.IMREAD_COLOR)
+        yield (str(f.relative_to(source)) if source.is_dir() else f.name), img, (None if img is not None else "unreadable image")
+
+
+def _iter_bag(bag: Path, topic: str | None):
+    from .. import bagio
+    from ..adapter import DriverAdapter, decode_compressed
+    from ..replay import find_image_topic, iter_frames
+
+    topic, _ = find_image_topic(bag, topic)
+    for fr in iter_frames(bag, topic):
+        try:
+            if fr.error:
+                raise fr.error
+            m = fr.msg
+            if fr.msgtype == bagio.COMPRESSED_IMAGE:
+                img = decode_compressed(m.data)
+            else:
+                w, h = int(m.width), int(m.height)
+                img = DriverAdapter(CropSpec.full_image(w - w % 2, h), w - w % 2, h).from_raw(m.encoding, w, h, int(m.step), m.data)
+            yield str(fr.stamp_ns), img, None
+        except FrameError as e:
+            yield str(fr.stamp_ns), None, str(e)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..adapter import crop_bgr
+    from ..detector import Detector, default_model_path
+    from ..predictions import write_prediction
+    from ..vis import draw_boxes
+
+    det = Detector.load(args.model or default_model_path(), backend=args.backend, conf=args.conf, iou=args.iou,
+                        imgsz=args.imgsz if args.backend != "torch" else None)
+    try:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        fh = args.out.open("w", encoding="utf-8")
+    except OSError as e:
+        raise ConfigError(str(args.out), None, f"cannot write: {e.strerror}") from None
+    if args.save_vis:
+        args.save_vis.mkdir(parents=True, exist_ok=True)
+    n, skipped = 0, []
+    with fh:
+        for name, img, err in tqdm(iter_source(args.source, args.topic), unit="img", disable=args.no_progress, file=sys.stderr):
+            if err:
+                skipped.append(f"{name}: {err}")
+                continue
+            h, w = img.shape[:2]
+            if args.crop:
+                v0, v1, u0, u1 = args.crop if len(args.crop) == 4 else (*args.crop, 0, w)
+                crop = CropSpec(v0, v1, u0, u1, args.downscale)
+                crop.validate(w, h, f"--crop for {name}")
+                boxes = det.detect(crop_bgr(img, crop), crop)
+            elif args.imgsz:
+                from ..records import boxes_from_arrays
+
+                b, s, c = det.infer(img, in_size=args.imgsz)
+                boxes = boxes_from_arrays(b, s, c)
+            else:
+                boxes = det.detect_image(img)
+            write_prediction(fh, name, w, h, boxes)
+            n += 1
+            if args.save_vis:
+                out = args.save_vis / (Path(name).stem + ".jpg")
+                cv2.imwrite(str(out), draw_boxes(img, boxes))
+    print(f"detect: {n} images -> {args.out}" + (f", {len(skipped)} skipped" if skipped else ""))
+    for s in skipped[:20]:
+        print(f"  skipped {s}", file=sys.stderr)
+    return 0

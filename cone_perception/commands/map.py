@@ -1,0 +1,90 @@
+"""``cone-perception map``: check a calibration by mapping pixels or boxes to rear_axle metres.
+
+  cone-perception map --calib calib/example_mainhoop.yaml --pixel 960,800 --pixel 100,500
+      -> one CSV line ``u,v,x,y`` per pixel, no header (``nan,nan`` above the horizon / beyond range)
+  cone-perception map --calib CAL --boxes boxes.csv
+      -> one line ``x,y,class_id,score,cov_xx,cov_xy,cov_yy`` per kept cone (columns of boxes.csv:
+         ``u1,v1,u2,v2,score,class_id``, full-image px, optional header line)
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from ..calib import DEFAULT_CAMERA, load_calibration
+from ..errors import ConfigError, FrameError
+from ..mapping import ConeMapper, validate_boxes
+from ..records import boxes_from_arrays
+
+
+def _pixel(text: str) -> tuple[float, float]:
+    try:
+        u, v = (float(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"pixel must be U,V (two numbers), got {text!r}") from None
+    return u, v
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.description = __doc__.split("\n\n")[0].split(": ", 1)[1]
+    p.epilog = (
+        "Pixels are in the FULL camera image (before crop and downscale). Output: CSV without header, "
+        "u,v,x,y per pixel (x, y in rear_axle metres, nan above the horizon or beyond max_range_m), or "
+        "x,y,class_id,score,cov_xx,cov_xy,cov_yy per kept cone with --boxes."
+    )
+    p.add_argument("--calib", default=DEFAULT_CAMERA, help="calibration YAML or shipped camera name (default: %(default)s)")
+    g = p.add_mutually_exclusive_group(required=True)
+    g.add_argument("--pixel", type=_pixel, action="append", metavar="U,V", help="a full-image pixel; repeatable")
+    g.add_argument("--boxes", type=Path, metavar="FILE.csv", help="CSV of boxes u1,v1,u2,v2,score,class_id")
+
+
+def read_boxes_csv(path: Path) -> np.ndarray:
+    """CSV ``u1,v1,u2,v2,score,class_id`` -> BOX_DTYPE records; errors name file and line."""
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+    except OSError as e:
+        raise ConfigError(str(path), None, f"cannot read: {e.strerror}") from None
+    rows = []
+    for i, line in enumerate(lines, 1):
+        line = line.strip()
+        if not line or line.startswith("#") or (i == 1 and line.replace(" ", "").startswith("u1,")):
+            continue
+        parts = line.split(",")
+        if len(parts) != 6:
+            raise ConfigError(str(path), f"line {i}", f"needs 6 columns u1,v1,u2,v2,score,class_id, got {len(parts)}")
+        try:
+            rows.append([float(x) for x in parts])
+        except ValueError:
+            raise ConfigError(str(path), f"line {i}", f"not numbers: {line!r}") from None
+    a = np.asarray(rows, dtype=np.float64).reshape(-1, 6)
+    if np.any(a[:, 5] != np.round(a[:, 5])) or np.any(a[:, 5] < 0):
+        raise ConfigError(str(path), "class_id", "must be a non-negative integer")
+    return boxes_from_arrays(a[:, :4], a[:, 4], a[:, 5].astype(np.int64))
+
+
+def run(args: argparse.Namespace) -> int:
+    calib = load_calibration(args.calib)
+    mapper = ConeMapper(calib)
+    out = sys.stdout
+    if args.pixel:
+        uv = np.asarray(args.pixel, dtype=np.float64)
+        xy, _ = mapper.ground.map_pixels(uv)
+        for (u, v), (x, y) in zip(uv, xy):
+            out.write(f"{u:g},{v:g},{x:.4f},{y:.4f}\n")
+        return 0
+    boxes = read_boxes_csv(args.boxes)
+    try:
+        validate_boxes(boxes)
+    except FrameError as e:
+        raise ConfigError(str(args.boxes), None, str(e)) from None
+    cones = mapper.map_boxes(boxes)
+    for c in cones:
+        out.write(
+            f"{c['x']:.4f},{c['y']:.4f},{int(c['class_id'])},{c['score']:.4f},"
+            f"{c['cov_xx']:.6g},{c['cov_xy']:.6g},{c['cov_yy']:.6g}\n"
+        )
+    return 0

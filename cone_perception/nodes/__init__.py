@@ -1,0 +1,1 @@
+"""Thin rclpy shells, one file per node. All logic lives in the core modules."""

@@ -1,0 +1,62 @@
+"""detection node: ``image_cropped`` (bgr8) + its ``camera_info`` -> ``cone_boxes`` (full-image px).
+
+Parameters
+  model (str, "" = the shipped default model), backend ("torch" | "torchscript" | "onnx"),
+  device ("cpu" | "cuda" | "cuda:N"), fp16 (bool, CUDA only), conf (0.25), iou (0.45),
+  max_det (100), threads (0 = library default).
+The crop and downscale of each image come from the newest ``image_cropped/camera_info``
+(``roi``, ``binning``), so boxes go out in full-image pixels whatever the band.
+"""
+
+from __future__ import annotations
+
+from ._common import QOS_DATA, QOS_IMAGE_IN, PerceptionNode, run_node  # noqa: I001 (sets DDS env first)
+
+import time
+
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+
+from ..errors import FrameError
+from . import _msgs
+from ._detector_params import load_detector
+
+
+class DetectionNode(PerceptionNode):
+    def __init__(self, **node_kwargs):
+        super().__init__("detection", **node_kwargs)
+        self.detector = load_detector(self)
+        self.crop = None
+        self.pub_boxes = self.create_publisher(PointCloud2, "cone_boxes", QOS_DATA)
+        self.create_subscription(CameraInfo, "image_cropped/camera_info", self.on_info, QOS_IMAGE_IN)
+        self.create_subscription(Image, "image_cropped", self.guarded(self.on_image), QOS_IMAGE_IN)
+
+    def on_info(self, msg: CameraInfo) -> None:
+        try:
+            self.crop = _msgs.crop_from_camera_info(msg)
+        except ValueError as e:
+            self.get_logger().warning(f"ignoring camera_info: {e}", throttle_duration_sec=5.0)
+
+    def on_image(self, msg: Image) -> None:
+        if self.crop is None:
+            raise FrameError("no_camera_info", "no image_cropped/camera_info received yet: crop unknown")
+        if (msg.width, msg.height) != (self.crop.out_width, self.crop.out_height):
+            raise FrameError(
+                "size_mismatch",
+                f"image {msg.width}x{msg.height} does not match camera_info crop "
+                f"{self.crop.out_width}x{self.crop.out_height}",
+            )
+        t0 = time.perf_counter()
+        boxes = self.detector.detect(_msgs.image_to_bgr(msg), self.crop)
+        self.pub_boxes.publish(_msgs.boxes_msg(boxes, msg.header))
+        self.get_logger().debug(
+            f"{len(boxes)} boxes in {(time.perf_counter() - t0) * 1e3:.1f} ms "
+            + " ".join(f"{k}={v:.1f}" for k, v in self.detector.timing.items())
+        )
+
+
+def main(args=None) -> int:
+    return run_node(DetectionNode, args, "detection")
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

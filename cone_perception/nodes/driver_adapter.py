@@ -1,0 +1,64 @@
+"""driver_adapter node: camera frames -> ``image_cropped`` (bgr8) + ``image_cropped/camera_info``.
+
+Parameters
+  calibration (str, "example_mainhoop"): calibration YAML path or shipped camera name; its
+      ``image_width/height``, ``crop`` and ``downscale`` define the band.
+  input_transport (str, "raw"): "raw" subscribes ``image_raw`` (sensor_msgs/Image: yuv422_yuy2 /
+      yuyv, bgr8, rgb8); "compressed" subscribes ``image_raw/compressed`` (JPEG/PNG).
+"""
+
+from __future__ import annotations
+
+from ._common import QOS_IMAGE_IN, QOS_IMAGE_OUT, PerceptionNode, run_node  # noqa: I001 (sets DDS env first)
+
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image
+
+from ..adapter import DriverAdapter
+from ..calib import DEFAULT_CAMERA, load_calibration
+from ..errors import ConfigError
+from . import _msgs
+
+
+class DriverAdapterNode(PerceptionNode):
+    def __init__(self, **node_kwargs):
+        super().__init__("driver_adapter", **node_kwargs)
+        calib_name = self.declare_parameter("calibration", DEFAULT_CAMERA).value
+        transport = self.declare_parameter("input_transport", "raw").value
+        calib = load_calibration(calib_name)
+        self.adapter = DriverAdapter(calib.crop, calib.image_width, calib.image_height)
+        self.camera_matrix = calib.camera_matrix
+        self.info_fields = self.adapter.camera_info_fields()
+        self.pub_image = self.create_publisher(Image, "image_cropped", QOS_IMAGE_OUT)
+        self.pub_info = self.create_publisher(CameraInfo, "image_cropped/camera_info", QOS_IMAGE_OUT)
+        if transport == "raw":
+            self.create_subscription(Image, "image_raw", self.guarded(self.on_raw), QOS_IMAGE_IN)
+        elif transport == "compressed":
+            self.create_subscription(
+                CompressedImage, "image_raw/compressed", self.guarded(self.on_compressed), QOS_IMAGE_IN
+            )
+        else:
+            raise ConfigError("parameter", "input_transport", f"must be 'raw' or 'compressed', got {transport!r}")
+        c = calib.crop
+        self.get_logger().info(
+            f"calibration {calib.source}: band rows {c.v0}-{c.v1} cols {c.u0}-{c.u1} of "
+            f"{calib.image_width}x{calib.image_height}, downscale {c.downscale} -> {c.out_width}x{c.out_height}"
+        )
+
+    def on_raw(self, msg: Image) -> None:
+        bgr = self.adapter.from_raw(msg.encoding, msg.width, msg.height, msg.step, msg.data)
+        self._publish(bgr, msg.header)
+
+    def on_compressed(self, msg: CompressedImage) -> None:
+        self._publish(self.adapter.from_compressed(msg.data), msg.header)
+
+    def _publish(self, bgr, header) -> None:
+        self.pub_image.publish(_msgs.bgr_image(bgr, header))
+        self.pub_info.publish(_msgs.camera_info(self.info_fields, header, self.camera_matrix))
+
+
+def main(args=None) -> int:
+    return run_node(DriverAdapterNode, args, "driver_adapter")
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

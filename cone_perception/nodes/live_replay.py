@@ -1,0 +1,200 @@
+"""Live replay: play a bag's camera frames (raw CDR) into live nodes and record what they publish.
+
+The nodes run as separate processes, exactly as on the car: either the three nodes
+(``driver_adapter``, ``detection``, ``mapping``) or the fused ``pipeline`` node. This process
+plays the frames and records ``cone_boxes`` and ``/cones`` by header stamp.
+
+Pacing: ``lockstep`` sends the next frame when the last one's ``/cones`` came back (as fast as
+the pipeline takes them; nothing is dropped for being late; the latency of each frame is the
+time from publishing the frame to receiving its ``/cones``), or ``rate`` at the recorded rate.
+"""
+
+from __future__ import annotations
+
+from ._common import QOS_DATA, run_node  # noqa: F401,I001 (sets DDS env first)
+
+import os
+import shutil
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
+from sensor_msgs.msg import CompressedImage, Image, PointCloud2
+
+from .. import bagio
+from ..errors import ConfigError
+from ..replay import BOXES_TOPIC, CONES_TOPIC, find_image_topic
+from . import _msgs
+
+MODES = {"separate": ("driver_adapter", "detection", "mapping"), "fused": ("pipeline",)}
+_QOS_PLAY = QoSProfile(depth=2, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
+
+
+def node_command(executable: str) -> list[str]:
+    """Command that starts one of this package's node executables here or on the car."""
+    here = Path(sys.executable).parent / executable
+    if here.is_file():
+        return [str(here)]
+    found = shutil.which(executable)
+    if found:
+        return [found]
+    if shutil.which("ros2"):
+        return ["ros2", "run", "cone_perception", executable]
+    raise ConfigError(executable, None, "node executable not found (install the package, or source the workspace)")
+
+
+@dataclass
+class LiveResult:
+    cones: dict[int, np.ndarray] = field(default_factory=dict)  # header stamp ns -> CONE_DTYPE
+    boxes: dict[int, np.ndarray] = field(default_factory=dict)  # header stamp ns -> BOX_DTYPE
+    latency_ms: dict[int, float] = field(default_factory=dict)  # publish -> /cones received
+    raw: list[tuple[str, int, bytes]] = field(default_factory=list)  # (topic, stamp, CDR) as received
+    sent: int = 0
+    lost: list[int] = field(default_factory=list)
+    frame_id: str = ""
+    node_output: dict[str, str] = field(default_factory=dict)
+    wall_s: float = 0.0
+
+
+def _stamp_of(raw: bytes) -> tuple[int, PointCloud2]:
+    msg = deserialize_message(raw, PointCloud2)
+    return bagio.stamp_ns(msg.header), msg
+
+
+def live_replay(
+    bag: str | os.PathLike,
+    *,
+    mode: str = "fused",
+    topic: str | None = None,
+    params: dict[str, object] | None = None,
+    pace: str = "lockstep",
+    frame_timeout_s: float = 15.0,
+    ready_timeout_s: float = 120.0,
+    progress: Callable | None = None,
+) -> LiveResult:
+    """Play ``bag``'s camera topic into freshly started node processes; returns what came back.
+
+    ``params`` are node parameters (``calibration``, ``model``, ``backend``, ...) given to every
+    node with ``-p``. Node processes are always stopped at the end.
+    """
+    if mode not in MODES:
+        raise ConfigError("live replay", "mode", f"must be one of {', '.join(MODES)}, got {mode!r}")
+    if pace not in ("lockstep", "rate"):
+        raise ConfigError("live replay", "pace", f"must be lockstep or rate, got {pace!r}")
+    topic, msgtype = find_image_topic(bag, topic)
+    compressed = msgtype == bagio.COMPRESSED_IMAGE
+    frames, corrupt = [], []
+    for m in bagio.read_messages(bag, topic):
+        try:
+            frames.append((m.log_stamp_ns, bagio.stamp_ns(m.msg.header), m.raw))
+        except Exception:  # noqa: BLE001 - a corrupt message is not sent; reported in ``lost``
+            corrupt.append(m.log_stamp_ns)
+
+    ros_args = ["--ros-args"]
+    for k, v in (params or {}).items():
+        ros_args += ["-p", f"{k}:={v}"]
+    if compressed:
+        ros_args += ["-p", "input_transport:=compressed", "-r", f"image_raw/compressed:={topic}"]
+    else:
+        ros_args += ["-r", f"image_raw:={topic}"]
+    procs = {}
+    res = LiveResult()
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node("cone_perception_live_replay", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    try:
+        pub = node.create_publisher(CompressedImage if compressed else Image, topic, _QOS_PLAY)
+
+        def on_cones(raw: bytes) -> None:
+            stamp, msg = _stamp_of(raw)
+            if stamp in sent_at and stamp not in res.cones:
+                res.latency_ms[stamp] = (time.monotonic() - sent_at[stamp]) * 1e3
+            res.cones[stamp] = _msgs.cones_from_msg(msg)
+            res.frame_id = msg.header.frame_id
+            res.raw.append((CONES_TOPIC, stamp, raw))
+
+        def on_boxes(raw: bytes) -> None:
+            stamp, msg = _stamp_of(raw)
+            res.boxes[stamp] = _msgs.boxes_from_msg(msg)
+            res.raw.append((BOXES_TOPIC, stamp, raw))
+
+        node.create_subscription(PointCloud2, "/cones", on_cones, QOS_DATA, raw=True)
+        node.create_subscription(PointCloud2, "/cone_boxes", on_boxes, QOS_DATA, raw=True)
+        for exe in MODES[mode]:
+            procs[exe] = subprocess.Popen(
+                node_command(exe) + ros_args, env=dict(os.environ), stdout=subprocess.PIPE,
+                stderr=subprocess.STDOUT, text=True,
+            )
+
+        def ready() -> bool:
+            for exe, p in procs.items():
+                if p.poll() is not None:
+                    out = p.communicate()[0]
+                    raise ConfigError(exe, None, f"node exited with code {p.returncode} before the replay:\n{out}")
+            ok = pub.get_subscription_count() > 0 and node.count_publishers("/cones") > 0
+            if mode == "separate":
+                ok = ok and node.count_subscribers("/image_cropped") > 0 and node.count_subscribers("/cone_boxes") > 1
+            return ok
+
+        end = time.monotonic() + ready_timeout_s
+        while not ready():
+            if time.monotonic() > end:
+                raise ConfigError("live replay", None, f"nodes not ready after {ready_timeout_s:.0f} s")
+            executor.spin_once(timeout_sec=0.1)
+        time.sleep(0.3)  # let the matched endpoints settle before the first frame
+
+        sent_at: dict[int, float] = {}
+        items = progress(frames, len(frames)) if progress else frames
+        t0_wall = time.monotonic()
+        t0_bag = frames[0][0] if frames else 0
+        for log_ns, stamp, raw in items:
+            if pace == "rate":
+                due = t0_wall + (log_ns - t0_bag) / 1e9
+                while time.monotonic() < due:
+                    executor.spin_once(timeout_sec=max(0.0, min(0.01, due - time.monotonic())))
+            sent_at[stamp] = time.monotonic()
+            pub.publish(raw)
+            res.sent += 1
+            if pace == "lockstep":
+                deadline = time.monotonic() + frame_timeout_s
+                while stamp not in res.cones and time.monotonic() < deadline:
+                    executor.spin_once(timeout_sec=0.01)
+            else:
+                executor.spin_once(timeout_sec=0.0)
+        grace = time.monotonic() + (2.0 if pace == "rate" else 0.3)
+        while time.monotonic() < grace:
+            executor.spin_once(timeout_sec=0.02)
+        res.wall_s = time.monotonic() - t0_wall
+        res.lost = [s for _, s, _ in frames if s not in res.cones] + corrupt
+    finally:
+        for exe, p in procs.items():
+            if p.poll() is None:
+                p.send_signal(2)
+        for exe, p in procs.items():
+            try:
+                out, _ = p.communicate(timeout=15)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                out, _ = p.communicate()
+            res.node_output[exe] = out or ""
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.shutdown(context=context)
+    return res
+
+
+def write_result_bag(res: LiveResult, out: str | os.PathLike) -> None:
+    """Write the recorded ``/cone_boxes`` and ``/cones`` (raw CDR, header stamps as log time)."""
+    with bagio.BagWriter(Path(out), {BOXES_TOPIC: bagio.POINTCLOUD2, CONES_TOPIC: bagio.POINTCLOUD2}) as w:
+        for topic, stamp, raw in sorted(res.raw, key=lambda x: (x[1], x[0])):
+            w.write_raw(topic, stamp, raw)

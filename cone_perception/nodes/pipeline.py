@@ -1,0 +1,72 @@
+"""pipeline node: the three stages fused in one process (no image crosses a process boundary).
+
+``image_raw`` (or ``image_raw/compressed``) in; ``cone_boxes``, ``/cones`` and ``/cones/markers`` out.
+
+Parameters: those of ``driver_adapter`` (calibration, input_transport), ``mapping``
+(publish_markers) and ``detection`` (model, backend, device, fp16, conf, iou, max_det, threads).
+"""
+
+from __future__ import annotations
+
+from ._common import QOS_DATA, QOS_IMAGE_IN, PerceptionNode, run_node  # noqa: I001 (sets DDS env first)
+
+import time
+
+from sensor_msgs.msg import CompressedImage, Image, PointCloud2
+from visualization_msgs.msg import MarkerArray
+
+from ..calib import DEFAULT_CAMERA, load_calibration
+from ..errors import ConfigError
+from ..pipeline import FrameResult, Pipeline
+from . import _msgs
+from ._detector_params import load_detector
+
+
+class PipelineNode(PerceptionNode):
+    def __init__(self, **node_kwargs):
+        super().__init__("pipeline", **node_kwargs)
+        calib = load_calibration(self.declare_parameter("calibration", DEFAULT_CAMERA).value)
+        transport = self.declare_parameter("input_transport", "raw").value
+        self.publish_markers = bool(self.declare_parameter("publish_markers", True).value)
+        detector = load_detector(self, (calib.crop.out_width, calib.crop.out_height))
+        self.pipeline = Pipeline(calib, detector)
+        self.frame_id = calib.frame_id
+        self.pub_boxes = self.create_publisher(PointCloud2, "cone_boxes", QOS_DATA)
+        self.pub_cones = self.create_publisher(PointCloud2, "/cones", QOS_DATA)
+        self.pub_markers = self.create_publisher(MarkerArray, "/cones/markers", QOS_DATA)
+        if transport == "raw":
+            self.create_subscription(Image, "image_raw", self.guarded(self.on_raw), QOS_IMAGE_IN)
+        elif transport == "compressed":
+            self.create_subscription(
+                CompressedImage, "image_raw/compressed", self.guarded(self.on_compressed), QOS_IMAGE_IN
+            )
+        else:
+            raise ConfigError("parameter", "input_transport", f"must be 'raw' or 'compressed', got {transport!r}")
+        self.get_logger().info(f"calibration {calib.source}, frame {self.frame_id}")
+
+    def on_raw(self, msg: Image) -> None:
+        t0 = time.perf_counter()
+        self._publish(self.pipeline.process_raw(msg.encoding, msg.width, msg.height, msg.step, msg.data), msg.header, t0)
+
+    def on_compressed(self, msg: CompressedImage) -> None:
+        t0 = time.perf_counter()
+        self._publish(self.pipeline.process_compressed(msg.data), msg.header, t0)
+
+    def _publish(self, res: FrameResult, header, t0: float) -> None:
+        self.pub_boxes.publish(_msgs.boxes_msg(res.boxes, header))
+        cones_header = _msgs.copy_header(header, self.frame_id)
+        self.pub_cones.publish(_msgs.cones_msg(res.cones, cones_header))
+        if self.publish_markers:
+            self.pub_markers.publish(_msgs.cone_markers(res.cones, cones_header))
+        self.get_logger().debug(
+            f"{len(res.boxes)} boxes, {len(res.cones)} cones in {(time.perf_counter() - t0) * 1e3:.1f} ms "
+            + " ".join(f"{k}={v:.1f}" for k, v in res.timing_ms.items())
+        )
+
+
+def main(args=None) -> int:
+    return run_node(PipelineNode, args, "pipeline")
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,51 @@
+"""The car's perception: driver_adapter + detection + mapping for one camera.
+
+    ros2 launch cone_perception car.launch.py                       # example_mainhoop camera
+    ros2 launch cone_perception car.launch.py camera:=mainhoop      # launch_configs/mainhoop.params.yaml
+    ros2 launch cone_perception car.launch.py fused:=true           # one `pipeline` process instead
+
+``camera`` names ``launch_configs/<camera>.params.yaml`` (parameters of all nodes, including the
+calibration file). ``image_topic`` is remapped to the nodes' ``image_raw`` input.
+"""
+
+import os
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument, OpaqueFunction
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+
+
+def _nodes(context):
+    share = get_package_share_directory("cone_perception")
+    camera = LaunchConfiguration("camera").perform(context)
+    params = os.path.join(share, "launch_configs", f"{camera}.params.yaml")
+    if not os.path.isfile(params):
+        raise RuntimeError(f"no parameter file {params} for camera {camera!r}")
+    image_topic = LaunchConfiguration("image_topic").perform(context)
+    fused = LaunchConfiguration("fused").perform(context).lower() in ("1", "true", "yes")
+    remap = [("image_raw", image_topic), ("image_raw/compressed", image_topic + "/compressed")]
+    if fused:
+        return [Node(package="cone_perception", executable="pipeline", name="pipeline",
+                     parameters=[params], remappings=remap, output="screen")]
+    return [
+        Node(package="cone_perception", executable="driver_adapter", name="driver_adapter",
+             parameters=[params], remappings=remap, output="screen"),
+        Node(package="cone_perception", executable="detection", name="detection",
+             parameters=[params], output="screen"),
+        Node(package="cone_perception", executable="mapping", name="mapping",
+             parameters=[params], output="screen"),
+    ]
+
+
+def generate_launch_description():
+    return LaunchDescription([
+        DeclareLaunchArgument("camera", default_value="example_mainhoop",
+                              description="launch_configs/<camera>.params.yaml to use"),
+        DeclareLaunchArgument("image_topic", default_value="/camera/image_raw",
+                              description="camera driver's image topic"),
+        DeclareLaunchArgument("fused", default_value="false",
+                              description="run the fused pipeline node instead of three nodes"),
+        OpaqueFunction(function=_nodes),
+    ])

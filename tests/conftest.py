@@ -1,0 +1,11 @@
+"""Shared test set-up: DDS settings and a ROS domain of this test run's own."""
+
+from __future__ import annotations
+
+import os
+
+from cone_perception import ros_env
+
+# Each test run gets its own ROS_DOMAIN_ID so parallel runs (developers, CI) never see each other.
+os.environ.setdefault("ROS_DOMAIN_ID", str(100 + os.getpid() % 100))
+ros_env.apply()

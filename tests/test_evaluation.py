@@ -1,0 +1,47 @@
+"""Localisation evaluation: greedy gated matching, recall and errors per distance group."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cone_perception.evaluation import DISTANCE_GROUPS, LocalisationReport, distance_group, match_cones
+from cone_perception.records import CONE_DTYPE
+
+
+def _cones(xy, cls=None) -> np.ndarray:
+    xy = np.asarray(xy, float).reshape(-1, 2)
+    c = np.zeros(len(xy), CONE_DTYPE)
+    c["x"], c["y"] = xy[:, 0], xy[:, 1]
+    c["class_id"] = 0 if cls is None else cls
+    return c
+
+
+def test_distance_groups_edges() -> None:
+    assert distance_group(np.array([0.0, 3.99, 4.0, 6.9, 7.0, 14.9, 15.0, 40.0])).tolist() == [0, 0, 1, 1, 2, 2, 3, 3]
+    assert len(DISTANCE_GROUPS) == 4
+
+
+def test_matching_is_nearest_first_one_to_one_and_gated() -> None:
+    truth = np.array([[5.0, 1.0], [5.0, -1.0], [20.0, 0.0]])
+    pred = np.array([[5.1, 0.9], [5.05, 0.95], [5.0, -3.0], [21.5, 0.4]])
+    pairs = match_cones(pred, truth)
+    d = {(i, j) for i, j, _ in pairs}
+    assert (1, 0) in d  # the nearer of two candidates wins
+    assert (0, 0) not in d and all(j != 0 or i == 1 for i, j, _ in pairs)
+    assert not any(i == 2 for i, _, _ in pairs)  # 2 m off at 5 m: outside the 1.0 m gate
+    assert (3, 2) in d  # 1.55 m off at 20 m: inside the 2.5 m gate
+
+
+def test_report_recall_errors_and_false_positives() -> None:
+    rep = LocalisationReport()
+    truth = _cones([[3.0, 1.5], [6.0, -1.5], [10.0, 2.0], [18.0, -2.0]], [0, 1, 0, 1])
+    pred = _cones([[3.1, 1.5], [10.0, 2.4], [30.0, 0.0]], [0, 1, 0])
+    rep.add_frame(pred, truth)
+    s = rep.summary()
+    g = s["groups"]
+    assert g["near 0-4 m"]["recall"] == 1.0 and np.isclose(g["near 0-4 m"]["median_err_m"], 0.1)
+    assert g["mid 4-7 m"]["recall"] == 0.0 and g["mid 4-7 m"]["n_matched"] == 0
+    assert g["far 7-15 m"]["recall"] == 1.0 and np.isclose(g["far 7-15 m"]["median_err_m"], 0.4)
+    assert g["far 7-15 m"]["class_accuracy"] == 0.0  # predicted yellow where a blue stands
+    assert g["very far >15 m"]["recall"] == 0.0
+    assert s["all"]["recall"] == 0.5 and s["false_positives"] == 1 and s["frames"] == 1

@@ -1,0 +1,172 @@
+"""Mapping core: composed homography, sign, foot points, horizon and range cuts, covariance."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cone_perception.calib import DEFAULT_FOOT_POINTS, Calibration, load_calibration
+from cone_perception.camera import MountPose, PinholeCamera, default_intrinsics
+from cone_perception.classes import BLUE, CLASS_NAMES, LARGE_ORANGE, ORANGE, UNKNOWN, YELLOW
+from cone_perception.crop import CropSpec
+from cone_perception.errors import FrameError
+from cone_perception.geometry import GroundMapper, apply_homography, fix_homography_sign
+from cone_perception.mapping import ConeMapper
+from cone_perception.records import CONE_DTYPE, boxes_from_arrays
+
+CAM = PinholeCamera(default_intrinsics(1920, 1080, 90.0), 1920, 1080, MountPose())
+
+
+def _calib(H_S_B, T_F_S, **kw) -> Calibration:
+    return Calibration(
+        camera="test",
+        image_width=1920,
+        image_height=1080,
+        H_S_B=np.asarray(H_S_B, float),
+        T_F_S=np.asarray(T_F_S, float),
+        crop=CropSpec(384, 960, 0, 1920, 2),
+        foot_points=tuple(DEFAULT_FOOT_POINTS[n] for n in CLASS_NAMES),
+        **kw,
+    )
+
+
+def test_composed_homography_against_hand_computation() -> None:
+    # A made-up H_S_B and the thesis's pure x offset T_F_S (board 2.5 m ahead of the rear axle).
+    H_S_B = np.array([[0.004, 0.0, -3.84], [0.0, 0.01, -8.0], [0.0, 0.0015, -0.4]])
+    T_F_S = np.array([[1.0, 0.0, 2.5], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    c = _calib(H_S_B, T_F_S)
+    u, v = 1000.0, 900.0
+    # by hand: w = 0.0015*900 - 0.4 = 0.95; x_S = (4 - 3.84)/0.95; y_S = (9 - 8)/0.95
+    w = 0.0015 * v - 0.4
+    x_s, y_s = (0.004 * u - 3.84) / w, (0.01 * v - 8.0) / w
+    xy, w_out = apply_homography(c.H_F_B, np.array([[u, v]]))
+    np.testing.assert_allclose(xy[0], [x_s + 2.5, y_s], rtol=1e-12)
+    assert w_out[0] > 0
+
+
+def test_sign_is_fixed_when_findhomography_scale_leaves_w_negative() -> None:
+    H = CAM.H_F_B()
+    H_neg = -H  # the same homography (scale -1): w < 0 on every ground pixel
+    assert apply_homography(H_neg, np.array([[960.0, 1079.0]]))[1][0] < 0
+    fixed = fix_homography_sign(H_neg, (960.0, 1079.0))
+    m = GroundMapper(fixed, 50.0)
+    uv, _ = CAM.project(np.array([[8.0, 1.0, 0.0]]))
+    xy, valid = m.map_pixels(uv)
+    assert valid[0]
+    np.testing.assert_allclose(xy[0], [8.0, 1.0], atol=1e-9)
+
+
+def test_example_calibration_maps_projected_ground_points_back() -> None:
+    c = load_calibration("example_mainhoop")
+    pts = np.array([[x, y, 0.0] for x in (3.0, 5.0, 10.0, 20.0, 29.0) for y in (-4.0, 0.0, 3.0)])
+    uv, _ = CAM.project(pts)
+    xy, valid = GroundMapper(c.H_F_B, c.max_range_m).map_pixels(uv)
+    assert valid.all()
+    np.testing.assert_allclose(xy, pts[:, :2], atol=1e-6)
+
+
+def test_horizon_and_range_cuts() -> None:
+    m = GroundMapper(CAM.H_F_B(), max_range_m=20.0)
+    horizon = CAM.horizon_v()
+    uv_near, _ = CAM.project(np.array([[10.0, 0.0, 0.0]]))
+    uv_far, _ = CAM.project(np.array([[25.0, 0.0, 0.0]]))
+    px = np.array([[960.0, horizon - 50.0], [960.0, horizon - 0.5], uv_near[0], uv_far[0]])
+    xy, valid = m.map_pixels(px)
+    assert valid.tolist() == [False, False, True, False]
+    assert np.isnan(xy[~valid]).all()
+    np.testing.assert_allclose(xy[2], [10.0, 0.0], atol=1e-9)
+
+
+def test_foot_point_per_class() -> None:
+    mapper = ConeMapper(_calib(np.linalg.inv(CAM.H_B_F()), np.eye(3)))  # the thesis's rules (defaults)
+    box = [100.0, 500.0, 140.0, 560.0]
+    recs = boxes_from_arrays(np.array([box] * 5), np.full(5, 0.9), [BLUE, YELLOW, ORANGE, LARGE_ORANGE, UNKNOWN])
+    fp = mapper.foot_points(recs)  # pixel-centre coordinates: box edges - 0.5
+    np.testing.assert_allclose(fp, np.array([[140, 560], [100, 560], [120, 560], [120, 560], [120, 560]]) - 0.5)
+
+
+def test_foot_point_rule_is_configurable() -> None:
+    rules = list(DEFAULT_FOOT_POINTS[n] for n in CLASS_NAMES)
+    rules[BLUE] = "bottom_center"
+    c = _calib(np.linalg.inv(CAM.H_B_F()), np.eye(3))
+    c.foot_points = tuple(rules)
+    recs = boxes_from_arrays(np.array([[100.0, 500.0, 140.0, 560.0]]), [0.9], [BLUE])
+    np.testing.assert_allclose(ConeMapper(c).foot_points(recs), [[119.5, 559.5]])
+
+
+def test_map_boxes_positions_classes_scores_and_cuts() -> None:
+    c = _calib(np.linalg.inv(CAM.H_B_F()), np.eye(3), max_range_m=25.0)
+    mapper = ConeMapper(c)
+    # blue cone at (6, 1.8): its foot (box bottom-right) projects from that ground point
+    truth = np.array([[6.0, 1.8, 0.0], [12.0, -1.7, 0.0], [40.0, 0.0, 0.0]])
+    uv, _ = CAM.project(truth)
+    uv = uv + 0.5  # pixel-centre projection -> pixel-edge box coordinates
+    boxes = np.array(
+        [
+            [uv[0, 0] - 30, uv[0, 1] - 60, uv[0, 0], uv[0, 1]],  # blue: bottom-right = foot
+            [uv[1, 0], uv[1, 1] - 30, uv[1, 0] + 15, uv[1, 1]],  # yellow: bottom-left = foot
+            [uv[2, 0] - 2, uv[2, 1] - 5, uv[2, 0] + 2, uv[2, 1]],  # beyond range -> dropped
+            [900, 100, 920, 150],  # above the horizon -> dropped
+        ]
+    )
+    recs = boxes_from_arrays(boxes, [0.9, 0.8, 0.7, 0.6], [BLUE, YELLOW, ORANGE, ORANGE])
+    cones = mapper.map_boxes(recs)
+    assert cones.dtype == CONE_DTYPE and cones.shape == (2,)
+    np.testing.assert_allclose(np.c_[cones["x"], cones["y"]], truth[:2, :2], atol=1e-4)
+    assert cones["class_id"].tolist() == [BLUE, YELLOW]
+    np.testing.assert_allclose(cones["score"], [0.9, 0.8], rtol=1e-6)
+    assert (cones["z"] == 0).all()
+
+
+def test_covariance_matches_finite_differences_and_grows_with_range() -> None:
+    su, sv = 1.5, 2.0
+    m = GroundMapper(CAM.H_F_B(), 50.0, (su, sv))
+    uv, _ = CAM.project(np.array([[4.0, 1.0, 0.0], [10.0, -2.0, 0.0], [25.0, 3.0, 0.0]]))
+    cov = m.covariance(uv)
+    eps = 1e-3
+    for k in range(uv.shape[0]):
+        J = np.empty((2, 2))
+        for j in range(2):
+            d = np.zeros(2)
+            d[j] = eps
+            J[:, j] = (m.map_pixels(uv[k : k + 1] + d)[0][0] - m.map_pixels(uv[k : k + 1] - d)[0][0]) / (2 * eps)
+        np.testing.assert_allclose(cov[k], J @ np.diag([su**2, sv**2]) @ J.T, rtol=1e-5)
+        assert np.all(np.linalg.eigvalsh(cov[k]) > 0)
+    # the far cone's longitudinal variance is much larger than the near one's
+    assert cov[2, 0, 0] > 20 * cov[0, 0, 0]
+
+
+def test_lens_distortion_is_undone_on_foot_points() -> None:
+    dist = np.array([-0.28, 0.08, 0.0, 0.0, 0.0])
+    cam = PinholeCamera(CAM.K, 1920, 1080, MountPose(), dist)
+    pts = np.array([[5.0, 3.0, 0.0], [15.0, -6.0, 0.0], [8.0, 0.0, 0.0]])
+    uv, _ = cam.project(pts)
+    plain = GroundMapper(cam.H_F_B(), 50.0)
+    lens = GroundMapper(cam.H_F_B(), 50.0, camera_matrix=cam.K, dist_coeffs=dist)
+    xy_plain, _ = plain.map_pixels(uv)
+    xy_lens, _ = lens.map_pixels(uv)
+    np.testing.assert_allclose(xy_lens, pts[:, :2], atol=1e-3)
+    assert np.abs(xy_plain - pts[:, :2]).max() > 0.3  # without the lens model it is far off
+    np.testing.assert_allclose(lens.ground_to_pixels(pts[:, :2]), uv, atol=1e-3)  # and back to raw pixels
+
+
+@pytest.mark.parametrize(
+    "box,cls,reason",
+    [
+        ([np.nan, 1, 2, 3], 0, "bad_box"),
+        ([10, 1, 5, 3], 0, "bad_box"),
+        ([1, 10, 5, 3], 0, "bad_box"),
+        ([1, 1, 5, 3], 7, "bad_class"),
+    ],
+)
+def test_bad_boxes_drop_the_frame(box, cls, reason) -> None:
+    mapper = ConeMapper(load_calibration("example_mainhoop"))
+    recs = boxes_from_arrays(np.array([[100, 500, 120, 560], box], dtype=np.float32), [0.5, 0.5], [0, cls])
+    with pytest.raises(FrameError) as e:
+        mapper.map_boxes(recs)
+    assert e.value.reason == reason
+
+
+def test_no_boxes_no_cones() -> None:
+    mapper = ConeMapper(load_calibration("example_mainhoop"))
+    assert mapper.map_boxes(boxes_from_arrays(np.zeros((0, 4)), [], [])).shape == (0,)
