@@ -1,0 +1,78 @@
+"""Prediction files (JSON lines) written by ``detect`` and read by ``eval``.
+
+One line per image::
+
+    {"image": "<file name or stamp>", "width": W, "height": H,
+     "boxes": [[u1, v1, u2, v2, score, class_id], ...]}
+
+Boxes are in the image's own pixels, class ids in project order. Reading validates every
+line and names the file and line of anything malformed.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO, Iterator
+
+import numpy as np
+
+from .classes import NUM_CLASSES
+from .errors import ConfigError
+from .records import BOX_DTYPE, boxes_from_arrays
+
+
+@dataclass
+class ImagePrediction:
+    image: str
+    width: int
+    height: int
+    boxes: np.ndarray  # BOX_DTYPE, image px
+
+
+def prediction_line(image: str, width: int, height: int, boxes: np.ndarray) -> str:
+    """One JSON line (without newline) for ``BOX_DTYPE`` records."""
+    rows = [
+        [round(float(b["u1"]), 2), round(float(b["v1"]), 2), round(float(b["u2"]), 2), round(float(b["v2"]), 2),
+         round(float(b["score"]), 4), int(b["class_id"])]
+        for b in boxes
+    ]
+    return json.dumps({"image": str(image), "width": int(width), "height": int(height), "boxes": rows})
+
+
+def write_prediction(fh: IO[str], image: str, width: int, height: int, boxes: np.ndarray) -> None:
+    fh.write(prediction_line(image, width, height, boxes) + "\n")
+
+
+def read_predictions(path: str | os.PathLike) -> Iterator[ImagePrediction]:
+    """Yield the lines of a prediction file; a malformed line raises :class:`ConfigError` with its number."""
+    path = Path(path)
+    try:
+        fh = path.open(encoding="utf-8")
+    except OSError as e:
+        raise ConfigError(str(path), None, f"cannot read: {e.strerror}") from None
+    with fh:
+        for i, line in enumerate(fh, 1):
+            if not line.strip():
+                continue
+            where = f"line {i}"
+            try:
+                d = json.loads(line)
+            except json.JSONDecodeError as e:
+                raise ConfigError(str(path), where, f"not JSON: {e.msg}") from None
+            if not isinstance(d, dict) or not {"image", "width", "height", "boxes"} <= set(d):
+                raise ConfigError(str(path), where, "needs the keys image, width, height, boxes")
+            try:
+                a = np.asarray(d["boxes"], dtype=np.float64).reshape(-1, 6) if d["boxes"] else np.zeros((0, 6))
+            except (TypeError, ValueError):
+                raise ConfigError(str(path), where, "boxes must be a list of [u1, v1, u2, v2, score, class_id]") from None
+            if not np.all(np.isfinite(a)):
+                raise ConfigError(str(path), where, "boxes have non-finite values")
+            if np.any((a[:, 5] < 0) | (a[:, 5] >= NUM_CLASSES) | (a[:, 5] != np.round(a[:, 5]))):
+                raise ConfigError(str(path), where, f"class_id must be an integer 0..{NUM_CLASSES - 1}")
+            if np.any((a[:, 2] < a[:, 0]) | (a[:, 3] < a[:, 1])):
+                raise ConfigError(str(path), where, "a box has u2 < u1 or v2 < v1")
+            yield ImagePrediction(str(d["image"]), int(d["width"]), int(d["height"]),
+                                  boxes_from_arrays(a[:, :4], a[:, 4], a[:, 5].astype(np.int64)).astype(BOX_DTYPE))
