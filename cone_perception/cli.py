@@ -17,6 +17,7 @@ import sys
 COMMANDS: dict[str, tuple[str, str]] = {
     "map": ("map", "map pixels or boxes to rear_axle metres with a calibration"),
     "bench": ("bench", "benchmark the per-frame stages on real-size frames"),
+    "eval": ("eval", "evaluate a prediction file against ground truth -> report.md, metrics.json, plots"),
 }
 
 

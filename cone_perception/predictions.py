@@ -30,6 +30,7 @@ class ImagePrediction:
     width: int
     height: int
     boxes: np.ndarray  # BOX_DTYPE, image px
+    line: int = 0  # line number in the file it was read from (0: not read from a file)
 
 
 def prediction_line(image: str, width: int, height: int, boxes: np.ndarray) -> str:
@@ -64,10 +65,15 @@ def read_predictions(path: str | os.PathLike) -> Iterator[ImagePrediction]:
                 raise ConfigError(str(path), where, f"not JSON: {e.msg}") from None
             if not isinstance(d, dict) or not {"image", "width", "height", "boxes"} <= set(d):
                 raise ConfigError(str(path), where, "needs the keys image, width, height, boxes")
+            size = (d["width"], d["height"])
+            if not all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in size):
+                raise ConfigError(str(path), where, f"width and height must be positive integers, got {size[0]!r}, {size[1]!r}")
             try:
-                a = np.asarray(d["boxes"], dtype=np.float64).reshape(-1, 6) if d["boxes"] else np.zeros((0, 6))
+                a = np.asarray(d["boxes"], dtype=np.float64) if d["boxes"] else np.zeros((0, 6))
             except (TypeError, ValueError):
-                raise ConfigError(str(path), where, "boxes must be a list of [u1, v1, u2, v2, score, class_id]") from None
+                a = None
+            if a is None or a.ndim != 2 or a.shape[1] != 6:
+                raise ConfigError(str(path), where, "boxes must be a list of [u1, v1, u2, v2, score, class_id]")
             if not np.all(np.isfinite(a)):
                 raise ConfigError(str(path), where, "boxes have non-finite values")
             if np.any((a[:, 5] < 0) | (a[:, 5] >= NUM_CLASSES) | (a[:, 5] != np.round(a[:, 5]))):
@@ -75,4 +81,4 @@ def read_predictions(path: str | os.PathLike) -> Iterator[ImagePrediction]:
             if np.any((a[:, 2] < a[:, 0]) | (a[:, 3] < a[:, 1])):
                 raise ConfigError(str(path), where, "a box has u2 < u1 or v2 < v1")
             yield ImagePrediction(str(d["image"]), int(d["width"]), int(d["height"]),
-                                  boxes_from_arrays(a[:, :4], a[:, 4], a[:, 5].astype(np.int64)).astype(BOX_DTYPE))
+                                  boxes_from_arrays(a[:, :4], a[:, 4], a[:, 5].astype(np.int64)).astype(BOX_DTYPE), i)
