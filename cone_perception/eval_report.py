@@ -101,6 +101,12 @@ def evaluate(images: list[EvalImage], calib: Calibration | None, conf: float = 0
     loc = LocalisationReport(max_range_m=calib.max_range_m) if do_loc else None
     pairs = PairDistanceReport() if do_loc else None
 
+    if calib is not None:
+        ratio = calib.image_width / calib.image_height
+        odd = sorted({(im.width, im.height) for im in images if abs(im.width / im.height / ratio - 1.0) > 0.01})
+        if odd:
+            notes.append(f"boxes of {', '.join(f'{w}x{h}' for w, h in odd)} images were scaled per axis to the calibration's "
+                         f"{calib.image_width}x{calib.image_height} (different aspect: right only for images squeezed from that camera)")
     gt_range, pred_range = [], []
     no_pred_range = 0
     for im in tqdm(images, desc="eval", unit="img", disable=not progress):
@@ -174,6 +180,13 @@ def _plt():
     return plt
 
 
+def _save(fig, path: Path) -> Path:
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    _plt().close(fig)
+    return path
+
+
 def plot_confusion(cm: np.ndarray, path: Path, title: str) -> Path:
     plt = _plt()
     labels = list(CLASS_NAMES) + ["background"]
@@ -190,10 +203,7 @@ def plot_confusion(cm: np.ndarray, path: Path, title: str) -> Path:
     ax.set_xlabel("predicted")
     ax.set_ylabel("true")
     ax.set_title(title, fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
 
 
 def plot_pr(detection: dict, path: Path, title: str) -> Path:
@@ -216,10 +226,7 @@ def plot_pr(detection: dict, path: Path, title: str) -> Path:
     ax.set_title(title, fontsize=10)
     ax.grid(alpha=0.3)
     ax.legend(loc="lower left", fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
 
 
 def plot_by_distance(groups: dict, path: Path) -> Path:
@@ -241,10 +248,7 @@ def plot_by_distance(groups: dict, path: Path) -> Path:
     ax.set_title("detection by distance group", fontsize=10)
     ax.grid(axis="y", alpha=0.3)
     ax.legend(fontsize=8, ncol=4, loc="upper center", bbox_to_anchor=(0.5, -0.18))
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
 
 
 def _group_values(values: np.ndarray, ranges: np.ndarray) -> list[np.ndarray]:
@@ -273,10 +277,7 @@ def plot_localisation(loc: LocalisationReport, path: Path) -> Path:
     _boxplot(axes[1], _group_values(ey, er), "error in y (left)", "predicted - true (m)")
     _boxplot(axes[2], _group_values(np.hypot(ex, ey), er), "position error", "distance to true position (m)")
     fig.suptitle("localisation error of matched cones by distance group", fontsize=11)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
 
 
 def plot_pairs(pairs: PairDistanceReport, path: Path) -> Path:
@@ -284,10 +285,7 @@ def plot_pairs(pairs: PairDistanceReport, path: Path) -> Path:
     e, er = np.asarray(pairs.err), np.asarray(pairs.err_range)
     fig, ax = plt.subplots(figsize=(6.8, 4.4))
     _boxplot(ax, _group_values(e, er), "blue-yellow pair distance error (thesis metric)", "measured - true distance (m)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
 
 
 # ------------------------------------------------------------------ report, json, summary

@@ -18,7 +18,6 @@ the file name, or the stem. Every mismatch is an error naming the file and line.
 
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,7 +26,7 @@ import numpy as np
 
 from .classes import NUM_CLASSES
 from .errors import ConfigError
-from .predictions import ImagePrediction
+from .predictions import ImagePrediction, iter_json_lines
 from .records import boxes_to_arrays
 
 #: The synthetic labelling rule (``synth`` writes YOLO labels only for cones passing it).
@@ -136,24 +135,12 @@ def _load_yolo(root: Path, names: list[str] | None) -> GroundTruth:
 
 def _load_jsonl(path: Path) -> GroundTruth:
     src = str(path)
-    try:
-        lines = path.read_text(encoding="utf-8").splitlines()
-    except (OSError, UnicodeDecodeError) as e:
-        raise ConfigError(src, None, f"cannot read: {e}") from None
     out = []
-    for i, line in enumerate(lines, 1):
-        if not line.strip():
-            continue
+    for i, d in iter_json_lines(path, {"image", "width", "height", "cones"}):
         where = f"line {i}"
-        try:
-            d = json.loads(line)
-        except json.JSONDecodeError as e:
-            raise ConfigError(src, where, f"not JSON: {e.msg}") from None
-        if not isinstance(d, dict) or not {"image", "width", "height", "cones"} <= set(d) or not isinstance(d["cones"], list):
-            raise ConfigError(src, where, "needs the keys image, width, height and a list cones (a gt.jsonl of cone-perception synth)")
+        if not isinstance(d["cones"], list):
+            raise ConfigError(src, f"{where}: cones", "must be a list of cones (a gt.jsonl of cone-perception synth)")
         W, H = d["width"], d["height"]
-        if not all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in (W, H)):
-            raise ConfigError(src, where, f"width and height must be positive integers, got {W!r}, {H!r}")
         rows = []
         for k, c in enumerate(d["cones"]):
             try:
