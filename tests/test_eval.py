@@ -337,3 +337,20 @@ def test_missing_files_and_bad_ground_truth(tmp_path, scene, capsys):
     g.images.append(g.images[0].__class__("images/other/a.jpg", None, None, g.images[0].boxes, g.images[0].class_ids, g.images[0].ignore))
     with pytest.raises(ConfigError, match="matches several"):
         pair_with_predictions(g, list(read_predictions(pred)), str(pred))
+
+
+def test_eval_gt_jsonl_scaled_predictions_and_false_positive_group(tmp_path, calib, scene):
+    """Predictions at half size still localise exactly; a detection on no cone is false only in its own group."""
+    boxes, cls = scene
+    gt = write_gt_jsonl(tmp_path / "gt.jsonl", {"f0": (boxes, cls)})
+    fp_box = scene_boxes(calib, [(ORANGE, 2.5, 0.0)])  # an orange cone that is not there, 2.5 m ahead
+    rows = box_rows(np.r_[boxes, fp_box], np.r_[cls, ORANGE], scale=(0.5, 0.5))
+    pred = write_pred(tmp_path / "p.jsonl", {"f0": rows}, size=(W // 2, H // 2))
+    out = tmp_path / "r"
+    assert run_eval("--pred", pred, "--gt", gt, "--calib", calib.source, "--out", out) == 0
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["ground_truth"]["size_mismatch_scaled"] == 1
+    groups = {k: g["operating_point"]["per_class"]["all"] for k, g in m["by_distance"]["groups"].items()}
+    assert (groups["near 0-4 m"]["tp"], groups["near 0-4 m"]["fp"]) == (2, 1)
+    assert all(g["fp"] == 0 and g["recall"] == 1.0 for k, g in groups.items() if k != "near 0-4 m")
+    assert m["localisation"]["all"]["median_err_m"] < 0.02 and m["localisation"]["false_positives"] == 1
