@@ -354,3 +354,25 @@ def test_eval_gt_jsonl_scaled_predictions_and_false_positive_group(tmp_path, cal
     assert (groups["near 0-4 m"]["tp"], groups["near 0-4 m"]["fp"]) == (2, 1)
     assert all(g["fp"] == 0 and g["recall"] == 1.0 for k, g in groups.items() if k != "near 0-4 m")
     assert m["localisation"]["all"]["median_err_m"] < 0.02 and m["localisation"]["false_positives"] == 1
+
+
+def test_yolo_folder_with_split_subfolders(tmp_path, scene, capsys):
+    boxes, cls = scene
+    names = ["yellow", "blue", "large_orange", "orange"]
+    for split, frame in (("train", "t0"), ("val", "v0")):
+        write_yolo(tmp_path / split, {frame: (boxes, cls)}, None)
+    root = tmp_path / "ds"
+    for sub in ("images", "labels"):
+        for split in ("train", "val"):
+            (root / sub).mkdir(parents=True, exist_ok=True)
+            (tmp_path / split / sub).rename(root / sub / split)
+    (root / "data.yaml").write_text(json.dumps({"names": names}))
+    g = load_ground_truth(root)
+    assert sorted(i.image for i in g.images) == ["images/train/t0.jpg", "images/val/v0.jpg"]
+    pred = write_pred(tmp_path / "p.jsonl", {"val/v0.jpg": box_rows(boxes, cls)})
+    assert run_eval("--pred", pred, "--gt", root, "--out", tmp_path / "o") == 2
+    assert "images/train/t0.jpg" in capsys.readouterr().err
+    assert run_eval("--pred", pred, "--gt", root, "--out", tmp_path / "o", "--only-predicted") == 0
+    m = json.loads((tmp_path / "o" / "metrics.json").read_text())
+    assert m["detection"]["map50"] == pytest.approx(1.0) and m["inputs"]["gt_boxes"] == 10
+    assert "by_distance" not in m  # no positions, no calibration
