@@ -26,6 +26,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "export": ("export", "export a detector checkpoint to TorchScript or ONNX, verified against eager"),
     "data": ("data", "dataset converters: fsoco-to-yolo, restore-aspect"),
     "speed": ("speed", "forward micro-benchmark of detector sizes and backends"),
+    "eval": ("eval", "evaluate a prediction file against ground truth -> report.md, metrics.json, plots"),
 }
 
 

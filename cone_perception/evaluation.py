@@ -6,6 +6,10 @@ Matching (per frame): predicted and true cones are paired greedily by ground dis
 first, each at most once, and only within a gate that widens with range
 (``gate_m = gate_base_m + gate_frac * range``), since a homography's error grows with range.
 Pairs are class-agnostic; the class agreement of pairs is reported separately.
+
+The thesis's own metric (ch. 4.4, 5.4) is the error of the distance between a blue and a yellow
+cone across the track: :class:`PairDistanceReport` pairs each true blue cone with the nearest true
+yellow one and compares the distance of their matched predictions with the true distance.
 """
 
 from __future__ import annotations
@@ -69,12 +73,16 @@ class LocalisationReport:
     false_positives: int = 0
     frames: int = 0
 
-    def add_frame(self, pred: np.ndarray, truth: np.ndarray) -> None:
-        """``pred``/``truth``: record arrays with ``x``, ``y``, ``class_id`` (``CONE_DTYPE``)."""
+    def add_frame(self, pred: np.ndarray, truth: np.ndarray) -> list[tuple[int, int, float]]:
+        """``pred``/``truth``: record arrays with ``x``, ``y``, ``class_id`` (``CONE_DTYPE``).
+
+        Returns the frame's pairs ``(pred_index, truth_index, distance_m)``, indices into the given arrays.
+        """
         self.frames += 1
         t_xy = np.c_[truth["x"], truth["y"]].astype(np.float64)
         t_r = np.hypot(t_xy[:, 0], t_xy[:, 1])
         keep = t_r <= self.max_range_m
+        t_index = np.flatnonzero(keep)
         truth, t_xy, t_r = truth[keep], t_xy[keep], t_r[keep]
         p_xy = np.c_[pred["x"], pred["y"]].astype(np.float64)
         pairs = match_cones(p_xy, t_xy)
@@ -88,6 +96,7 @@ class LocalisationReport:
         self.true_range.extend(t_r.tolist())
         self.true_matched.extend(matched.tolist())
         self.false_positives += len(pred) - len(pairs)
+        return [(i, int(t_index[j]), d) for i, j, d in pairs]
 
     def summary(self) -> dict:
         """Per distance group and overall: n_true, recall, n_matched, median / p90 error (m), class accuracy."""
@@ -135,3 +144,71 @@ def format_localisation(summary: dict) -> str:
         )
     rows.append(f"frames {summary['frames']}, unmatched predictions (false positives) {summary['false_positives']}; errors in m")
     return "\n".join(rows)
+
+
+#: Blue-yellow pairs farther apart than this are not across the track (FS track width >= 3 m).
+MAX_PAIR_M = 6.0
+
+
+def blue_yellow_pairs(truth: np.ndarray, max_pair_m: float = MAX_PAIR_M) -> list[tuple[int, int, float]]:
+    """Each blue cone with its nearest yellow cone: ``(blue_index, yellow_index, distance_m)``, within ``max_pair_m``."""
+    from .classes import BLUE, YELLOW
+
+    xy = np.c_[truth["x"], truth["y"]].astype(np.float64)
+    blue, yellow = np.flatnonzero(truth["class_id"] == BLUE), np.flatnonzero(truth["class_id"] == YELLOW)
+    if blue.size == 0 or yellow.size == 0:
+        return []
+    d = np.linalg.norm(xy[blue, None, :] - xy[None, yellow, :], axis=2)
+    j = np.argmin(d, axis=1)
+    dmin = d[np.arange(blue.size), j]
+    return [(int(b), int(yellow[jj]), float(dd)) for b, jj, dd in zip(blue, j, dmin) if dd <= max_pair_m]
+
+
+@dataclass
+class PairDistanceReport:
+    """The thesis metric: measured minus true distance of blue-yellow pairs, by the pair's distance group.
+
+    A pair is grouped by the range of its midpoint; it is measured when both cones are matched.
+    """
+
+    max_pair_m: float = MAX_PAIR_M
+    pair_range: list = field(default_factory=list)  # per true pair (m)
+    pair_measured: list = field(default_factory=list)
+    true_dist: list = field(default_factory=list)  # per measured pair (m)
+    err: list = field(default_factory=list)  # measured - true (m)
+    err_range: list = field(default_factory=list)
+
+    def add_frame(self, pred: np.ndarray, truth: np.ndarray, matches: list[tuple[int, int, float]]) -> None:
+        """``matches``: ``(pred_index, truth_index, _)`` as returned by :meth:`LocalisationReport.add_frame`."""
+        by_truth = {j: i for i, j, _ in matches}
+        for b, y, d_true in blue_yellow_pairs(truth, self.max_pair_m):
+            r = float(np.hypot((truth["x"][b] + truth["x"][y]) / 2.0, (truth["y"][b] + truth["y"][y]) / 2.0))
+            ok = b in by_truth and y in by_truth
+            self.pair_range.append(r)
+            self.pair_measured.append(ok)
+            if ok:
+                pb, py = by_truth[b], by_truth[y]
+                d_pred = float(np.hypot(pred["x"][pb] - pred["x"][py], pred["y"][pb] - pred["y"][py]))
+                self.true_dist.append(d_true)
+                self.err.append(d_pred - d_true)
+                self.err_range.append(r)
+
+    def summary(self) -> dict:
+        """Per distance group and overall: pairs, measured, median error, median / p90 absolute error (m)."""
+        pr, pm = np.asarray(self.pair_range), np.asarray(self.pair_measured, dtype=bool)
+        e, er = np.asarray(self.err), np.asarray(self.err_range)
+        pg, eg = distance_group(pr), distance_group(er)
+        groups = {name: _pair_stats(pm[pg == k], e[eg == k]) for k, (name, _, _) in enumerate(DISTANCE_GROUPS)}
+        return {"max_pair_m": self.max_pair_m, "groups": groups, "all": _pair_stats(pm, e)}
+
+
+def _pair_stats(measured: np.ndarray, e: np.ndarray) -> dict:
+    out = {"n_pairs": int(measured.size), "n_measured": int(e.size)}
+    nan = float("nan")
+    out.update(
+        median_err_m=float(np.median(e)) if e.size else nan,
+        median_abs_err_m=float(np.median(np.abs(e))) if e.size else nan,
+        mean_abs_err_m=float(np.mean(np.abs(e))) if e.size else nan,
+        p90_abs_err_m=float(np.percentile(np.abs(e), 90)) if e.size else nan,
+    )
+    return out

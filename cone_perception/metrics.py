@@ -1,8 +1,15 @@
-"""COCO-style detection metrics (mAP@0.5, mAP@0.5:0.95, per class) with pycocotools.
+"""COCO-style detection metrics (mAP@0.5, mAP@0.5:0.95, per class, PR curves) with pycocotools,
+and the counts at one operating point (precision / recall / F1, confusion matrix).
 
 Inputs are plain arrays per image, boxes x1 y1 x2 y2 in the same pixel frame
 for ground truth and predictions. Evaluation runs in memory (no JSON files),
 quietly, and takes well under a second for a few hundred images.
+
+Ground-truth boxes may be marked *ignore* (too small or mostly hidden to be
+labelled): they count neither as misses nor make a detection on them false.
+They go to pycocotools as ``iscrowd`` regions, so a detection is ignored when
+its intersection with such a box covers >= the IoU threshold of its own area;
+:func:`operating_point` uses the same rule.
 """
 
 from __future__ import annotations
@@ -25,6 +32,11 @@ class ImageDetections:
     pred_boxes: np.ndarray  # (K, 4) float
     pred_scores: np.ndarray  # (K,) float
     pred_classes: np.ndarray  # (K,) int
+    gt_ignore: np.ndarray | None = None  # (M,) bool: ignore regions (not labelled), None = none
+
+
+#: Recall points of the COCO precision curves (101 points 0, 0.01, ..., 1).
+RECALL_POINTS = np.linspace(0.0, 1.0, 101)
 
 
 @dataclass
@@ -35,16 +47,19 @@ class DetectionMetrics:
     ap_per_class: dict[str, float] = field(default_factory=dict)
     num_images: int = 0
     num_gt: int = 0
+    #: precision at :data:`RECALL_POINTS`, IoU 0.5, per class present (COCO interpolation)
+    pr50_per_class: dict[str, list[float]] = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         return {
             "map50": self.map50, "map50_95": self.map50_95, "ap50_per_class": dict(self.ap50_per_class),
             "ap_per_class": dict(self.ap_per_class), "num_images": self.num_images, "num_gt": self.num_gt,
+            "pr50_per_class": {k: list(v) for k, v in self.pr50_per_class.items()},
         }
 
 
 def coco_map(images: list[ImageDetections], class_names: tuple[str, ...] = CLASS_NAMES, max_dets: int = 300) -> DetectionMetrics:
-    """COCO mAP over ``images``; classes without ground truth are left out of the mean."""
+    """COCO mAP over ``images``; classes without (non-ignored) ground truth are left out of the mean."""
     from pycocotools.coco import COCO
     from pycocotools.cocoeval import COCOeval
 
@@ -52,20 +67,24 @@ def coco_map(images: list[ImageDetections], class_names: tuple[str, ...] = CLASS
     ann_id = 1
     for i, im in enumerate(images):
         imgs.append({"id": i})
-        for b, c in zip(np.asarray(im.gt_boxes, np.float64).reshape(-1, 4), np.asarray(im.gt_classes).reshape(-1)):
+        gb, gc = np.asarray(im.gt_boxes, np.float64).reshape(-1, 4), np.asarray(im.gt_classes).reshape(-1)
+        ign = np.zeros(len(gb), bool) if im.gt_ignore is None else np.asarray(im.gt_ignore, bool).reshape(-1)
+        for b, c, g in zip(gb, gc, ign):
             w, h = float(b[2] - b[0]), float(b[3] - b[1])
             gt_anns.append({"id": ann_id, "image_id": i, "category_id": int(c), "bbox": [float(b[0]), float(b[1]), w, h],
-                            "area": w * h, "iscrowd": 0})
+                            "area": w * h, "iscrowd": int(g)})
             ann_id += 1
         pb = np.asarray(im.pred_boxes, np.float64).reshape(-1, 4)
         for b, s, c in zip(pb, np.asarray(im.pred_scores).reshape(-1), np.asarray(im.pred_classes).reshape(-1)):
             dets.append([i, b[0], b[1], b[2] - b[0], b[3] - b[1], float(s), int(c)])
-    present = sorted({a["category_id"] for a in gt_anns})
-    if not gt_anns:
+    present = sorted({a["category_id"] for a in gt_anns if not a["iscrowd"]})
+    num_gt = sum(1 for a in gt_anns if not a["iscrowd"])
+    if not present:
         return DetectionMetrics(0.0, 0.0, num_images=len(images), num_gt=0)
     if not dets:
         zeros = {class_names[c]: 0.0 for c in present}
-        return DetectionMetrics(0.0, 0.0, zeros, dict(zeros), len(images), len(gt_anns))
+        flat = {class_names[c]: [0.0] * len(RECALL_POINTS) for c in present}
+        return DetectionMetrics(0.0, 0.0, zeros, dict(zeros), len(images), num_gt, flat)
     with contextlib.redirect_stdout(io.StringIO()):
         gt = COCO()
         gt.dataset = {"images": imgs, "annotations": gt_anns,
@@ -86,7 +105,109 @@ def coco_map(images: list[ImageDetections], class_names: tuple[str, ...] = CLASS
 
     ap50 = {class_names[c]: ap(p[0, :, k]) for k, c in enumerate(present)}
     apall = {class_names[c]: ap(p[:, :, k]) for k, c in enumerate(present)}
+    pr50 = {class_names[c]: np.clip(p[0, :, k], 0.0, None).tolist() for k, c in enumerate(present)}
     return DetectionMetrics(
         map50=float(np.mean(list(ap50.values()))), map50_95=float(np.mean(list(apall.values()))),
-        ap50_per_class=ap50, ap_per_class=apall, num_images=len(images), num_gt=len(gt_anns),
+        ap50_per_class=ap50, ap_per_class=apall, num_images=len(images), num_gt=num_gt, pr50_per_class=pr50,
     )
+
+
+# ------------------------------------------------------------------ one operating point
+
+
+@dataclass
+class OperatingPoint:
+    """Counts at one confidence and IoU threshold.
+
+    ``tp``/``fp``/``fn`` per class name come from class-aware matching (a detection is right only
+    with the right class). ``confusion`` comes from class-agnostic matching: ``(C + 1, C + 1)`` int,
+    rows = true class, columns = predicted class, last row / column = background (a detection on
+    no cone / a cone with no detection).
+    """
+
+    conf: float
+    iou: float
+    class_names: tuple[str, ...]
+    tp: dict[str, int]
+    fp: dict[str, int]
+    fn: dict[str, int]
+    confusion: np.ndarray
+
+    def scores(self) -> dict[str, dict[str, float]]:
+        """Per class and ``all`` (summed counts): precision, recall, F1 and the counts."""
+        rows = {n: (self.tp[n], self.fp[n], self.fn[n]) for n in self.class_names}
+        rows["all"] = tuple(sum(r[i] for r in rows.values()) for i in range(3))
+        return {n: _prf(*r) for n, r in rows.items()}
+
+    def to_dict(self) -> dict:
+        return {"conf": self.conf, "iou": self.iou, "per_class": self.scores(),
+                "confusion": {"labels": list(self.class_names) + ["background"], "rows_true_cols_pred": self.confusion.tolist()}}
+
+
+def _prf(tp: int, fp: int, fn: int) -> dict:
+    p = tp / (tp + fp) if tp + fp else float("nan")
+    r = tp / (tp + fn) if tp + fn else float("nan")
+    f1 = 2 * tp / (2 * tp + fp + fn) if tp + fp + fn else float("nan")  # = 2PR / (P + R)
+    return {"tp": int(tp), "fp": int(fp), "fn": int(fn), "precision": p, "recall": r, "f1": f1}
+
+
+def greedy_match(pred_boxes: np.ndarray, gt_boxes: np.ndarray, gt_ignore: np.ndarray, iou: float) -> tuple[np.ndarray, np.ndarray]:
+    """COCO's matching at one IoU threshold, predictions given best score first.
+
+    Each prediction takes the unmatched, non-ignored ground-truth box of highest IoU >= ``iou``;
+    failing that it is *ignored* if it lies on an ignore box (intersection / own area >= ``iou``).
+    Boxes x1 y1 x2 y2 px: ``pred_boxes`` (K, 4), ``gt_boxes`` (M, 4), ``gt_ignore`` (M,) bool.
+    Returns ((K,) int ground-truth index or -1, (K,) bool ignored).
+    """
+    from pycocotools import mask as mask_utils
+
+    pb, gb = np.asarray(pred_boxes, np.float64).reshape(-1, 4), np.asarray(gt_boxes, np.float64).reshape(-1, 4)
+    ign = np.asarray(gt_ignore, bool).reshape(-1)
+    to_gt, ignored = np.full(len(pb), -1, np.int64), np.zeros(len(pb), bool)
+    if len(pb) == 0 or len(gb) == 0:
+        return to_gt, ignored
+    xywh = lambda b: np.c_[b[:, :2], b[:, 2:] - b[:, :2]]  # noqa: E731
+    ious = np.asarray(mask_utils.iou(xywh(pb), xywh(gb), ign.astype(np.uint8).tolist())).reshape(len(pb), len(gb))
+    used = ign.copy()
+    for k in range(len(pb)):
+        cand = np.where(used, -1.0, ious[k])
+        j = int(np.argmax(cand))
+        if cand[j] >= iou:
+            to_gt[k], used[j] = j, True
+        elif np.any(ious[k, ign] >= iou):
+            ignored[k] = True
+    return to_gt, ignored
+
+
+def operating_point(images: list[ImageDetections], conf: float = 0.25, iou: float = 0.5,
+                    class_names: tuple[str, ...] = CLASS_NAMES) -> OperatingPoint:
+    """Precision / recall / F1 counts and the confusion matrix of detections with score >= ``conf``."""
+    C = len(class_names)
+    tp, fp, fn = np.zeros(C, np.int64), np.zeros(C, np.int64), np.zeros(C, np.int64)
+    cm = np.zeros((C + 1, C + 1), np.int64)
+    for im in images:
+        gb, gc = np.asarray(im.gt_boxes, np.float64).reshape(-1, 4), np.asarray(im.gt_classes, np.int64).reshape(-1)
+        gi = np.zeros(len(gb), bool) if im.gt_ignore is None else np.asarray(im.gt_ignore, bool).reshape(-1)
+        ps = np.asarray(im.pred_scores, np.float64).reshape(-1)
+        keep = np.flatnonzero(ps >= conf)
+        keep = keep[np.argsort(-ps[keep], kind="stable")]
+        pb, pc = np.asarray(im.pred_boxes, np.float64).reshape(-1, 4)[keep], np.asarray(im.pred_classes, np.int64).reshape(-1)[keep]
+        for c in range(C):  # class-aware: precision / recall / F1
+            mp, mg = pc == c, gc == c
+            to_gt, ignored = greedy_match(pb[mp], gb[mg], gi[mg], iou)
+            tp[c] += int((to_gt >= 0).sum())
+            fp[c] += int(((to_gt < 0) & ~ignored).sum())
+            fn[c] += int((~gi[mg]).sum()) - int((to_gt >= 0).sum())
+        to_gt, ignored = greedy_match(pb, gb, gi, iou)  # class-agnostic: confusion matrix
+        for k, j in enumerate(to_gt):
+            if j >= 0:
+                cm[gc[j], pc[k]] += 1
+            elif not ignored[k]:
+                cm[C, pc[k]] += 1
+        hit = np.zeros(len(gb), bool)
+        hit[to_gt[to_gt >= 0]] = True
+        for j in np.flatnonzero(~hit & ~gi):
+            cm[gc[j], C] += 1
+    names = tuple(class_names)
+    return OperatingPoint(float(conf), float(iou), names, dict(zip(names, tp.tolist())), dict(zip(names, fp.tolist())),
+                          dict(zip(names, fn.tolist())), cm)

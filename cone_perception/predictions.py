@@ -30,6 +30,7 @@ class ImagePrediction:
     width: int
     height: int
     boxes: np.ndarray  # BOX_DTYPE, image px
+    line: int = 0  # line number in the file it was read from (0: not read from a file)
 
 
 def prediction_line(image: str, width: int, height: int, boxes: np.ndarray) -> str:
@@ -46,11 +47,15 @@ def write_prediction(fh: IO[str], image: str, width: int, height: int, boxes: np
     fh.write(prediction_line(image, width, height, boxes) + "\n")
 
 
-def read_predictions(path: str | os.PathLike) -> Iterator[ImagePrediction]:
-    """Yield the lines of a prediction file; a malformed line raises :class:`ConfigError` with its number."""
+def iter_json_lines(path: str | os.PathLike, keys: set[str]) -> Iterator[tuple[int, dict]]:
+    """``(line number, object)`` of each non-empty line of a JSON-lines file with an image size.
+
+    Raises :class:`ConfigError` naming the file and line for a line that is not a JSON object with
+    ``keys`` and positive integer ``width`` / ``height``.
+    """
     path = Path(path)
     try:
-        fh = path.open(encoding="utf-8")
+        fh = path.open(encoding="utf-8", errors="replace")  # undecodable bytes fail as "not JSON" with their line
     except OSError as e:
         raise ConfigError(str(path), None, f"cannot read: {e.strerror}") from None
     with fh:
@@ -62,17 +67,30 @@ def read_predictions(path: str | os.PathLike) -> Iterator[ImagePrediction]:
                 d = json.loads(line)
             except json.JSONDecodeError as e:
                 raise ConfigError(str(path), where, f"not JSON: {e.msg}") from None
-            if not isinstance(d, dict) or not {"image", "width", "height", "boxes"} <= set(d):
-                raise ConfigError(str(path), where, "needs the keys image, width, height, boxes")
-            try:
-                a = np.asarray(d["boxes"], dtype=np.float64).reshape(-1, 6) if d["boxes"] else np.zeros((0, 6))
-            except (TypeError, ValueError):
-                raise ConfigError(str(path), where, "boxes must be a list of [u1, v1, u2, v2, score, class_id]") from None
-            if not np.all(np.isfinite(a)):
-                raise ConfigError(str(path), where, "boxes have non-finite values")
-            if np.any((a[:, 5] < 0) | (a[:, 5] >= NUM_CLASSES) | (a[:, 5] != np.round(a[:, 5]))):
-                raise ConfigError(str(path), where, f"class_id must be an integer 0..{NUM_CLASSES - 1}")
-            if np.any((a[:, 2] < a[:, 0]) | (a[:, 3] < a[:, 1])):
-                raise ConfigError(str(path), where, "a box has u2 < u1 or v2 < v1")
-            yield ImagePrediction(str(d["image"]), int(d["width"]), int(d["height"]),
-                                  boxes_from_arrays(a[:, :4], a[:, 4], a[:, 5].astype(np.int64)).astype(BOX_DTYPE))
+            if not isinstance(d, dict) or not keys <= set(d):
+                raise ConfigError(str(path), where, f"needs the keys {', '.join(sorted(keys))}")
+            size = (d["width"], d["height"])
+            if not all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in size):
+                raise ConfigError(str(path), where, f"width and height must be positive integers, got {size[0]!r}, {size[1]!r}")
+            yield i, d
+
+
+def read_predictions(path: str | os.PathLike) -> Iterator[ImagePrediction]:
+    """Yield the lines of a prediction file; a malformed line raises :class:`ConfigError` with its number."""
+    path = Path(path)
+    for i, d in iter_json_lines(path, {"image", "width", "height", "boxes"}):
+        where = f"line {i}"
+        try:
+            a = np.asarray(d["boxes"], dtype=np.float64) if d["boxes"] else np.zeros((0, 6))
+        except (TypeError, ValueError):
+            a = None
+        if a is None or a.ndim != 2 or a.shape[1] != 6:
+            raise ConfigError(str(path), where, "boxes must be a list of [u1, v1, u2, v2, score, class_id]")
+        if not np.all(np.isfinite(a)):
+            raise ConfigError(str(path), where, "boxes have non-finite values")
+        if np.any((a[:, 5] < 0) | (a[:, 5] >= NUM_CLASSES) | (a[:, 5] != np.round(a[:, 5]))):
+            raise ConfigError(str(path), where, f"class_id must be an integer 0..{NUM_CLASSES - 1}")
+        if np.any((a[:, 2] < a[:, 0]) | (a[:, 3] < a[:, 1])):
+            raise ConfigError(str(path), where, "a box has u2 < u1 or v2 < v1")
+        yield ImagePrediction(str(d["image"]), int(d["width"]), int(d["height"]),
+                              boxes_from_arrays(a[:, :4], a[:, 4], a[:, 5].astype(np.int64)).astype(BOX_DTYPE), i)

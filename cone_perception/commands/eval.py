@@ -1,0 +1,80 @@
+"""``cone-perception eval``: a prediction file against ground truth -> report.md, metrics.json, PNGs.
+
+  cone-perception eval --pred FILE.jsonl --gt DIR_OR_GT.jsonl [--calib FILE] --out DIR
+                       [--conf 0.25] [--iou 0.5] [--gt-names A,B,..] [--only-predicted]
+
+Ground truth: a YOLO label folder (images/, labels/, data.yaml) or a synthetic gt.jsonl (with cone
+positions: localisation and the thesis's pair metric too). See ``cone_perception/eval_report.py``.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def _unit(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number in 0..1, got {text!r}") from None
+    if not 0.0 <= v <= 1.0:
+        raise argparse.ArgumentTypeError(f"must be within 0..1, got {v}")
+    return v
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.description = ("Evaluate a prediction file of `cone-perception detect` against ground truth: mAP (pycocotools), "
+                     "precision/recall/F1, confusion matrix, PR curves, the same per distance group, localisation error "
+                     "and the blue-yellow pair distance error; writes report.md, metrics.json and PNGs.")
+    p.add_argument("--pred", type=Path, required=True, help="JSON-lines prediction file written by `cone-perception detect`")
+    p.add_argument("--gt", type=Path, required=True,
+                   help="ground truth: a YOLO folder (images/ + labels/, flat or per split, class names in data.yaml) "
+                        "or a gt.jsonl of `cone-perception synth` (with cone positions)")
+    p.add_argument("--calib", default=None,
+                   help="calibration YAML (or shipped camera name) to map boxes to metres: distances for YOLO ground truth, "
+                        "detections for localisation (default: calib.yaml / <bag>_calib.yaml beside the ground truth, if any)")
+    p.add_argument("--out", type=Path, required=True, help="output folder for report.md, metrics.json and the PNGs")
+    p.add_argument("--conf", type=_unit, default=0.25, help="operating score threshold for P/R/F1, confusion and localisation (default %(default)s)")
+    p.add_argument("--iou", type=_unit, default=0.5, help="IoU for a detection to match a box at the operating point (default %(default)s)")
+    p.add_argument("--gt-names", default=None,
+                   help="YOLO folder without data.yaml: its class names in id order, comma-separated "
+                        "(e.g. blue_cone,large_orange_cone,orange_cone,yellow_cone)")
+    p.add_argument("--only-predicted", action="store_true",
+                   help="evaluate only the ground-truth images the prediction file has lines for (default: all must be there)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def run(args: argparse.Namespace) -> int:
+    import logging
+
+    from ..calib import load_calibration
+    from ..errors import ConfigError
+    from ..eval_report import evaluate, format_summary, write_report
+    from ..groundtruth import load_ground_truth, pair_with_predictions
+    from ..predictions import read_predictions
+
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(message)s")
+    if not args.pred.is_file():
+        raise ConfigError(str(args.pred), None, "prediction file not found")
+    if args.out.exists() and not args.out.is_dir():
+        raise ConfigError(str(args.out), None, "output exists and is not a directory")
+    names = [n.strip() for n in args.gt_names.split(",") if n.strip()] if args.gt_names else None
+    gt = load_ground_truth(args.gt, names)
+    preds = list(read_predictions(args.pred))
+    images, counts = pair_with_predictions(gt, preds, str(args.pred), args.only_predicted)
+    calib_path = args.calib if args.calib is not None else gt.calib_path
+    calib = load_calibration(calib_path) if calib_path is not None else None
+    if calib is not None and args.calib is None:
+        print(f"calibration: {calib_path} (found beside the ground truth)")
+    if args.gt.is_dir() and (args.gt / "gt.jsonl").is_file():
+        print(f"note: {args.gt / 'gt.jsonl'} exists; pass it as --gt for localisation and distances from true positions")
+    res = evaluate(images, calib, args.conf, args.iou, gt.has_positions, progress=not args.no_progress)
+    res.metrics["ground_truth"] = {"format": gt.kind, **gt.info, **counts}
+    try:
+        files = write_report(res, args.out, str(args.pred), str(args.gt))
+    except OSError as e:
+        raise ConfigError(str(args.out), None, f"cannot write: {e.strerror}") from None
+    print(format_summary(res))
+    print(f"wrote {', '.join(p.name for p in files.values())} to {args.out}")
+    return 0

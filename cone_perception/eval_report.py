@@ -1,0 +1,416 @@
+"""``eval``: detection and localisation quality of a prediction file against ground truth.
+
+:func:`evaluate` turns paired images (:mod:`.groundtruth`) into every figure: COCO mAP@0.5 and
+mAP@0.5:0.95 (pycocotools, :mod:`.metrics`), precision / recall / F1 and the confusion matrix at
+the operating threshold, the same per distance group, and with cone positions in the ground truth
+the localisation error (:mod:`.evaluation`) and the thesis's blue-yellow pair distance error.
+:func:`write_report` writes ``metrics.json``, ``report.md`` and the PNGs; :func:`format_summary`
+is the printed table.
+
+Distance of a ground-truth box: its true range (``gt.jsonl``) or, with a calibration, the range of
+its foot point mapped through ``H_F_B``. Distance of a detection: that of the ground-truth box it
+overlaps most (IoU >= the threshold), else of its own foot point through the calibration; a
+detection with neither is left out of the groups (counted). In a group's evaluation the boxes of
+other groups are ignore regions, so a detection is never counted false for a cone of another group.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from .calib import Calibration
+from .classes import CLASS_NAMES, CLASS_RGBA
+from .evaluation import DISTANCE_GROUPS, LocalisationReport, PairDistanceReport, distance_group
+from .groundtruth import EvalImage
+from .metrics import RECALL_POINTS, ImageDetections, coco_map, greedy_match, operating_point
+from .records import CONE_DTYPE, boxes_from_arrays
+
+FILES = {
+    "report": "report.md",
+    "metrics": "metrics.json",
+    "confusion": "confusion_matrix.png",
+    "pr": "pr_curves.png",
+    "by_distance": "detection_by_distance.png",
+    "localisation": "localisation_boxplots.png",
+    "pairs": "pair_distance_error.png",
+}
+
+
+@dataclass
+class EvalResult:
+    metrics: dict  # every figure (what metrics.json holds)
+    confusion: np.ndarray  # (C + 1, C + 1) rows true, cols predicted, last = background
+    loc: LocalisationReport | None = None  # per-pair errors for the box plots
+    pairs: PairDistanceReport | None = None
+    notes: list[str] = field(default_factory=list)
+
+
+def _to_calib_px(boxes_px: np.ndarray, width: int, height: int, calib: Calibration) -> np.ndarray:
+    """(N, 4) boxes in an image of ``width`` x ``height`` px -> the calibration's full-image px."""
+    sx, sy = calib.image_width / width, calib.image_height / height
+    return np.asarray(boxes_px, np.float64).reshape(-1, 4) * np.array([sx, sy, sx, sy])
+
+
+def box_ranges_m(boxes_px: np.ndarray, class_ids: np.ndarray, width: int, height: int, mapper) -> np.ndarray:
+    """(N,) range in m of each box's foot point through ``mapper`` (a ConeMapper without range cut); NaN above the horizon."""
+    if len(boxes_px) == 0:
+        return np.zeros(0)
+    rec = boxes_from_arrays(_to_calib_px(boxes_px, width, height, mapper.calib), np.ones(len(boxes_px)), class_ids)
+    xy, _ = mapper.ground.map_pixels(mapper.foot_points(rec))
+    return np.hypot(xy[:, 0], xy[:, 1])
+
+
+def _group_or_none(range_m: np.ndarray) -> np.ndarray:
+    """(N,) distance group index, -1 where the range is unknown (NaN)."""
+    g = distance_group(np.nan_to_num(range_m, nan=0.0))
+    g[np.isnan(range_m)] = -1
+    return g
+
+
+def _detections(im: EvalImage, gt_keep: np.ndarray | None = None, pred_keep: np.ndarray | None = None) -> ImageDetections:
+    ign = im.gt_ignore if gt_keep is None else (im.gt_ignore | ~gt_keep)
+    pk = slice(None) if pred_keep is None else pred_keep
+    return ImageDetections(im.gt_boxes, im.gt_classes, im.pred_boxes[pk], im.pred_scores[pk], im.pred_classes[pk], ign)
+
+
+def _detection_block(dets: list[ImageDetections], conf: float, iou: float) -> tuple[dict, np.ndarray]:
+    m = coco_map(dets, CLASS_NAMES).to_dict()
+    op = operating_point(dets, conf, iou, CLASS_NAMES)
+    m["operating_point"] = op.to_dict()
+    return m, op.confusion
+
+
+def evaluate(images: list[EvalImage], calib: Calibration | None, conf: float = 0.25, iou: float = 0.5,
+             has_positions: bool = False, progress: bool = False) -> EvalResult:
+    """Every figure of the report for paired images; ``calib`` maps boxes to metres (optional)."""
+    from tqdm import tqdm
+
+    from .mapping import ConeMapper
+
+    notes: list[str] = []
+    range_mapper = ConeMapper(replace(calib, max_range_m=math.inf)) if calib is not None else None
+    mapper = ConeMapper(calib) if calib is not None else None
+    do_loc = has_positions and calib is not None
+    if has_positions and calib is None:
+        notes.append("localisation skipped: the ground truth has positions but no calibration was given (--calib) or found beside it")
+    loc = LocalisationReport(max_range_m=calib.max_range_m) if do_loc else None
+    pairs = PairDistanceReport() if do_loc else None
+
+    if calib is not None:
+        ratio = calib.image_width / calib.image_height
+        odd = sorted({(im.width, im.height) for im in images if abs(im.width / im.height / ratio - 1.0) > 0.01})
+        if odd:
+            notes.append(f"boxes of {', '.join(f'{w}x{h}' for w, h in odd)} images were scaled per axis to the calibration's "
+                         f"{calib.image_width}x{calib.image_height} (different aspect: right only for images squeezed from that camera)")
+    gt_range, pred_range = [], []
+    no_pred_range = 0
+    for im in tqdm(images, desc="eval", unit="img", disable=not progress):
+        if im.gt_xy_m is not None:
+            gr = np.hypot(im.gt_xy_m[:, 0], im.gt_xy_m[:, 1])
+        elif range_mapper is not None:
+            gr = box_ranges_m(im.gt_boxes, im.gt_classes, im.width, im.height, range_mapper)
+        else:
+            gr = np.full(len(im.gt_boxes), np.nan)
+        order = np.argsort(-im.pred_scores, kind="stable")
+        to_gt, _ = greedy_match(im.pred_boxes[order], im.gt_boxes, np.zeros(len(gr), bool), iou)
+        pr = np.full(len(im.pred_boxes), np.nan)
+        pr[order] = np.where(to_gt >= 0, gr[np.maximum(to_gt, 0)] if len(gr) else np.nan, np.nan)
+        if range_mapper is not None:
+            own = box_ranges_m(im.pred_boxes, im.pred_classes, im.width, im.height, range_mapper)
+            pr = np.where(np.isnan(pr), own, pr)
+        no_pred_range += int(np.isnan(pr[im.pred_scores >= conf]).sum())
+        gt_range.append(gr)
+        pred_range.append(pr)
+        if loc is not None:
+            keep = im.pred_scores >= conf
+            rec = boxes_from_arrays(_to_calib_px(im.pred_boxes[keep], im.width, im.height, calib), im.pred_scores[keep], im.pred_classes[keep])
+            pred_cones = mapper.map_boxes(rec)
+            truth = np.zeros(int((~im.gt_ignore).sum()), CONE_DTYPE)
+            truth["x"], truth["y"] = im.gt_xy_m[~im.gt_ignore, 0], im.gt_xy_m[~im.gt_ignore, 1]
+            truth["class_id"] = im.gt_classes[~im.gt_ignore]
+            matches = loc.add_frame(pred_cones, truth)
+            pairs.add_frame(pred_cones, truth, matches)
+
+    overall, confusion = _detection_block([_detections(im) for im in images], conf, iou)
+    n_gt = int(sum((~im.gt_ignore).sum() for im in images))
+    metrics: dict = {
+        "inputs": {"images": len(images), "gt_boxes": n_gt, "gt_ignored_boxes": int(sum(im.gt_ignore.sum() for im in images)),
+                   "predictions": int(sum(len(im.pred_scores) for im in images)),
+                   "predictions_at_conf": int(sum((im.pred_scores >= conf).sum() for im in images)),
+                   "conf": conf, "iou": iou, "calibration": calib.source if calib is not None else None},
+        "detection": overall,
+    }
+    has_dist = any(np.isfinite(r).any() for r in gt_range)
+    if has_dist:
+        groups = {}
+        gt_group, pred_group = [_group_or_none(r) for r in gt_range], [_group_or_none(r) for r in pred_range]
+        for k, (name, lo, hi) in enumerate(DISTANCE_GROUPS):
+            dets = [_detections(im, gg == k, pg == k) for im, gg, pg in zip(images, gt_group, pred_group)]
+            block, _ = _detection_block(dets, conf, iou)
+            block["range_m"] = [lo, hi if math.isfinite(hi) else None]
+            groups[name] = block
+        metrics["by_distance"] = {
+            "distance_from": "ground-truth positions" if has_positions else "foot points through the calibration",
+            "gt_boxes_without_distance": int(sum((np.isnan(gr) & ~im.gt_ignore).sum() for im, gr in zip(images, gt_range))),
+            "predictions_without_distance": no_pred_range,
+            "groups": groups,
+        }
+    else:
+        notes.append("per-distance metrics skipped: no cone positions in the ground truth and no calibration (--calib)")
+    if loc is not None:
+        metrics["localisation"] = loc.summary()
+        metrics["pair_distance"] = pairs.summary()
+    return EvalResult(metrics, confusion, loc, pairs, notes)
+
+
+# ------------------------------------------------------------------ pictures
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _save(fig, path: Path) -> Path:
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    _plt().close(fig)
+    return path
+
+
+def plot_confusion(cm: np.ndarray, path: Path, title: str) -> Path:
+    plt = _plt()
+    labels = list(CLASS_NAMES) + ["background"]
+    fig, ax = plt.subplots(figsize=(6.4, 5.4))
+    rows = cm.sum(axis=1, keepdims=True)
+    frac = np.divide(cm, rows, out=np.zeros(cm.shape), where=rows > 0)
+    ax.imshow(frac, cmap="Blues", vmin=0.0, vmax=1.0)
+    for i in range(cm.shape[0]):
+        for j in range(cm.shape[1]):
+            if cm[i, j]:
+                ax.text(j, i, str(int(cm[i, j])), ha="center", va="center", color="white" if frac[i, j] > 0.5 else "black", fontsize=9)
+    ax.set_xticks(range(len(labels)), labels, rotation=35, ha="right")
+    ax.set_yticks(range(len(labels)), labels)
+    ax.set_xlabel("predicted")
+    ax.set_ylabel("true")
+    ax.set_title(title, fontsize=10)
+    return _save(fig, path)
+
+
+def plot_pr(detection: dict, path: Path, title: str) -> Path:
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6.4, 4.8))
+    curves = detection.get("pr50_per_class", {})
+    for name, prec in curves.items():
+        ax.plot(RECALL_POINTS, prec, color=CLASS_RGBA[CLASS_NAMES.index(name)], lw=2,
+                label=f"{name} AP50 {detection['ap50_per_class'][name]:.3f}")
+    if curves:
+        ax.plot(RECALL_POINTS, np.mean(list(curves.values()), axis=0), color="black", lw=1.5, ls="--",
+                label=f"mean mAP50 {detection['map50']:.3f}")
+    op = detection["operating_point"]["per_class"]["all"]
+    if not (math.isnan(op["precision"]) or math.isnan(op["recall"])):
+        ax.plot([op["recall"]], [op["precision"]], "k*", ms=12, label=f"operating point (conf {detection['operating_point']['conf']:g})")
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 1.02)
+    ax.set_xlabel("recall")
+    ax.set_ylabel("precision")
+    ax.set_title(title, fontsize=10)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="lower left", fontsize=8)
+    return _save(fig, path)
+
+
+def plot_by_distance(groups: dict, path: Path) -> Path:
+    plt = _plt()
+    names = list(groups)
+    series = {
+        "mAP@0.5": [g["map50"] for g in groups.values()],
+        "mAP@0.5:0.95": [g["map50_95"] for g in groups.values()],
+        "recall": [g["operating_point"]["per_class"]["all"]["recall"] for g in groups.values()],
+        "precision": [g["operating_point"]["per_class"]["all"]["precision"] for g in groups.values()],
+    }
+    x = np.arange(len(names))
+    fig, ax = plt.subplots(figsize=(7.2, 4.2))
+    w = 0.2
+    for k, (label, vals) in enumerate(series.items()):
+        ax.bar(x + (k - 1.5) * w, np.nan_to_num(vals), w, label=label)
+    ax.set_xticks(x, [f"{n}\n({g['num_gt']} cones)" for n, g in groups.items()])
+    ax.set_ylim(0, 1.05)
+    ax.set_title("detection by distance group", fontsize=10)
+    ax.grid(axis="y", alpha=0.3)
+    ax.legend(fontsize=8, ncol=4, loc="upper center", bbox_to_anchor=(0.5, -0.18))
+    return _save(fig, path)
+
+
+def _group_values(values: np.ndarray, ranges: np.ndarray) -> list[np.ndarray]:
+    g = distance_group(ranges)
+    return [values[g == k] for k in range(len(DISTANCE_GROUPS))]
+
+
+def _boxplot(ax, data: list[np.ndarray], title: str, ylabel: str) -> None:
+    names = [n for n, _, _ in DISTANCE_GROUPS]
+    pos = [i for i, d in enumerate(data) if d.size]
+    if pos:
+        ax.boxplot([data[i] for i in pos], positions=pos, widths=0.6, showfliers=True, flierprops={"markersize": 3})
+    ax.set_xticks(range(len(names)), [f"{n}\nn={d.size}" for n, d in zip(names, data)], fontsize=8)
+    ax.set_xlim(-0.6, len(names) - 0.4)
+    ax.axhline(0.0, color="grey", lw=0.8)
+    ax.set_title(title, fontsize=10)
+    ax.set_ylabel(ylabel)
+    ax.grid(axis="y", alpha=0.3)
+
+
+def plot_localisation(loc: LocalisationReport, path: Path) -> Path:
+    plt = _plt()
+    ex, ey, er = np.asarray(loc.err_x), np.asarray(loc.err_y), np.asarray(loc.err_range)
+    fig, axes = plt.subplots(1, 3, figsize=(13.5, 4.4))
+    _boxplot(axes[0], _group_values(ex, er), "error in x (forward)", "predicted - true (m)")
+    _boxplot(axes[1], _group_values(ey, er), "error in y (left)", "predicted - true (m)")
+    _boxplot(axes[2], _group_values(np.hypot(ex, ey), er), "position error", "distance to true position (m)")
+    fig.suptitle("localisation error of matched cones by distance group", fontsize=11)
+    return _save(fig, path)
+
+
+def plot_pairs(pairs: PairDistanceReport, path: Path) -> Path:
+    plt = _plt()
+    e, er = np.asarray(pairs.err), np.asarray(pairs.err_range)
+    fig, ax = plt.subplots(figsize=(6.8, 4.4))
+    _boxplot(ax, _group_values(e, er), "blue-yellow pair distance error (thesis metric)", "measured - true distance (m)")
+    return _save(fig, path)
+
+
+# ------------------------------------------------------------------ report, json, summary
+
+
+def _f(x, nd: int = 3) -> str:
+    return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.{nd}f}"
+
+
+def _json_safe(o):
+    if isinstance(o, dict):
+        return {str(k): _json_safe(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_json_safe(v) for v in o]
+    if isinstance(o, (np.floating, float)):
+        return None if not math.isfinite(float(o)) else float(o)
+    if isinstance(o, np.integer):
+        return int(o)
+    return o
+
+
+def _detection_table(d: dict) -> list[str]:
+    rows = ["| class | AP@0.5 | AP@0.5:0.95 | TP | FP | FN | precision | recall | F1 |", "|---|---|---|---|---|---|---|---|---|"]
+    pc = d["operating_point"]["per_class"]
+    for name in list(CLASS_NAMES) + ["all"]:
+        s = pc[name]
+        if name != "all" and name not in d["ap50_per_class"] and s["tp"] + s["fp"] + s["fn"] == 0:
+            continue
+        ap50 = d["map50"] if name == "all" else d["ap50_per_class"].get(name)
+        ap = d["map50_95"] if name == "all" else d["ap_per_class"].get(name)
+        label = "**all** (mAP)" if name == "all" else name
+        rows.append(f"| {label} | {_f(ap50)} | {_f(ap)} | {s['tp']} | {s['fp']} | {s['fn']} | {_f(s['precision'])} | {_f(s['recall'])} | {_f(s['f1'])} |")
+    return rows
+
+
+def write_report(res: EvalResult, out: Path, pred_source: str, gt_source: str) -> dict[str, Path]:
+    """``metrics.json``, ``report.md`` and the PNGs into ``out``; returns the written files by key."""
+    out.mkdir(parents=True, exist_ok=True)
+    m = res.metrics
+    inp = m["inputs"]
+    files = {}
+    files["confusion"] = plot_confusion(res.confusion, out / FILES["confusion"],
+                                        f"confusion matrix, conf >= {inp['conf']:g}, IoU >= {inp['iou']:g} ({inp['images']} images)")
+    files["pr"] = plot_pr(m["detection"], out / FILES["pr"], f"precision-recall at IoU 0.5 ({inp['images']} images, {inp['gt_boxes']} cones)")
+    md = [
+        "# Evaluation report", "",
+        f"- predictions: `{pred_source}`", f"- ground truth: `{gt_source}`",
+        f"- images {inp['images']}, ground-truth cones {inp['gt_boxes']} (+ {inp['gt_ignored_boxes']} ignored: too small or hidden), "
+        f"detections {inp['predictions']} ({inp['predictions_at_conf']} with score >= {inp['conf']:g})",
+        f"- operating point: score >= {inp['conf']:g}, IoU >= {inp['iou']:g}; mAP by pycocotools over all scores",
+        f"- calibration: `{inp['calibration']}`" if inp["calibration"] else "- calibration: none",
+    ]
+    md += [f"- {k.replace('_', ' ')}: {v}" for k, v in m.get("ground_truth", {}).items()]
+    md += [f"- note: {n}" for n in res.notes]
+    d = m["detection"]
+    md += ["", "## Detection", "", f"mAP@0.5 **{_f(d['map50'])}**, mAP@0.5:0.95 **{_f(d['map50_95'])}** "
+           "(mean over the classes present in the ground truth).", ""]
+    md += _detection_table(d)
+    md += ["", f"![PR curves]({FILES['pr']})", "",
+           "Confusion matrix: rows true class, columns predicted class; detections matched to cones by IoU whatever "
+           "their class; *background* = a detection on no cone (column) or a cone without detection (row).", "",
+           f"![confusion matrix]({FILES['confusion']})"]
+    if "by_distance" in m:
+        bd = m["by_distance"]
+        files["by_distance"] = plot_by_distance(bd["groups"], out / FILES["by_distance"])
+        md += ["", "## Detection by distance group", "",
+               f"Distance from {bd['distance_from']}; cones of other groups are ignore regions in each group's evaluation. "
+               f"Cones without a distance: {bd['gt_boxes_without_distance']}; detections (at the operating point) without one: "
+               f"{bd['predictions_without_distance']}.", "",
+               "| group | cones | mAP@0.5 | mAP@0.5:0.95 | TP | FP | FN | precision | recall | F1 |", "|---|---|---|---|---|---|---|---|---|---|"]
+        for name, g in bd["groups"].items():
+            s = g["operating_point"]["per_class"]["all"]
+            md.append(f"| {name} | {g['num_gt']} | {_f(g['map50'])} | {_f(g['map50_95'])} | {s['tp']} | {s['fp']} | {s['fn']} | "
+                      f"{_f(s['precision'])} | {_f(s['recall'])} | {_f(s['f1'])} |")
+        md += ["", f"![detection by distance]({FILES['by_distance']})"]
+    if "localisation" in m:
+        lo = m["localisation"]
+        files["localisation"] = plot_localisation(res.loc, out / FILES["localisation"])
+        files["pairs"] = plot_pairs(res.pairs, out / FILES["pairs"])
+        md += ["", "## Localisation", "",
+               f"Detections (score >= {inp['conf']:g}) mapped to metres through the calibration, matched to true cones by "
+               "ground distance (greedy, nearest first, gate 0.5 m + 10 % of the range). Errors in m.", "",
+               "| group | true cones | recall | matched | median err | p90 err | median abs x | median abs y | same class |",
+               "|---|---|---|---|---|---|---|---|---|"]
+        for name, s in list(lo["groups"].items()) + [("**all**", lo["all"])]:
+            md.append(f"| {name} | {s['n_true']} | {_f(s['recall'])} | {s['n_matched']} | {_f(s['median_err_m'])} | {_f(s['p90_err_m'])} | "
+                      f"{_f(s['median_abs_err_x_m'])} | {_f(s['median_abs_err_y_m'])} | {_f(s['class_accuracy'])} |")
+        md += ["", f"Unmatched detections (false positives in metres): {lo['false_positives']}.", "",
+               f"![localisation box plots]({FILES['localisation']})", "",
+               "### Blue-yellow pair distance (thesis metric)", "",
+               f"Each true blue cone is paired with the nearest true yellow cone (within {m['pair_distance']['max_pair_m']:g} m); "
+               "a pair is measured when both are matched; error = measured - true distance; group by the pair's midpoint.", "",
+               "| group | pairs | measured | median err | median abs err | mean abs err | p90 abs err |", "|---|---|---|---|---|---|---|"]
+        pdist = m["pair_distance"]
+        for name, s in list(pdist["groups"].items()) + [("**all**", pdist["all"])]:
+            md.append(f"| {name} | {s['n_pairs']} | {s['n_measured']} | {_f(s['median_err_m'])} | {_f(s['median_abs_err_m'])} | "
+                      f"{_f(s['mean_abs_err_m'])} | {_f(s['p90_abs_err_m'])} |")
+        md += ["", f"![pair distance error]({FILES['pairs']})"]
+    md += ["", f"Every figure is in [{FILES['metrics']}]({FILES['metrics']}).", ""]
+    (out / FILES["report"]).write_text("\n".join(md), encoding="utf-8")
+    files["report"] = out / FILES["report"]
+    (out / FILES["metrics"]).write_text(json.dumps(_json_safe(m), indent=1) + "\n", encoding="utf-8")
+    files["metrics"] = out / FILES["metrics"]
+    return files
+
+
+def format_summary(res: EvalResult) -> str:
+    """The printed summary: overall, per group, localisation and pair error in a few lines."""
+    m = res.metrics
+    d, inp = m["detection"], m["inputs"]
+    a = d["operating_point"]["per_class"]["all"]
+    lines = [f"images {inp['images']}, cones {inp['gt_boxes']}, detections {inp['predictions_at_conf']} (score >= {inp['conf']:g})",
+             f"mAP@0.5 {_f(d['map50'])}  mAP@0.5:0.95 {_f(d['map50_95'])}  precision {_f(a['precision'])}  recall {_f(a['recall'])}  F1 {_f(a['f1'])}"]
+    if "by_distance" in m:
+        lines.append(f"{'group':<16}{'cones':>7}{'mAP50':>8}{'recall':>8}{'prec':>8}")
+        for name, g in m["by_distance"]["groups"].items():
+            s = g["operating_point"]["per_class"]["all"]
+            lines.append(f"{name:<16}{g['num_gt']:>7}{_f(g['map50']):>8}{_f(s['recall']):>8}{_f(s['precision']):>8}")
+    if "localisation" in m:
+        lines.append(f"{'localisation':<16}{'true':>7}{'recall':>8}{'med err':>9}{'p90 err':>9}{'pair err':>10}")
+        lo, pd = m["localisation"], m["pair_distance"]
+        for name in list(lo["groups"]) + ["all"]:
+            s = lo["all"] if name == "all" else lo["groups"][name]
+            p = pd["all"] if name == "all" else pd["groups"][name]
+            lines.append(f"{name:<16}{s['n_true']:>7}{_f(s['recall']):>8}{_f(s['median_err_m']):>9}{_f(s['p90_err_m']):>9}{_f(p['median_abs_err_m']):>10}")
+        lines.append("errors in m; pair err = median |measured - true| blue-yellow distance (thesis metric)")
+    lines += [f"note: {n}" for n in res.notes]
+    return "\n".join(lines)
