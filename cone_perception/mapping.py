@@ -71,6 +71,22 @@ class ConeMapper:
         n = np.linalg.norm(d, axis=1, keepdims=True)
         return xy_m + d / np.maximum(n, 1e-9) * off[:, None]
 
+    def box_foot_of(self, xy_m: np.ndarray, class_ids: np.ndarray) -> np.ndarray:
+        """Inverse of the box -> cone mapping: (N, 2) cone centres (m) -> (N, 2) box foot points
+        in pixel-EDGE coordinates (where this calibration expects each class's foot point)."""
+        xy = np.asarray(xy_m, dtype=np.float64).reshape(-1, 2)
+        off = self._offset_m[np.asarray(class_ids, dtype=np.intp)]
+        if np.any(off):
+            d = xy - self._camera_xy
+            xy = xy - d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9) * off[:, None]
+        return self.ground_to_pixels(xy) + 0.5
+
+    def box_u_range(self, u_foot: np.ndarray, width_px: np.ndarray, class_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(u1, u2) of boxes ``width_px`` wide whose class rule puts the foot point at ``u_foot``."""
+        a = self._u_weights[np.asarray(class_ids, dtype=np.intp)]
+        u1 = np.asarray(u_foot, dtype=np.float64) - a * np.asarray(width_px, dtype=np.float64)
+        return u1, u1 + width_px
+
     def ground_to_pixels(self, xy_m: np.ndarray) -> np.ndarray:
         """(N, 2) ground points (m) -> (N, 2) full-image px where the camera sees them."""
         return self.ground.ground_to_pixels(xy_m)

@@ -17,7 +17,8 @@ from cone_perception.geometry import apply_homography
 from cone_perception.groundtruth import load_ground_truth, pair_with_predictions
 from cone_perception.metrics import ImageDetections, coco_map, operating_point
 from cone_perception.predictions import read_predictions
-from cone_perception.records import CONE_DTYPE
+from cone_perception.mapping import ConeMapper
+from cone_perception.records import CONE_DTYPE, boxes_from_arrays
 
 W, H = 1920, 1080
 # (class, x_m, y_m): a straight track 3 m wide, pairs at 3, 5.5, 10 and 18 m, plus two orange cones
@@ -32,15 +33,13 @@ CONES = [
 
 def scene_boxes(calib, cones=CONES) -> np.ndarray:
     """(N, 4) full-image boxes whose class foot point maps exactly to each cone's position."""
-    H_B_F = np.linalg.inv(calib.H_F_B)
-    out = []
-    for c, x, y in cones:
-        (u, v), = apply_homography(H_B_F, np.array([[x, y]]))[0]
-        w = 1200.0 / x  # px, shrinking with range
-        h = 1.3 * w
-        u1 = {BLUE: u - w, YELLOW: u}.get(c, u - w / 2)
-        out.append([u1, v - h, u1 + w, v])
-    return np.asarray(out)
+    mapper = ConeMapper(calib)
+    cls = np.array([c for c, _, _ in cones])
+    xy = np.array([[x, y] for _, x, y in cones], dtype=np.float64)
+    foot = mapper.box_foot_of(xy, cls)
+    w = 1200.0 / xy[:, 0]  # px, shrinking with range
+    u1, u2 = mapper.box_u_range(foot[:, 0], w, cls)
+    return np.column_stack([u1, foot[:, 1] - 1.3 * w, u2, foot[:, 1]])
 
 
 def box_rows(boxes, classes, scores=None, scale=(1.0, 1.0)):
@@ -208,9 +207,11 @@ def test_eval_gt_jsonl_localisation_error_is_measured(tmp_path, calib, scene):
     assert run_eval("--pred", pred, "--gt", gt, "--out", out) == 0
     m = json.loads((out / "metrics.json").read_text())
     assert m["inputs"]["calibration"].endswith("calib.yaml")
-    H_F_B = calib.H_F_B
-    (x0, y0), = apply_homography(H_F_B, np.array([[moved[1, 0], boxes[1, 3]]]))[0]
-    (x1, y1), = apply_homography(H_F_B, np.array([[moved[1, 0], moved[1, 3]]]))[0]
+    mapper = ConeMapper(calib)  # where the car puts the true and the moved box
+    c0 = mapper.map_boxes(boxes_from_arrays(boxes[1:2], [1.0], cls[1:2]))[0]
+    c1 = mapper.map_boxes(boxes_from_arrays(moved[1:2], [1.0], cls[1:2]))[0]
+    x0, y0, x1, y1 = float(c0["x"]), float(c0["y"]), float(c1["x"]), float(c1["y"])
+    assert np.hypot(x0 - 3.0, y0 + 1.5) < 1e-3  # the true box maps onto the true cone
     want = float(np.hypot(x1 - x0, y1 - y0))
     near = m["localisation"]["groups"]["near 0-4 m"]
     assert near["n_matched"] == 2 and near["p90_err_m"] == pytest.approx(0.8 * want, abs=0.02)  # p90 of [0, want]
