@@ -37,18 +37,22 @@ class PerceptionNode(Node):
         self._diag_timer = self.create_timer(1.0, self._publish_diagnostics)
 
     def guarded(self, handler: Callable) -> Callable:
-        """Wrap a subscription callback: a :class:`FrameError` drops that frame, counted and logged."""
+        """Wrap a subscription callback: a :class:`FrameError` drops that frame, counted and logged.
+
+        A handler that returns ``False`` has put the frame aside for later (not counted yet).
+        """
 
         def callback(msg):
             try:
-                handler(msg)
+                done = handler(msg)
             except FrameError as e:
                 n = self.stats.count_drop(e.reason)
                 self.get_logger().warning(
                     f"dropped frame ({e.reason}, {n} so far): {e}", throttle_duration_sec=WARN_THROTTLE_S
                 )
             else:
-                self.stats.count_ok()
+                if done is not False:
+                    self.stats.count_ok()
 
         return callback
 

@@ -26,6 +26,7 @@ class DetectionNode(PerceptionNode):
         super().__init__("detection", **node_kwargs)
         self.detector = load_detector(self)
         self.crop = None
+        self.pending = None  # newest image received before any camera_info
         self.pub_boxes = self.create_publisher(PointCloud2, "cone_boxes", QOS_DATA)
         self.create_subscription(CameraInfo, "image_cropped/camera_info", self.on_info, QOS_IMAGE_IN)
         self.create_subscription(Image, "image_cropped", self.guarded(self.on_image), QOS_IMAGE_IN)
@@ -35,10 +36,18 @@ class DetectionNode(PerceptionNode):
             self.crop = _msgs.crop_from_camera_info(msg)
         except ValueError as e:
             self.get_logger().warning(f"ignoring camera_info: {e}", throttle_duration_sec=5.0)
+            return
+        if self.pending is not None:  # an image that came before the first camera_info
+            pending, self.pending = self.pending, None
+            self.guarded(self.on_image)(pending)
 
-    def on_image(self, msg: Image) -> None:
+    def on_image(self, msg: Image) -> bool | None:
         if self.crop is None:
-            raise FrameError("no_camera_info", "no image_cropped/camera_info received yet: crop unknown")
+            if self.pending is not None:
+                self.pending = msg  # keep the newest only; the older one is dropped, counted below
+                raise FrameError("no_camera_info", "no image_cropped/camera_info received yet: crop unknown")
+            self.pending = msg
+            return False  # processed when the first camera_info arrives
         if (msg.width, msg.height) != (self.crop.out_width, self.crop.out_height):
             raise FrameError(
                 "size_mismatch",

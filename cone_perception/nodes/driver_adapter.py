@@ -52,8 +52,9 @@ class DriverAdapterNode(PerceptionNode):
         self._publish(self.adapter.from_compressed(msg.data), msg.header)
 
     def _publish(self, bgr, header) -> None:
-        self.pub_image.publish(_msgs.bgr_image(bgr, header))
+        # camera_info first: the detection node needs the crop before the image
         self.pub_info.publish(_msgs.camera_info(self.info_fields, header, self.camera_matrix))
+        self.pub_image.publish(_msgs.bgr_image(bgr, header))
 
 
 def main(args=None) -> int:
