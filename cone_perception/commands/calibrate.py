@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 import yaml
 
-from ..calib import DEFAULT_FOOT_POINTS, Calibration, calibration_from_dict, load_calibration, save_calibration
+from ..calib import RECOMMENDED_FOOT_OFFSET_M, RECOMMENDED_FOOT_POINTS, Calibration, calibration_from_dict, load_calibration, save_calibration
 from ..calib_vis import birdseye_picture, not_found_picture, points_picture
 from ..calibration import (
     Board,
@@ -541,7 +541,8 @@ def _build_calibration(
             H_S_B=res.H_S_B,
             T_F_S=res.T_F_S,
             crop=_default_crop(res),
-            foot_points=tuple(DEFAULT_FOOT_POINTS[n] for n in CLASS_NAMES),
+            foot_points=tuple(RECOMMENDED_FOOT_POINTS[n] for n in CLASS_NAMES),
+            foot_offset_m=tuple(RECOMMENDED_FOOT_OFFSET_M[n] for n in CLASS_NAMES),
             camera_matrix=K,
             dist_coeffs=dist,
             extra=extra,
