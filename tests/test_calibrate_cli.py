@@ -60,7 +60,11 @@ def _mapped_errors(yaml_path: Path, cam: PinholeCamera) -> np.ndarray:
 
     Boxes are in pixel-edge coordinates: the pixel-centre coordinate of a foot is its edge coordinate - 0.5."""
     xy = np.array([[x, y] for x in np.arange(3.0, 10.01, 1.0) for y in (-3.0, -1.0, 0.0, 1.5, 3.0)])
-    uv, _ = cam.project(np.column_stack([xy, np.zeros(len(xy))]))
+    calib = load_calibration(yaml_path)
+    off = calib.foot_offset_m[CLASS_NAMES.index("orange")]
+    ray = xy - np.array([cam.pose.x_m, cam.pose.y_m])  # the TRUE camera, not the recovered one
+    foot = xy - off * ray / np.linalg.norm(ray, axis=1, keepdims=True)  # the base edge the camera sees
+    uv, _ = cam.project(np.column_stack([foot, np.zeros(len(xy))]))
     uv = uv + 0.5
     boxes = np.column_stack([uv[:, 0] - 10, uv[:, 1] - 30, uv[:, 0] + 10, uv[:, 1]])
     orange = CLASS_NAMES.index("orange")  # bottom-centre foot point
