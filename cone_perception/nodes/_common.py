@@ -6,13 +6,17 @@ import sys
 from typing import Callable
 
 from .. import ros_env
-from ..errors import ConePerceptionError, FrameError
+from ..errors import ConePerceptionError, ConfigError, FrameError
 from ..stats import FrameStats
 
 ros_env.apply()  # before rclpy loads the middleware
 
 import rclpy  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue  # noqa: E402
+from sensor_msgs.msg import CompressedImage, Image, PointCloud2  # noqa: E402
+from visualization_msgs.msg import MarkerArray  # noqa: E402
+
+from . import _msgs  # noqa: E402
 from rclpy.executors import ExternalShutdownException  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
@@ -55,6 +59,31 @@ class PerceptionNode(Node):
                     self.stats.count_ok()
 
         return callback
+
+    def subscribe_camera(self, transport: str) -> None:
+        """Subscribe ``image_raw`` (``transport`` "raw") or ``image_raw/compressed`` ("compressed")
+        to ``self.on_raw`` / ``self.on_compressed``, newest frame only."""
+        if transport == "raw":
+            self.create_subscription(Image, "image_raw", self.guarded(self.on_raw), QOS_IMAGE_IN)
+        elif transport == "compressed":
+            self.create_subscription(
+                CompressedImage, "image_raw/compressed", self.guarded(self.on_compressed), QOS_IMAGE_IN
+            )
+        else:
+            raise ConfigError("parameter", "input_transport", f"must be 'raw' or 'compressed', got {transport!r}")
+
+    def advertise_cones(self, frame_id: str, markers: bool) -> None:
+        """Publishers of ``/cones`` (and ``/cones/markers`` if ``markers``) in ``frame_id``."""
+        self.cones_frame_id, self.publish_markers = frame_id, markers
+        self.pub_cones = self.create_publisher(PointCloud2, "/cones", QOS_DATA)
+        self.pub_markers = self.create_publisher(MarkerArray, "/cones/markers", QOS_DATA)
+
+    def publish_cones(self, cones, header) -> None:
+        """Publish ``CONE_DTYPE`` records with the camera frame's stamp, in the cones frame."""
+        h = _msgs.copy_header(header, self.cones_frame_id)
+        self.pub_cones.publish(_msgs.cones_msg(cones, h))
+        if self.publish_markers:
+            self.pub_markers.publish(_msgs.cone_markers(cones, h))
 
     def _publish_diagnostics(self) -> None:
         st = DiagnosticStatus()

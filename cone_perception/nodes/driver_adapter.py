@@ -9,13 +9,12 @@ Parameters
 
 from __future__ import annotations
 
-from ._common import QOS_IMAGE_IN, QOS_IMAGE_OUT, PerceptionNode, run_node  # noqa: I001 (sets DDS env first)
+from ._common import QOS_IMAGE_OUT, PerceptionNode, run_node  # noqa: I001 (sets DDS env first)
 
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 
 from ..adapter import DriverAdapter
 from ..calib import DEFAULT_CAMERA, load_calibration
-from ..errors import ConfigError
 from . import _msgs
 
 
@@ -30,14 +29,7 @@ class DriverAdapterNode(PerceptionNode):
         self.info_fields = self.adapter.camera_info_fields()
         self.pub_image = self.create_publisher(Image, "image_cropped", QOS_IMAGE_OUT)
         self.pub_info = self.create_publisher(CameraInfo, "image_cropped/camera_info", QOS_IMAGE_OUT)
-        if transport == "raw":
-            self.create_subscription(Image, "image_raw", self.guarded(self.on_raw), QOS_IMAGE_IN)
-        elif transport == "compressed":
-            self.create_subscription(
-                CompressedImage, "image_raw/compressed", self.guarded(self.on_compressed), QOS_IMAGE_IN
-            )
-        else:
-            raise ConfigError("parameter", "input_transport", f"must be 'raw' or 'compressed', got {transport!r}")
+        self.subscribe_camera(transport)
         c = calib.crop
         self.get_logger().info(
             f"calibration {calib.source}: band rows {c.v0}-{c.v1} cols {c.u0}-{c.u1} of "

@@ -10,7 +10,6 @@ from __future__ import annotations
 from ._common import QOS_DATA, PerceptionNode, run_node  # noqa: I001 (sets DDS env first)
 
 from sensor_msgs.msg import PointCloud2
-from visualization_msgs.msg import MarkerArray
 
 from ..calib import DEFAULT_CAMERA, load_calibration
 from ..mapping import ConeMapper
@@ -21,21 +20,15 @@ class MappingNode(PerceptionNode):
     def __init__(self, **node_kwargs):
         super().__init__("mapping", **node_kwargs)
         calib_name = self.declare_parameter("calibration", DEFAULT_CAMERA).value
-        self.publish_markers = bool(self.declare_parameter("publish_markers", True).value)
+        markers = bool(self.declare_parameter("publish_markers", True).value)
         calib = load_calibration(calib_name)
         self.mapper = ConeMapper(calib)
-        self.frame_id = calib.frame_id
-        self.pub_cones = self.create_publisher(PointCloud2, "/cones", QOS_DATA)
-        self.pub_markers = self.create_publisher(MarkerArray, "/cones/markers", QOS_DATA)
+        self.advertise_cones(calib.frame_id, markers)
         self.create_subscription(PointCloud2, "cone_boxes", self.guarded(self.on_boxes), QOS_DATA)
-        self.get_logger().info(f"calibration {calib.source}, frame {self.frame_id}, max range {calib.max_range_m} m")
+        self.get_logger().info(f"calibration {calib.source}, frame {calib.frame_id}, max range {calib.max_range_m} m")
 
     def on_boxes(self, msg: PointCloud2) -> None:
-        cones = self.mapper.map_boxes(_msgs.boxes_from_msg(msg))
-        header = _msgs.copy_header(msg.header, self.frame_id)
-        self.pub_cones.publish(_msgs.cones_msg(cones, header))
-        if self.publish_markers:
-            self.pub_markers.publish(_msgs.cone_markers(cones, header))
+        self.publish_cones(self.mapper.map_boxes(_msgs.boxes_from_msg(msg)), msg.header)
 
 
 def main(args=None) -> int:

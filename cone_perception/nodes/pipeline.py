@@ -8,15 +8,13 @@ Parameters: those of ``driver_adapter`` (calibration, input_transport), ``mappin
 
 from __future__ import annotations
 
-from ._common import QOS_DATA, QOS_IMAGE_IN, PerceptionNode, run_node  # noqa: I001 (sets DDS env first)
+from ._common import QOS_DATA, PerceptionNode, run_node  # noqa: I001 (sets DDS env first)
 
 import time
 
 from sensor_msgs.msg import CompressedImage, Image, PointCloud2
-from visualization_msgs.msg import MarkerArray
 
 from ..calib import DEFAULT_CAMERA, load_calibration
-from ..errors import ConfigError
 from ..pipeline import FrameResult, Pipeline
 from . import _msgs
 from ._detector_params import load_detector
@@ -27,22 +25,13 @@ class PipelineNode(PerceptionNode):
         super().__init__("pipeline", **node_kwargs)
         calib = load_calibration(self.declare_parameter("calibration", DEFAULT_CAMERA).value)
         transport = self.declare_parameter("input_transport", "raw").value
-        self.publish_markers = bool(self.declare_parameter("publish_markers", True).value)
+        markers = bool(self.declare_parameter("publish_markers", True).value)
         detector = load_detector(self, (calib.crop.out_width, calib.crop.out_height))
         self.pipeline = Pipeline(calib, detector)
-        self.frame_id = calib.frame_id
         self.pub_boxes = self.create_publisher(PointCloud2, "cone_boxes", QOS_DATA)
-        self.pub_cones = self.create_publisher(PointCloud2, "/cones", QOS_DATA)
-        self.pub_markers = self.create_publisher(MarkerArray, "/cones/markers", QOS_DATA)
-        if transport == "raw":
-            self.create_subscription(Image, "image_raw", self.guarded(self.on_raw), QOS_IMAGE_IN)
-        elif transport == "compressed":
-            self.create_subscription(
-                CompressedImage, "image_raw/compressed", self.guarded(self.on_compressed), QOS_IMAGE_IN
-            )
-        else:
-            raise ConfigError("parameter", "input_transport", f"must be 'raw' or 'compressed', got {transport!r}")
-        self.get_logger().info(f"calibration {calib.source}, frame {self.frame_id}")
+        self.advertise_cones(calib.frame_id, markers)
+        self.subscribe_camera(transport)
+        self.get_logger().info(f"calibration {calib.source}, frame {calib.frame_id}")
 
     def on_raw(self, msg: Image) -> None:
         t0 = time.perf_counter()
@@ -54,10 +43,7 @@ class PipelineNode(PerceptionNode):
 
     def _publish(self, res: FrameResult, header, t0: float) -> None:
         self.pub_boxes.publish(_msgs.boxes_msg(res.boxes, header))
-        cones_header = _msgs.copy_header(header, self.frame_id)
-        self.pub_cones.publish(_msgs.cones_msg(res.cones, cones_header))
-        if self.publish_markers:
-            self.pub_markers.publish(_msgs.cone_markers(res.cones, cones_header))
+        self.publish_cones(res.cones, header)
         self.get_logger().debug(
             f"{len(res.boxes)} boxes, {len(res.cones)} cones in {(time.perf_counter() - t0) * 1e3:.1f} ms "
             + " ".join(f"{k}={v:.1f}" for k, v in res.timing_ms.items())
