@@ -171,7 +171,14 @@ def read_messages(path: str | os.PathLike, topics: str | Iterable[str] | None = 
                 if t not in have:
                     raise ConfigError(str(path), t, f"topic not in bag (topics: {', '.join(sorted(have))})")
             conns = [c for c in conns if c.topic in want]
-        for conn, t, raw in reader.messages(connections=conns):
+        it = reader.messages(connections=conns)
+        while True:
+            try:
+                conn, t, raw = next(it)
+            except StopIteration:
+                break
+            except Exception as e:  # rosbags / mcap raise their own types for truncated or broken storage
+                raise ConfigError(str(path), None, f"bag is corrupt or truncated: {type(e).__name__}: {e}") from None
             yield BagMessage(conn.topic, conn.msgtype, int(t), bytes(raw))
     finally:
         reader.close()
