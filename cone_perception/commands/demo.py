@@ -102,10 +102,12 @@ def run(args: argparse.Namespace) -> int:
         sent, lost = res.sent, len(res.lost)
         how = f"live {args.mode}"
 
-    rep = LocalisationReport(max_range_m=calib.max_range_m)
+    from ..mapping import ConeMapper
+
+    rep, mapper = LocalisationReport(max_range_m=calib.max_range_m), ConeMapper(calib)
     for stamp in sorted(cones):
         if stamp in truth:
-            rep.add_frame(cones[stamp], expected_truth(truth[stamp], calib))
+            rep.add_frame(cones[stamp], expected_truth(truth[stamp], calib, mapper))
     loc = rep.summary()
     n = len(cones)
     per_frame = np.array([len(c) for c in cones.values()]) if cones else np.zeros(1)
@@ -136,13 +138,14 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def expected_truth(truth: np.ndarray, calib) -> np.ndarray:
+def expected_truth(truth: np.ndarray, calib, mapper=None) -> np.ndarray:
     """True cones a detector is expected to find: at least half visible (``score`` of ``/cones_gt``
-    holds the visible fraction) and standing inside the camera's band and range."""
+    holds the visible fraction) and standing inside the camera's band and range.
+    ``mapper``: the calibration's :class:`~cone_perception.mapping.ConeMapper`, if already built."""
     from ..mapping import ConeMapper
 
     keep = truth["score"] >= 0.5
-    uv = ConeMapper(calib).ground_to_pixels(np.c_[truth["x"], truth["y"]])
+    uv = (mapper or ConeMapper(calib)).ground_to_pixels(np.c_[truth["x"], truth["y"]])
     c = calib.crop
     inside = (uv[:, 0] >= c.u0) & (uv[:, 0] < c.u1) & (uv[:, 1] >= c.v0) & (uv[:, 1] < c.v1)
     return truth[keep & inside & (np.hypot(truth["x"], truth["y"]) <= calib.max_range_m)]
