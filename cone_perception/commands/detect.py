@@ -21,16 +21,9 @@ from tqdm import tqdm
 
 from ..crop import CropSpec
 from ..errors import ConfigError, FrameError
+from .train import parse_size
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp")
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(x) for x in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"size must be WxH, e.g. 960x288, got {text!r}") from None
-    return w, h
 
 
 def _crop(text: str) -> tuple[int, ...]:
@@ -49,7 +42,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, required=True, help="JSON-lines output file")
     p.add_argument("--model", default=None, help="model file (default: the shipped default model)")
     p.add_argument("--backend", default="torch", choices=["torch", "torchscript", "onnx"], help="inference backend")
-    p.add_argument("--imgsz", type=_size, default=None, help="letterbox each image to this model input WxH")
+    p.add_argument("--imgsz", type=parse_size, default=None, help="letterbox each image to this model input WxH")
     p.add_argument("--crop", type=_crop, default=None, help="band V0,V1[,U0,U1] in image px, cut before the model")
     p.add_argument("--downscale", type=int, default=1, choices=[1, 2, 4], help="with --crop: integer downscale")
     p.add_argument("--conf", type=float, default=0.25, help="confidence threshold (default %(default)s)")

@@ -393,9 +393,9 @@ def write_preview(cfg: SynthConfig, out: Path, n: int = 8, cols: int = 2, thumb_
         thumb = cv2.resize(img, (thumb_w, th), interpolation=cv2.INTER_AREA)
         cv2.putText(thumb, f"{track.kind} seed {track.seed}", (8, 22), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (255, 255, 255), 2, cv2.LINE_AA)
         thumbs.append(thumb)
-    while len(thumbs) % cols:
-        thumbs.append(np.zeros_like(thumbs[0]))
-    sheet = np.vstack([np.hstack(thumbs[i : i + cols]) for i in range(0, len(thumbs), cols)])
+    from ..vis import frame_strip
+
+    sheet = frame_strip(thumbs, width=thumb_w, cols=cols)
     if not cv2.imwrite(str(out), sheet):
         raise ConfigError(str(out), None, "cannot write PNG")
     return out
