@@ -26,7 +26,7 @@ import numpy as np
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.serialization import deserialize_message
+from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import CompressedImage, Image, PointCloud2
 
 from .. import bagio
@@ -69,6 +69,14 @@ def _stamp_of(raw: bytes) -> tuple[int, PointCloud2]:
     return bagio.stamp_ns(msg.header), msg
 
 
+def _primer(raw: bytes, msgtype: type, stamps: list[int]) -> tuple[int, bytes]:
+    """A copy of the first frame under a stamp no recorded frame has (1 s before the first)."""
+    msg = deserialize_message(raw, msgtype)
+    stamp = min(stamps) - 10**9 if min(stamps) >= 10**9 else max(stamps) + 10**9
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, 10**9)
+    return stamp, serialize_message(msg)
+
+
 def live_replay(
     bag: str | os.PathLike,
     *,
@@ -84,6 +92,11 @@ def live_replay(
 
     ``params`` are node parameters (``calibration``, ``model``, ``backend``, ...) given to every
     node with ``-p``. Node processes are always stopped at the end.
+
+    Before the first recorded frame, a primer (the first frame under another stamp) is sent until
+    its ``/cones`` comes back: that proves every link of the chain is matched (the graph can list
+    an endpoint before its publisher delivers to it) and warms the model up. The primer is not
+    part of the result.
     """
     if mode not in MODES:
         raise ConfigError("live replay", "mode", f"must be one of {', '.join(MODES)}, got {mode!r}")
@@ -107,6 +120,10 @@ def live_replay(
         ros_args += ["-r", f"image_raw:={topic}"]
     procs = {}
     res = LiveResult()
+    primer_stamp, primer_raw = _primer(frames[0][2], CompressedImage if compressed else Image,
+                                       [s for _, s, _ in frames]) if frames else (None, b"")
+    primer_seen: list[int] = []
+    sent_at: dict[int, float] = {}
     context = rclpy.Context()
     rclpy.init(context=context)
     node = rclpy.create_node("cone_perception_live_replay", context=context)
@@ -117,6 +134,9 @@ def live_replay(
 
         def on_cones(raw: bytes) -> None:
             stamp, msg = _stamp_of(raw)
+            if stamp == primer_stamp:
+                primer_seen.append(stamp)
+                return
             if stamp in sent_at and stamp not in res.cones:
                 res.latency_ms[stamp] = (time.monotonic() - sent_at[stamp]) * 1e3
             res.cones[stamp] = _msgs.cones_from_msg(msg)
@@ -125,6 +145,8 @@ def live_replay(
 
         def on_boxes(raw: bytes) -> None:
             stamp, msg = _stamp_of(raw)
+            if stamp == primer_stamp:
+                return
             res.boxes[stamp] = _msgs.boxes_from_msg(msg)
             res.raw.append((BOXES_TOPIC, stamp, raw))
 
@@ -151,9 +173,14 @@ def live_replay(
             if time.monotonic() > end:
                 raise ConfigError("live replay", None, f"nodes not ready after {ready_timeout_s:.0f} s")
             executor.spin_once(timeout_sec=0.1)
-        time.sleep(0.3)  # let the matched endpoints settle before the first frame
+        while frames and not primer_seen:
+            if time.monotonic() > end:
+                raise ConfigError("live replay", None, f"no /cones for the primer frame after {ready_timeout_s:.0f} s")
+            pub.publish(primer_raw)
+            resend = time.monotonic() + 2.0
+            while not primer_seen and time.monotonic() < resend:
+                executor.spin_once(timeout_sec=0.05)
 
-        sent_at: dict[int, float] = {}
         items = progress(frames, len(frames)) if progress else frames
         t0_wall = time.monotonic()
         t0_bag = frames[0][0] if frames else 0
