@@ -149,9 +149,16 @@ def fsoco_to_yolo(src: str | Path, out: str | Path, val_fraction: float = 0.2, s
 
 
 def restore_aspect(src: str | Path, out: str | Path, aspect: tuple[float, float] = (16, 9), images: str = "images",
-                   labels: str = "labels", progress: bool = True) -> ConvertReport:
-    """Copy a YOLO dataset, resizing every image to ``aspect`` (w:h, width kept); labels are unchanged
-    (they are normalised). Other files at the top (data.yaml, README) are copied too."""
+                   labels: str = "labels", progress: bool = True, width: int | None = None,
+                   clips: list[str] | None = None) -> ConvertReport:
+    """Copy a YOLO dataset, resizing every image to ``aspect`` (w:h); labels are unchanged (they are
+    normalised). The width is kept, or set to ``width``. ``clips`` keeps only frames of these clips
+    (file name before '-', as in training data YAMLs). Other files at the top (data.yaml, README)
+    are copied too."""
+    from .train.datasets import in_clips
+
+    if width is not None and width < 16:
+        raise ConfigError("restore-aspect", "width", f"must be at least 16 px, got {width}")
     src, out = Path(src), Path(out)
     si, sl = src / images, src / labels
     if not si.is_dir():
@@ -162,15 +169,21 @@ def restore_aspect(src: str | Path, out: str | Path, aspect: tuple[float, float]
     (out / labels).mkdir(parents=True, exist_ok=True)
     rep = ConvertReport()
     files = sorted(p for p in si.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+    if clips:
+        files = [p for p in files if in_clips(p.stem, set(clips))]
+        if not files:
+            raise ConfigError(str(si), "clips", f"no images of clips {', '.join(clips)}")
     for p in tqdm(files, desc="restore-aspect", disable=not progress):
         img = cv2.imread(str(p), cv2.IMREAD_COLOR)
         if img is None:
             rep.skip("unreadable_image", f"{p}: cannot be read")
             continue
         h, w = img.shape[:2]
-        new_h = int(round(w * aspect[1] / aspect[0]))
-        if new_h != h:
-            img = cv2.resize(img, (w, new_h), interpolation=cv2.INTER_AREA if new_h < h else cv2.INTER_LINEAR)
+        new_w = width or w
+        new_h = int(round(new_w * aspect[1] / aspect[0]))
+        if (new_w, new_h) != (w, h):
+            smaller = new_w * new_h < w * h
+            img = cv2.resize(img, (new_w, new_h), interpolation=cv2.INTER_AREA if smaller else cv2.INTER_LINEAR)
         cv2.imwrite(str(out / images / p.name), img)
         lf = sl / f"{p.stem}.txt"
         if lf.is_file():

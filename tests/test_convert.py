@@ -84,3 +84,11 @@ def test_restore_aspect_command(tmp_path, capsys):
     assert (tmp_path / "out" / "README.md").is_file()
     with pytest.raises(ConfigError):
         restore_aspect(src, src, progress=False)
+    # car-size copy of one clip: width set, other clips left out, labels unchanged
+    rc = cli_main(["data", "restore-aspect", str(src), str(tmp_path / "big"), "--width", "128", "--clips", "a"])
+    assert rc == 0 and "wrote 1 images, 1 boxes" in capsys.readouterr().out
+    assert cv2.imread(str(tmp_path / "big" / "images" / "a-1.jpg")).shape[:2] == (72, 128)
+    assert not (tmp_path / "big" / "images" / "b-1.jpg").exists()
+    assert (tmp_path / "big" / "labels" / "a-1.txt").read_text() == "0 0.5 0.5 0.1 0.2\n"
+    with pytest.raises(ConfigError, match="no images of clips"):
+        restore_aspect(src, tmp_path / "none", clips=["zzz"], progress=False)

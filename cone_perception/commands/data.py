@@ -28,6 +28,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     r.add_argument("src", help="dataset folder with images/ and labels/")
     r.add_argument("out", help="output folder")
     r.add_argument("--aspect", type=_aspect, default=(16.0, 9.0), help="true aspect W:H (default 16:9); the width is kept")
+    r.add_argument("--width", type=int, default=None, help="resize to this width instead of keeping it (e.g. 1920: frames of the car's size)")
+    r.add_argument("--clips", default=None, help="keep only these clips, comma-separated (e.g. autox4,autox2,accel)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -37,7 +39,8 @@ def run(args: argparse.Namespace) -> int:
     if args.action == "fsoco-to-yolo":
         rep = convert.fsoco_to_yolo(args.src, args.out, args.val_fraction, args.seed, args.border)
     else:
-        rep = convert.restore_aspect(args.src, args.out, args.aspect)
+        clips = [c.strip() for c in args.clips.split(",") if c.strip()] if args.clips else None
+        rep = convert.restore_aspect(args.src, args.out, args.aspect, width=args.width, clips=clips)
     skipped = ", ".join(f"{k}: {v}" for k, v in sorted(rep.skipped.items())) or "none"
     print(f"wrote {rep.images} images, {rep.boxes} boxes to {args.out} {rep.per_split or ''}; skipped: {skipped}")
     return 0
