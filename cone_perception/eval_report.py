@@ -78,6 +78,38 @@ def _detections(im: EvalImage, gt_keep: np.ndarray | None = None, pred_keep: np.
     return ImageDetections(im.gt_boxes, im.gt_classes, im.pred_boxes[pk], im.pred_scores[pk], im.pred_classes[pk], ign)
 
 
+HEIGHT_BINS = ((0.0, 8.0), (8.0, 12.0), (12.0, 24.0), (24.0, 48.0), (48.0, math.inf))
+MIN_HEIGHT_PX = 12.0  # the default-model target: recall >= 0.90 for boxes at least this tall at the model input
+
+
+def _height_name(lo: float, hi: float) -> str:
+    return f">= {lo:g} px" if math.isinf(hi) else f"{lo:g}-{hi:g} px"
+
+
+def recall_by_box_height(images: list[EvalImage], conf: float, iou: float) -> dict:
+    """Recall at the operating point of ground-truth boxes binned by their height at the model input.
+
+    Heights are image px times the prediction file's ``input_scale`` (model input px per image
+    px); without it, image px (and ``unit`` says so).
+    """
+    scales = [im.input_scale for im in images]
+    known = all(s is not None for s in scales)
+    heights = [(im.gt_boxes[:, 3] - im.gt_boxes[:, 1]) * (im.input_scale if known else 1.0) for im in images]
+    out: dict = {"unit": "model input px" if known else "image px (the prediction file has no input_scale)", "bins": {}}
+
+    def block(lo: float, hi: float) -> dict:
+        keep = [(h >= lo) & (h < hi) for h in heights]
+        op = operating_point([_detections(im, k) for im, k in zip(images, keep)], conf, iou, CLASS_NAMES).to_dict()
+        a = op["per_class"]["all"]
+        return {"num_gt": int(sum((k & ~im.gt_ignore).sum() for im, k in zip(images, keep))),
+                "tp": a["tp"], "fn": a["fn"], "recall": a["recall"]}
+
+    for lo, hi in HEIGHT_BINS:
+        out["bins"][_height_name(lo, hi)] = block(lo, hi)
+    out["at_least_min_height"] = {"min_height_px": MIN_HEIGHT_PX, **block(MIN_HEIGHT_PX, math.inf)}
+    return out
+
+
 def _detection_block(dets: list[ImageDetections], conf: float, iou: float) -> tuple[dict, np.ndarray]:
     m = coco_map(dets, CLASS_NAMES).to_dict()
     op = operating_point(dets, conf, iou, CLASS_NAMES)
@@ -145,6 +177,7 @@ def evaluate(images: list[EvalImage], calib: Calibration | None, conf: float = 0
                    "conf": conf, "iou": iou, "calibration": calib.source if calib is not None else None},
         "detection": overall,
     }
+    metrics["by_box_height"] = recall_by_box_height(images, conf, iou)
     has_dist = any(np.isfinite(r).any() for r in gt_range)
     if has_dist:
         groups = {}
@@ -348,6 +381,12 @@ def write_report(res: EvalResult, out: Path, pred_source: str, gt_source: str) -
            "Confusion matrix: rows true class, columns predicted class; detections matched to cones by IoU whatever "
            "their class; *background* = a detection on no cone (column) or a cone without detection (row).", "",
            f"![confusion matrix]({FILES['confusion']})"]
+    bh = m["by_box_height"]
+    md += ["", "## Recall by box height", "",
+           f"Ground-truth box height in {bh['unit']}; recall at the operating point (score >= {inp['conf']:g}, IoU >= {inp['iou']:g}).", "",
+           "| box height | cones | TP | FN | recall |", "|---|---|---|---|---|"]
+    for name, s in list(bh["bins"].items()) + [(f"**>= {bh['at_least_min_height']['min_height_px']:g} px**", bh["at_least_min_height"])]:
+        md.append(f"| {name} | {s['num_gt']} | {s['tp']} | {s['fn']} | {_f(s['recall'])} |")
     if "by_distance" in m:
         bd = m["by_distance"]
         files["by_distance"] = plot_by_distance(bd["groups"], out / FILES["by_distance"])
@@ -399,6 +438,8 @@ def format_summary(res: EvalResult) -> str:
     a = d["operating_point"]["per_class"]["all"]
     lines = [f"images {inp['images']}, cones {inp['gt_boxes']}, detections {inp['predictions_at_conf']} (score >= {inp['conf']:g})",
              f"mAP@0.5 {_f(d['map50'])}  mAP@0.5:0.95 {_f(d['map50_95'])}  precision {_f(a['precision'])}  recall {_f(a['recall'])}  F1 {_f(a['f1'])}"]
+    big = m["by_box_height"]["at_least_min_height"]
+    lines.append(f"recall of boxes >= {big['min_height_px']:g} px tall ({m['by_box_height']['unit']}): {_f(big['recall'])} of {big['num_gt']}")
     if "by_distance" in m:
         lines.append(f"{'group':<16}{'cones':>7}{'mAP50':>8}{'recall':>8}{'prec':>8}")
         for name, g in m["by_distance"]["groups"].items():

@@ -76,6 +76,7 @@ class EvalImage:
     pred_boxes: np.ndarray  # (K, 4) float64 px
     pred_scores: np.ndarray  # (K,) float64
     pred_classes: np.ndarray  # (K,) int64
+    input_scale: float | None = None  # model input px per image px (from the prediction file)
 
 
 def load_ground_truth(path: str | os.PathLike, names: list[str] | None = None) -> GroundTruth:
@@ -217,7 +218,7 @@ def pair_with_predictions(gt: GroundTruth, preds: list[ImagePrediction], pred_so
             resized += int((g.width, g.height) != (p.width, p.height))
         b, s, c = boxes_to_arrays(p.boxes)
         out.append(EvalImage(p.image, p.width, p.height, g.boxes * np.array([sx, sy, sx, sy]), g.class_ids, g.ignore,
-                             g.xy_m, b.astype(np.float64), s.astype(np.float64), c))
+                             g.xy_m, b.astype(np.float64), s.astype(np.float64), c, p.input_scale))
     missing = [g.image for k, g in enumerate(gt.images) if k not in seen]
     if missing and not only_predicted:
         raise ConfigError(pred_source, None, f"has no line for {len(missing)} of {len(gt.images)} ground-truth images of {gt.source} "

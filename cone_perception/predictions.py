@@ -3,9 +3,10 @@
 One line per image::
 
     {"image": "<file name or stamp>", "width": W, "height": H,
-     "boxes": [[u1, v1, u2, v2, score, class_id], ...]}
+     "boxes": [[u1, v1, u2, v2, score, class_id], ...], "input_scale": s}
 
-Boxes are in the image's own pixels, class ids in project order. Reading validates every
+Boxes are in the image's own pixels; the optional ``input_scale`` is the model input px per image px
+(1/downscale for a band, the letterbox ratio otherwise), so box sizes at the model input are known; class ids in project order. Reading validates every
 line and names the file and line of anything malformed.
 """
 
@@ -31,20 +32,25 @@ class ImagePrediction:
     height: int
     boxes: np.ndarray  # BOX_DTYPE, image px
     line: int = 0  # line number in the file it was read from (0: not read from a file)
+    input_scale: float | None = None  # model input px per image px, if the file says
 
 
-def prediction_line(image: str, width: int, height: int, boxes: np.ndarray) -> str:
+def prediction_line(image: str, width: int, height: int, boxes: np.ndarray, input_scale: float | None = None) -> str:
     """One JSON line (without newline) for ``BOX_DTYPE`` records."""
     rows = [
         [round(float(b["u1"]), 2), round(float(b["v1"]), 2), round(float(b["u2"]), 2), round(float(b["v2"]), 2),
          round(float(b["score"]), 4), int(b["class_id"])]
         for b in boxes
     ]
-    return json.dumps({"image": str(image), "width": int(width), "height": int(height), "boxes": rows})
+    doc = {"image": str(image), "width": int(width), "height": int(height), "boxes": rows}
+    if input_scale is not None:
+        doc["input_scale"] = round(float(input_scale), 6)
+    return json.dumps(doc)
 
 
-def write_prediction(fh: IO[str], image: str, width: int, height: int, boxes: np.ndarray) -> None:
-    fh.write(prediction_line(image, width, height, boxes) + "\n")
+def write_prediction(fh: IO[str], image: str, width: int, height: int, boxes: np.ndarray,
+                     input_scale: float | None = None) -> None:
+    fh.write(prediction_line(image, width, height, boxes, input_scale) + "\n")
 
 
 def iter_json_lines(path: str | os.PathLike, keys: set[str]) -> Iterator[tuple[int, dict]]:
@@ -92,5 +98,9 @@ def read_predictions(path: str | os.PathLike) -> Iterator[ImagePrediction]:
             raise ConfigError(str(path), where, f"class_id must be an integer 0..{NUM_CLASSES - 1}")
         if np.any((a[:, 2] < a[:, 0]) | (a[:, 3] < a[:, 1])):
             raise ConfigError(str(path), where, "a box has u2 < u1 or v2 < v1")
+        scale = d.get("input_scale")
+        if scale is not None and not (isinstance(scale, (int, float)) and not isinstance(scale, bool) and 0 < scale < 1e3):
+            raise ConfigError(str(path), where, f"input_scale must be a positive number, got {scale!r}")
         yield ImagePrediction(str(d["image"]), int(d["width"]), int(d["height"]),
-                              boxes_from_arrays(a[:, :4], a[:, 4], a[:, 5].astype(np.int64)).astype(BOX_DTYPE), i)
+                              boxes_from_arrays(a[:, :4], a[:, 4], a[:, 5].astype(np.int64)).astype(BOX_DTYPE), i,
+                              float(scale) if scale is not None else None)

@@ -238,3 +238,30 @@ def test_speed_command_reports_each_case(capsys):
     rows = json.loads(capsys.readouterr().out)
     assert [(r["model"], r["backend"]) for r in rows] == [("p", "torch"), ("p", "onnx")]
     assert all(0 < r["min_ms"] <= r["median_ms"] <= r["max_ms"] for r in rows) and rows[0]["gflops"] > 0
+
+
+def test_detect_command_writes_boxes_and_the_model_input_scale(trained, tmp_path):
+    ckpt, images = trained
+    folder = tmp_path / "imgs"
+    folder.mkdir()
+    h, w = images[0].shape[:2]
+    for k, img in enumerate(images[:2]):
+        big = cv2.resize(img, (2 * w, 2 * h), interpolation=cv2.INTER_NEAREST)  # a band twice the model input
+        cv2.imwrite(str(folder / f"f{k}.png"), big)
+    out = tmp_path / "p.jsonl"
+    assert cli_main(["detect", str(folder), "--model", str(ckpt), "--crop", f"0,{2 * h}", "--downscale", "2",
+                     "--out", str(out), "--no-progress"]) == 0
+    from cone_perception.predictions import read_predictions
+
+    preds = list(read_predictions(out))
+    det = Detector.load(ckpt)
+    assert [p.image for p in preds] == ["f0.png", "f1.png"]
+    for p in preds:
+        assert (p.width, p.height, p.input_scale) == (2 * w, 2 * h, 0.5)
+        img = cv2.imread(str(folder / p.image))
+        want = det.detect(cv2.resize(img, (w, h), interpolation=cv2.INTER_AREA), CropSpec(0, 2 * h, 0, 2 * w, 2))
+        assert len(p.boxes) == len(want) > 0
+        np.testing.assert_allclose(_as_arrays(p.boxes)[0], _as_arrays(want)[0], atol=0.02)  # file keeps 2 decimals
+    # letterboxed to another input size: the scale is the letterbox ratio
+    assert cli_main(["detect", str(folder), "--model", str(ckpt), "--imgsz", f"{w}x{2 * h}", "--out", str(out), "--no-progress"]) == 0
+    assert {p.input_scale for p in read_predictions(out)} == {0.5}

@@ -377,3 +377,37 @@ def test_yolo_folder_with_split_subfolders(tmp_path, scene, capsys):
     m = json.loads((tmp_path / "o" / "metrics.json").read_text())
     assert m["detection"]["map50"] == pytest.approx(1.0) and m["inputs"]["gt_boxes"] == 10
     assert "by_distance" not in m  # no positions, no calibration
+
+
+def test_recall_by_box_height_at_the_model_input():
+    from cone_perception.eval_report import recall_by_box_height
+    from cone_perception.groundtruth import EvalImage
+
+    hs = np.array([12.0, 20.0, 40.0, 60.0, 120.0])  # image px; at input_scale 0.5: 6, 10, 20, 30, 60 px
+    gt = np.column_stack([np.arange(5) * 200.0, np.full(5, 100.0), np.arange(5) * 200.0 + 40, 100.0 + hs])
+    found = np.array([True, False, True, False, True])
+
+    def image(scale):
+        return EvalImage("a", W, H, gt, np.full(5, BLUE), np.zeros(5, bool), None, gt[found], np.ones(3), np.full(3, BLUE), scale)
+
+    r = recall_by_box_height([image(0.5)], 0.25, 0.5)
+    assert r["unit"] == "model input px"
+    assert [(b["num_gt"], b["tp"]) for b in r["bins"].values()] == [(1, 1), (1, 0), (1, 1), (1, 0), (1, 1)]
+    big = r["at_least_min_height"]
+    assert (big["num_gt"], big["tp"], big["fn"]) == (3, 2, 1) and big["recall"] == pytest.approx(2 / 3)
+    r = recall_by_box_height([image(None)], 0.25, 0.5)  # no input_scale: heights in image px
+    assert r["unit"].startswith("image px")
+    assert r["at_least_min_height"]["recall"] == pytest.approx(3 / 5)
+
+
+def test_prediction_input_scale_round_trip_and_bad_value(tmp_path):
+    from cone_perception.predictions import prediction_line
+
+    boxes = boxes_from_arrays(np.array([[1.0, 2.0, 3.0, 4.0]]), np.array([0.9]), np.array([BLUE]))
+    p = tmp_path / "p.jsonl"
+    p.write_text(prediction_line("a.jpg", 640, 360, boxes, input_scale=1.5) + "\n" + prediction_line("b.jpg", 640, 360, boxes) + "\n")
+    a, b = read_predictions(p)
+    assert a.input_scale == pytest.approx(1.5) and b.input_scale is None
+    p.write_text(json.dumps({"image": "a", "width": 4, "height": 4, "boxes": [], "input_scale": -1}) + "\n")
+    with pytest.raises(ConfigError, match="line 1.*input_scale"):
+        list(read_predictions(p))

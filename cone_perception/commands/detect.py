@@ -115,14 +115,17 @@ def run(args: argparse.Namespace) -> int:
                 crop = CropSpec(v0, v1, u0, u1, args.downscale)
                 crop.validate(w, h, f"--crop for {name}")
                 boxes = det.detect(crop_bgr(img, crop), crop)
+                scale = 1.0 / args.downscale
             elif args.imgsz:
                 from ..records import boxes_from_arrays
 
                 b, s, c = det.infer(img, in_size=args.imgsz)
                 boxes = boxes_from_arrays(b, s, c)
+                scale = min(args.imgsz[0] / w, args.imgsz[1] / h)
             else:
                 boxes = det.detect_image(img)
-            write_prediction(fh, name, w, h, boxes)
+                scale = min(det.imgsz[0] / w, det.imgsz[1] / h)
+            write_prediction(fh, name, w, h, boxes, input_scale=scale)
             n += 1
             if args.save_vis:
                 out = args.save_vis / (Path(name).stem + ".jpg")
