@@ -35,13 +35,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "clips autox4, autox2, accel are always left out")
     q.add_argument("--calib-frames", type=int, default=DEFAULT_CALIB_FRAMES, metavar="N",
                    help="calibration frames, spread evenly over the folder (default %(default)s)")
-    q.add_argument("--calib-clips", default=None, help="use only frames of these clips, comma-separated (e.g. autox3,autox6)")
+    q.add_argument("--calib-clips", default=None, metavar="CLIPS", help="use only frames of these clips, comma-separated (e.g. autox3,autox6)")
     q.add_argument("--calib-crop", type=_crop, default=None, metavar="V0,V1[,U0,U1]",
-                   help="cut this band (in the frames' px) before the model, as the car does (e.g. 32,224 for the "
-                        "car's 96,672 band in 640x360 frames); default: the whole frame, letterboxed")
+                   help="cut this band (rows, optionally columns, in the frames' px) before the model, as the car's "
+                        "adapter does (e.g. 32,224 in 640x360 frames = rows 96-672 of 1080); default: the whole frame, "
+                        "letterboxed")
     q.add_argument("--calib-downscale", type=int, default=1, choices=[1, 2, 4], help="with --calib-crop: integer downscale")
     q.add_argument("--calib-method", choices=CALIB_METHODS, default="minmax",
-                   help="activation range calibration (default %(default)s; entropy / percentile need ~75 MB per frame)")
+                   help="activation ranges: min-max over the frames (default) or the 99.999th percentile "
+                        "(keeps every activation of every frame in memory: ~55 MB a frame at 960x288)")
     q.add_argument("--int8-activations", choices=ACTIVATION_TYPES, default="uint8",
                    help="activation type (default %(default)s: x86 runs uint8 x int8 fastest)")
     q.add_argument("--per-tensor", action="store_true", help="one weight scale per conv instead of one per output channel")
