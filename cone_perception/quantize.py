@@ -6,8 +6,8 @@
 
 Only the convolutions are quantised (per-channel int8 weights, 8-bit activations calibrated on
 the frames); everything after the last convolutions - the head's concat, the DFL softmax and
-expectation, the box arithmetic and the class sigmoid - stays float, because quantising the box
-decoding breaks it (8 bits cannot hold pixel coordinates up to 960 and a 0..1 score at once).
+expectation, the box arithmetic and the class sigmoid - stays float (one 8-bit scale cannot hold
+pixel coordinates up to 960 and 0..1 scores; a YOLO11n quantised throughout lost its box decoding).
 :func:`qdq_summary` tells what a quantised graph holds (used by the export check and the tests).
 """
 

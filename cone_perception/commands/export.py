@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .detect import _crop
+from .detect import parse_crop
 from .train import parse_size
 
 TOLERANCE = 1e-3
@@ -36,7 +36,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     q.add_argument("--calib-frames", type=int, default=DEFAULT_CALIB_FRAMES, metavar="N",
                    help="calibration frames, spread evenly over the folder (default %(default)s)")
     q.add_argument("--calib-clips", default=None, metavar="CLIPS", help="use only frames of these clips, comma-separated (e.g. autox3,autox6)")
-    q.add_argument("--calib-crop", type=_crop, default=None, metavar="V0,V1[,U0,U1]",
+    q.add_argument("--calib-crop", type=parse_crop, default=None, metavar="V0,V1[,U0,U1]",
                    help="cut this band (rows, optionally columns, in the frames' px) before the model, as the car's "
                         "adapter does (e.g. 32,224 in 640x360 frames = rows 96-672 of 1080); default: the whole frame, "
                         "letterboxed")
