@@ -92,6 +92,14 @@ def letterbox(img: np.ndarray, in_w: int, in_h: int) -> tuple[np.ndarray, Letter
     return img, Letterbox(r, in_w, in_h)
 
 
+def preprocess(bgr: np.ndarray, in_w: int, in_h: int) -> tuple[np.ndarray, Letterbox]:
+    """BGR uint8 image -> the network input: letterboxed to (in_w, in_h), (1, 3, H, W) float32 RGB 0..1.
+
+    The one preprocessing of every backend (and of int8 calibration, :mod:`.quantize`)."""
+    img, lb = letterbox(bgr, in_w, in_h)
+    return cv2.dnn.blobFromImage(img, 1.0 / 255.0, swapRB=True), lb
+
+
 # -- backends: (1, 3, H, W) float32 RGB 0..1 -> (4 + nc, N) float32 numpy --------------------------
 
 
@@ -381,8 +389,7 @@ class Detector:
                 self._say_once(("pad", w, h), f"image {w}x{h} is not a multiple of 32: padded to {in_w}x{in_h}")
             elif in_size is None:
                 self._say_once(("fit", w, h), f"image {w}x{h} letterboxed to the model input {in_w}x{in_h}")
-        img, lb = letterbox(bgr, in_w, in_h)
-        blob = cv2.dnn.blobFromImage(img, 1.0 / 255.0, swapRB=True)  # (1, 3, H, W) float32 RGB
+        blob, lb = preprocess(bgr, in_w, in_h)
         t1 = time.perf_counter()
         pred = self._run(blob)
         t2 = time.perf_counter()

@@ -26,7 +26,7 @@ from .train import parse_size
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp")
 
 
-def _crop(text: str) -> tuple[int, ...]:
+def parse_crop(text: str) -> tuple[int, ...]:
     try:
         vals = tuple(int(x) for x in text.split(","))
     except ValueError:
@@ -43,7 +43,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", default=None, help="model file (default: the shipped default model)")
     p.add_argument("--backend", default="torch", choices=["torch", "torchscript", "onnx"], help="inference backend")
     p.add_argument("--imgsz", type=parse_size, default=None, help="letterbox each image to this model input WxH")
-    p.add_argument("--crop", type=_crop, default=None, help="band V0,V1[,U0,U1] in image px, cut before the model")
+    p.add_argument("--crop", type=parse_crop, default=None, help="band V0,V1[,U0,U1] in image px, cut before the model")
     p.add_argument("--downscale", type=int, default=1, choices=[1, 2, 4], help="with --crop: integer downscale")
     p.add_argument("--conf", type=float, default=0.25, help="confidence threshold (default %(default)s)")
     p.add_argument("--iou", type=float, default=0.45, help="NMS IoU threshold (default %(default)s)")

@@ -47,10 +47,11 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(rows))
         return 0
     print(f"forward only, input {args.imgsz[0]}x{args.imgsz[1]}, {args.threads} threads, {args.frames} frames")
-    print(f"{'model':<12}{'backend':<13}{'params':>10}{'GFLOPs':>8}{'median ms':>11}{'p90 ms':>9}{'min-max ms':>16}{'fps':>8}")
+    wm = max([12] + [len(str(r["model"])) + 2 for r in rows])  # a model path is longer than a size name
+    print(f"{'model':<{wm}}{'backend':<13}{'params':>10}{'GFLOPs':>8}{'median ms':>11}{'p90 ms':>9}{'min-max ms':>16}{'fps':>8}")
     for r in rows:
         params = f"{r['params'] / 1e6:.2f}M" if r["params"] else "-"
         gf = f"{r['gflops']:.2f}" if r["gflops"] else "-"
-        print(f"{str(r['model']):<12}{r['backend']:<13}{params:>10}{gf:>8}{r['median_ms']:>11.2f}{r['p90_ms']:>9.2f}"
+        print(f"{str(r['model']):<{wm}}{r['backend']:<13}{params:>10}{gf:>8}{r['median_ms']:>11.2f}{r['p90_ms']:>9.2f}"
               f"{r['min_ms']:>8.2f}-{r['max_ms']:<7.2f}{1e3 / r['median_ms']:>8.1f}")
     return 0

@@ -39,6 +39,8 @@ log = logging.getLogger(__name__)
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp")
 MAX_REPORTED = 10
+#: Clips of the real (bgracing) frames held out for validation: never trained or calibrated on.
+VALIDATION_CLIPS = ("autox4", "autox2", "accel")
 
 
 @dataclass
