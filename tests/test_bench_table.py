@@ -94,7 +94,8 @@ def test_bench_pipeline_reports_the_setting() -> None:
 
 def test_table_applies_each_setting_to_the_val_frames(tmp_path, monkeypatch) -> None:
     """Ground truth = the stub's box as the FULL setting maps it: full matches it; half (box x2) and
-    crop (box + 96 rows) must not. A second box centred below the band counts as outside it."""
+    crop (box + 96 rows) must not. A second box centred below the band counts as outside it, a third
+    one reaching across the band's bottom edge as cut."""
     from cone_perception.commands import _table, bench
 
     val = tmp_path / "val"
@@ -105,7 +106,8 @@ def test_table_applies_each_setting_to_the_val_frames(tmp_path, monkeypatch) -> 
         cv2.imwrite(str(val / "images" / f"f{i}.jpg"), np.full((1080, 1920, 3), 100, np.uint8))
         (val / "labels" / f"f{i}.txt").write_text(
             f"0 {(x1 + x2) / 2 / 1920} {(y1 + y2) / 2 / 1080} {(x2 - x1) / 1920} {(y2 - y1) / 1080}\n"
-            f"0 {1000 / 1920} {900 / 1080} {40 / 1920} {60 / 1080}\n")
+            f"0 {1000 / 1920} {900 / 1080} {40 / 1920} {60 / 1080}\n"     # below the band
+            f"0 {1500 / 1920} {665 / 1080} {40 / 1920} {50 / 1080}\n")    # centre inside, bottom cut at row 672
 
     made = []
 
@@ -126,8 +128,8 @@ def test_table_applies_each_setting_to_the_val_frames(tmp_path, monkeypatch) -> 
     rows = {r["setting"]: r for r in doc["rows"]}
     assert list(rows) == list(INPUT_SETTINGS)
     assert [rows[s]["model_input"] for s in INPUT_SETTINGS] == ["1920x1088", "960x544", "1920x576", "960x288"]
-    assert rows["full"]["recall"] == pytest.approx(0.5)
-    assert rows["full"]["map50"] > 0.4
+    assert rows["full"]["recall"] == pytest.approx(1 / 3)
+    assert rows["full"]["map50"] == pytest.approx(1 / 3, abs=0.02)
     for s in ("half", "crop", "crop_half"):
         assert rows[s]["recall"] == 0.0 and rows[s]["map50"] == pytest.approx(0.0, abs=1e-9)
     # the val frames were cut with the --band rows (96..672), the bench frames with the calibration's (384..960)
@@ -136,9 +138,9 @@ def test_table_applies_each_setting_to_the_val_frames(tmp_path, monkeypatch) -> 
     assert [c for c, _ in made] == [CropSpec(0, 1080, 0, 1920, 1), CropSpec(0, 1080, 0, 1920, 2),
                                     CropSpec(384, 960, 0, 1920, 1), CropSpec(384, 960, 0, 1920, 2)]
     c = doc["conditions"]
-    assert (c["val_boxes"], c["val_boxes_outside_band"], c["val_images"]) == (4, 2, 2)
+    assert (c["val_boxes"], c["val_boxes_outside_band"], c["val_boxes_not_inside_band"], c["val_images"]) == (6, 2, 4, 2)
     md = (out / "table.md").read_text()
-    assert md.count("| stub |") == 4 and "2 boxes (50.0 %)" in md
+    assert md.count("| stub |") == 4 and "2 boxes (33.3 %)" in md and "4 (66.7 %) reach beyond it" in md
 
 
 def test_table_needs_its_inputs(tmp_path) -> None:
