@@ -149,3 +149,14 @@ def test_table_needs_its_inputs(tmp_path) -> None:
     assert main(["bench", "table", "--band", "96,672", "--out", str(tmp_path / "o")]) == 2
     assert main(["bench", "table", "--val", str(tmp_path), "--band", "96,672", "--out", str(tmp_path / "o"),
                  "--settings", "full,quarter"]) == 2
+
+
+def test_fixed_size_backends_are_built_for_the_setting() -> None:
+    """ONNX is built for the padded input of the setting (960x540 -> 960x544), not the checkpoint's 960x288."""
+    from cone_perception.commands.bench import load_for_crop
+
+    det = load_for_crop(None, "onnx", CropSpec(0, 1080, 0, 1920, 2), threads=1)
+    assert det.imgsz == (960, 544) and det.input_size_for(960, 540) == (960, 544)
+    assert det._run.session.get_inputs()[0].shape == [1, 3, 544, 960]
+    boxes, _, _ = det.infer(np.full((540, 960, 3), 114, np.uint8))
+    assert boxes.shape[1] == 4
