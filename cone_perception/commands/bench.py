@@ -1,13 +1,17 @@
 """``cone-perception bench``: per-stage timings on real-size frames, through the code the nodes run.
 
   cone-perception bench adapter  [--frames 300] [--calib CAL] [--encoding yuv422_yuy2] [--json]
-  cone-perception bench pipeline [--frames 300] [--calib CAL] [--model M] [--backend B] [--threads N] [--json]
+  cone-perception bench pipeline [--frames 300] [--calib CAL] [--model M] [--backend B] [--threads N]
+                                 [--input full|half|crop|crop_half] [--json]
+  cone-perception bench table --models A.pt[,B.pt] --val DIR --gt-names A,B,.. --band V0,V1 --out DIR [--frames N]
 
 ``adapter``: 1920x1080 frames (size from the calibration) in the given encoding -> cropped,
 downscaled BGR band, exactly as the ``driver_adapter`` node does it.
 ``pipeline``: rendered 1920x1080 YUYV scenes with cones through the fused pipeline (adapter,
 model input, forward, decode + NMS, mapping) and the packing of ``cone_boxes`` and ``/cones``
-into PointCloud2 messages, as the ``pipeline`` node runs them.
+into PointCloud2 messages, as the ``pipeline`` node runs them. ``--input`` replaces the
+calibration's crop and downscale by one of the runtime-table settings (:meth:`CropSpec.for_setting`).
+``table``: the runtime table (see ``bench_table.py``).
 Warm-up frames are excluded; median, p90, p99, min-max (noise) and frames/s (from the median
 end-to-end time) are reported, plus peak RSS.
 """
@@ -17,6 +21,9 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import replace
+
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -24,23 +31,42 @@ import numpy as np
 from ..adapter import DriverAdapter, bgr_to_yuyv
 from ..benchmark import StageTimer, format_table, peak_rss_mb
 from ..calib import DEFAULT_CAMERA, load_calibration
+from ..crop import INPUT_SETTINGS, CropSpec
 from ..errors import ConfigError
+from .detect import parse_crop
 
 _BYTES_PER_PX = {"yuv422_yuy2": 2, "bgr8": 3, "rgb8": 3}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.description = "Benchmark per-frame stages on real-size frames (warm-up excluded)."
-    p.add_argument("target", choices=["adapter", "pipeline"], help="what to benchmark")
+    p.description = ("Benchmark per-frame stages on real-size frames (warm-up excluded); `table` adds mAP on real "
+                     "validation frames per model and input setting (the thesis's runtime table).")
+    p.add_argument("target", choices=["adapter", "pipeline", "table"],
+                   help="what to benchmark: adapter, pipeline, or table (the runtime table: bench + mAP per model and input setting)")
     p.add_argument("--frames", type=int, default=300, help="timed frames (>= 200 recommended; default %(default)s)")
     p.add_argument("--warmup", type=int, default=20, help="untimed warm-up frames (default %(default)s)")
     p.add_argument("--calib", default=DEFAULT_CAMERA, help="calibration (crop, downscale, image size); default %(default)s")
     p.add_argument("--encoding", default="yuv422_yuy2", choices=sorted(_BYTES_PER_PX), help="input encoding")
     p.add_argument("--threads", type=int, default=2, help="OpenCV, torch and ONNX Runtime threads (default %(default)s)")
     p.add_argument("--model", default=None, help="pipeline: model file (default: the shipped default model)")
-    p.add_argument("--backend", default="torch", choices=["torch", "torchscript", "onnx"], help="pipeline: inference backend")
-    p.add_argument("--scenes", type=int, default=16, help="pipeline: distinct rendered scenes, cycled (default %(default)s)")
+    p.add_argument("--backend", default="torch", choices=["torch", "torchscript", "onnx"], help="pipeline, table: inference backend (fixed-size ones are built for each band's input size)")
+    p.add_argument("--scenes", type=int, default=16, help="pipeline, table: distinct rendered scenes, cycled (default %(default)s)")
+    p.add_argument("--input", default=None, choices=INPUT_SETTINGS,
+                   help="pipeline: override the calibration's crop: full = all rows, downscale 1; half = all rows, "
+                        "downscale 2; crop = the calibration's band, downscale 1; crop_half = the band, downscale 2 "
+                        "(default: the calibration's own crop and downscale)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
+    t = p.add_argument_group("table", "bench table: for each model and input setting, bench pipeline + detect + eval on real frames")
+    t.add_argument("--models", default=None, help="table: model files, comma-separated (default: the shipped default model)")
+    t.add_argument("--val", type=Path, default=None, help="table: YOLO folder (images/, labels/) of real validation frames")
+    t.add_argument("--gt-names", default=None, help="table: class names of --val in id order, comma-separated (as eval --gt-names)")
+    t.add_argument("--band", type=parse_crop, default=None, metavar="V0,V1[,U0,U1]",
+                   help="table: the band of the --val frames (their camera is not the calibration's), as detect --crop")
+    t.add_argument("--out", type=Path, default=None, help="table: output folder (table.md, table.json, predictions, eval reports)")
+    t.add_argument("--settings", default=",".join(INPUT_SETTINGS),
+                   help="table: input settings, comma-separated (default %(default)s)")
+    t.add_argument("--det-conf", type=float, default=0.001, help="table: detector score threshold for the mAP run (default %(default)s)")
+    t.add_argument("--conf", type=float, default=0.25, help="table: operating score threshold for recall (default %(default)s)")
 
 
 def synthetic_frames(width: int, height: int, encoding: str, n: int, seed: int = 0) -> list[bytes]:
@@ -75,21 +101,22 @@ def rendered_frames(calib, n: int, seed: int = 4242) -> list[bytes]:
     return out
 
 
-def _bench_pipeline(args: argparse.Namespace, calib) -> dict:
+def bench_pipeline(calib, det, frames: list[bytes], n_frames: int, warmup: int = 20) -> dict:
+    """Time ``det`` in the fused pipeline of ``calib`` (its crop and downscale) on raw YUYV ``frames``
+    (cycled): per stage, end to end with the packing of ``cone_boxes`` and ``/cones``. The result
+    of ``bench pipeline`` (and one row of ``bench table``)."""
     import time
 
     from .. import bagio
-    from ..detector import Detector, default_model_path
     from ..pipeline import Pipeline
     from ..records import to_pointcloud2
 
-    det = Detector.load(args.model or default_model_path(), backend=args.backend, threads=args.threads)
     pipe = Pipeline(calib, det)
     w, h = calib.image_width, calib.image_height
-    frames = rendered_frames(calib, max(1, args.scenes))
+    crop = calib.crop
     timer = StageTimer()
     n_boxes = 0
-    for i in range(args.warmup + args.frames):
+    for i in range(warmup + n_frames):
         data = frames[i % len(frames)]
         t0 = time.perf_counter()
         res = pipe.process_raw("yuv422_yuy2", w, h, 2 * w, data)
@@ -98,7 +125,7 @@ def _bench_pipeline(args: argparse.Namespace, calib) -> dict:
         to_pointcloud2(res.boxes, hdr, bagio.PointCloud2, bagio.PointField)
         to_pointcloud2(res.cones, bagio.header(i, calib.frame_id), bagio.PointCloud2, bagio.PointField)
         t2 = time.perf_counter()
-        if i < args.warmup:
+        if i < warmup:
             continue
         for k, v in res.timing_ms.items():
             timer.add(k, v / 1e3)
@@ -106,19 +133,40 @@ def _bench_pipeline(args: argparse.Namespace, calib) -> dict:
         timer.add("end_to_end", t2 - t0)
         n_boxes += len(res.boxes)
     s = timer.summary()
+    in_w, in_h = det.input_size_for(crop.out_width, crop.out_height)
     return {
         "target": "pipeline",
         "input": f"{w}x{h} yuv422_yuy2 (rendered scenes)",
-        "output": f"band {calib.crop.out_width}x{calib.crop.out_height}, boxes + cones",
+        "output": f"band {crop.out_width}x{crop.out_height}, boxes + cones",
+        "crop": {"v0": crop.v0, "v1": crop.v1, "u0": crop.u0, "u1": crop.u1, "downscale": crop.downscale},
+        "model_input": [in_w, in_h],
         "model": det.source,
-        "backend": args.backend,
-        "threads": args.threads,
+        "backend": det.backend,
         "fps": 1000.0 / s["end_to_end"]["median_ms"],
-        "boxes_per_frame": n_boxes / args.frames,
+        "boxes_per_frame": n_boxes / n_frames,
         "non_forward_median_ms": s["end_to_end"]["median_ms"] - s["forward"]["median_ms"],
         "stages": s,
         "peak_rss_mb": peak_rss_mb(),
     }
+
+
+def load_for_crop(model: str | None, backend: str, crop: CropSpec, threads: int, **kw):
+    """The detector for a band: fixed-size backends are built for the band's own input size
+    (rounded up to a multiple of 32, padded), so no setting is letterboxed to another size."""
+    from ..detector import Detector, default_model_path, round_up32
+
+    imgsz = (round_up32(crop.out_width), round_up32(crop.out_height))
+    return Detector.load(model or default_model_path(), backend=backend, threads=threads, imgsz=imgsz, **kw)
+
+
+def _bench_pipeline(args: argparse.Namespace, calib) -> dict:
+    if args.input:
+        calib = replace(calib, crop=calib.crop.for_setting(args.input, calib.image_width, calib.image_height))
+    det = load_for_crop(args.model, args.backend, calib.crop, args.threads)
+    result = bench_pipeline(calib, det, rendered_frames(calib, max(1, args.scenes)), args.frames, args.warmup)
+    result["setting"] = args.input or "calibration"
+    result["threads"] = args.threads
+    return result
 
 
 def run(args: argparse.Namespace) -> int:
@@ -126,13 +174,18 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("bench", "--frames/--warmup", "need --frames >= 1 and --warmup >= 0")
     cv2.setNumThreads(args.threads)
     calib = load_calibration(args.calib)
+    if args.target == "table":
+        from ._table import run_table
+
+        return run_table(args, calib)
     if args.target == "pipeline":
         result = _bench_pipeline(args, calib)
         if args.json:
             json.dump(result, sys.stdout, indent=1)
             print()
             return 0
-        print(f"bench pipeline: {result['input']} -> {result['output']}; model {result['model']} "
+        print(f"bench pipeline ({result['setting']}): {result['input']} -> {result['output']}, model input "
+              f"{result['model_input'][0]}x{result['model_input'][1]}; model {result['model']} "
               f"({result['backend']}, {result['threads']} threads), {args.frames} frames, "
               f"{result['boxes_per_frame']:.1f} boxes/frame")
         print(format_table(result["stages"]))

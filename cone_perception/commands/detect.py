@@ -88,8 +88,29 @@ def _iter_bag(bag: Path, topic: str | None):
             yield str(fr.stamp_ns), None, str(e)
 
 
-def run(args: argparse.Namespace) -> int:
+def detect_one(det, img: np.ndarray, name: str, crop: tuple[int, ...] | None = None, downscale: int = 1,
+               imgsz: tuple[int, int] | None = None) -> tuple[np.ndarray, float]:
+    """Boxes (``BOX_DTYPE``, the image's px) of one full BGR image, as ``detect`` does it: with ``crop``
+    (V0,V1[,U0,U1]) the band is cut and downscaled as on the car, else letterboxed to ``imgsz`` or the
+    model input; and the model input px per image px (the prediction file's ``input_scale``).
+    Also used by ``bench table``."""
     from ..adapter import crop_bgr
+
+    h, w = img.shape[:2]
+    if crop:
+        v0, v1, u0, u1 = crop if len(crop) == 4 else (*crop, 0, w)
+        spec = CropSpec(v0, v1, u0, u1, downscale)
+        spec.validate(w, h, f"--crop for {name}")
+        return det.detect(crop_bgr(img, spec), spec), 1.0 / downscale
+    if imgsz:
+        from ..records import boxes_from_arrays
+
+        b, s, c = det.infer(img, in_size=imgsz)
+        return boxes_from_arrays(b, s, c), min(imgsz[0] / w, imgsz[1] / h)
+    return det.detect_image(img), min(det.imgsz[0] / w, det.imgsz[1] / h)
+
+
+def run(args: argparse.Namespace) -> int:
     from ..detector import Detector, default_model_path
     from ..predictions import write_prediction
     from ..vis import draw_boxes
@@ -110,21 +131,7 @@ def run(args: argparse.Namespace) -> int:
                 skipped.append(f"{name}: {err}")
                 continue
             h, w = img.shape[:2]
-            if args.crop:
-                v0, v1, u0, u1 = args.crop if len(args.crop) == 4 else (*args.crop, 0, w)
-                crop = CropSpec(v0, v1, u0, u1, args.downscale)
-                crop.validate(w, h, f"--crop for {name}")
-                boxes = det.detect(crop_bgr(img, crop), crop)
-                scale = 1.0 / args.downscale
-            elif args.imgsz:
-                from ..records import boxes_from_arrays
-
-                b, s, c = det.infer(img, in_size=args.imgsz)
-                boxes = boxes_from_arrays(b, s, c)
-                scale = min(args.imgsz[0] / w, args.imgsz[1] / h)
-            else:
-                boxes = det.detect_image(img)
-                scale = min(det.imgsz[0] / w, det.imgsz[1] / h)
+            boxes, scale = detect_one(det, img, name, args.crop, args.downscale, args.imgsz)
             write_prediction(fh, name, w, h, boxes, input_scale=scale)
             n += 1
             if args.save_vis:

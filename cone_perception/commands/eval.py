@@ -45,32 +45,44 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
+def evaluate_predictions(pred: Path, gt_path: Path, gt_names: str | None = None, calib_arg: str | None = None,
+                         conf: float = 0.25, iou: float = 0.5, only_predicted: bool = False, progress: bool = True,
+                         verbose: bool = True):
+    """A prediction file against ground truth -> :class:`~cone_perception.eval_report.EvalResult`, as ``eval``
+    computes it (``gt_names`` comma-separated). Also used by ``bench table``."""
+    from ..calib import load_calibration
+    from ..eval_report import evaluate
+    from ..groundtruth import load_ground_truth, pair_with_predictions
+    from ..predictions import read_predictions
+
+    names = [n.strip() for n in gt_names.split(",") if n.strip()] if gt_names else None
+    gt = load_ground_truth(gt_path, names)
+    preds = list(read_predictions(pred))
+    images, counts = pair_with_predictions(gt, preds, str(pred), only_predicted)
+    calib_path = calib_arg if calib_arg is not None else gt.calib_path
+    calib = load_calibration(calib_path) if calib_path is not None else None
+    if verbose and calib is not None and calib_arg is None:
+        print(f"calibration: {calib_path} (found beside the ground truth)")
+    if verbose and gt_path.is_dir() and (gt_path / "gt.jsonl").is_file():
+        print(f"note: {gt_path / 'gt.jsonl'} exists; pass it as --gt for localisation and distances from true positions")
+    res = evaluate(images, calib, conf, iou, gt.has_positions, progress=progress)
+    res.metrics["ground_truth"] = {"format": gt.kind, **gt.info, **counts}
+    return res
+
+
 def run(args: argparse.Namespace) -> int:
     import logging
 
-    from ..calib import load_calibration
     from ..errors import ConfigError
-    from ..eval_report import evaluate, format_summary, write_report
-    from ..groundtruth import load_ground_truth, pair_with_predictions
-    from ..predictions import read_predictions
+    from ..eval_report import format_summary, write_report
 
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(message)s")
     if not args.pred.is_file():
         raise ConfigError(str(args.pred), None, "prediction file not found")
     if args.out.exists() and not args.out.is_dir():
         raise ConfigError(str(args.out), None, "output exists and is not a directory")
-    names = [n.strip() for n in args.gt_names.split(",") if n.strip()] if args.gt_names else None
-    gt = load_ground_truth(args.gt, names)
-    preds = list(read_predictions(args.pred))
-    images, counts = pair_with_predictions(gt, preds, str(args.pred), args.only_predicted)
-    calib_path = args.calib if args.calib is not None else gt.calib_path
-    calib = load_calibration(calib_path) if calib_path is not None else None
-    if calib is not None and args.calib is None:
-        print(f"calibration: {calib_path} (found beside the ground truth)")
-    if args.gt.is_dir() and (args.gt / "gt.jsonl").is_file():
-        print(f"note: {args.gt / 'gt.jsonl'} exists; pass it as --gt for localisation and distances from true positions")
-    res = evaluate(images, calib, args.conf, args.iou, gt.has_positions, progress=not args.no_progress)
-    res.metrics["ground_truth"] = {"format": gt.kind, **gt.info, **counts}
+    res = evaluate_predictions(args.pred, args.gt, args.gt_names, args.calib, args.conf, args.iou, args.only_predicted,
+                               progress=not args.no_progress)
     try:
         files = write_report(res, args.out, str(args.pred), str(args.gt))
     except OSError as e:
