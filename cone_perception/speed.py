@@ -1,7 +1,7 @@
 """Forward micro-benchmark of the detector: network forward only, per size and backend.
 
-``cone-perception speed`` prints a table; :func:`time_forward` is what other
-benchmarks (``cone-perception bench``) call for the network stage.
+``cone-perception speed`` prints a table from :func:`time_forward` (the end-to-end
+``cone-perception bench`` times the forward per frame inside the detector instead).
 """
 
 from __future__ import annotations

@@ -265,3 +265,26 @@ def test_detect_command_writes_boxes_and_the_model_input_scale(trained, tmp_path
     # letterboxed to another input size: the scale is the letterbox ratio
     assert cli_main(["detect", str(folder), "--model", str(ckpt), "--imgsz", f"{w}x{2 * h}", "--out", str(out), "--no-progress"]) == 0
     assert {p.input_scale for p in read_predictions(out)} == {0.5}
+
+
+def test_detect_command_onnx_band_runs_at_its_own_size(trained, tmp_path):
+    """A fixed-size backend built from a checkpoint is rebuilt for a band of another size: the same
+    boxes as eager torch at the band's native size (not letterboxed into the checkpoint's input)."""
+    ckpt, images = trained
+    folder = tmp_path / "imgs"
+    folder.mkdir()
+    h, w = images[0].shape[:2]
+    big = cv2.resize(images[0], (2 * w, 2 * h), interpolation=cv2.INTER_NEAREST)
+    cv2.imwrite(str(folder / "f0.png"), big)
+    from cone_perception.predictions import read_predictions
+
+    got = {}
+    for backend in ("torch", "onnx"):
+        out = tmp_path / f"{backend}.jsonl"
+        assert cli_main(["detect", str(folder), "--model", str(ckpt), "--backend", backend, "--crop", f"0,{2 * h}",
+                         "--out", str(out), "--no-progress"]) == 0
+        (p,) = read_predictions(out)
+        got[backend] = _as_arrays(p.boxes)
+    assert len(got["torch"][0]) == len(got["onnx"][0]) > 0
+    np.testing.assert_allclose(got["onnx"][0], got["torch"][0], atol=0.02)
+    np.testing.assert_allclose(got["onnx"][1], got["torch"][1], atol=2e-3)

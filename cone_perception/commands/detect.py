@@ -111,12 +111,28 @@ def detect_one(det, img: np.ndarray, name: str, crop: tuple[int, ...] | None = N
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..detector import Detector, default_model_path
+    from ..detector import Detector, default_model_path, round_up32
     from ..predictions import write_prediction
     from ..vis import draw_boxes
 
-    det = Detector.load(args.model or default_model_path(), backend=args.backend, conf=args.conf, iou=args.iou,
+    model = args.model or default_model_path()
+    det = Detector.load(model, backend=args.backend, conf=args.conf, iou=args.iou,
                         imgsz=args.imgsz if args.backend != "torch" else None)
+    # a fixed-size backend built from a checkpoint is rebuilt for the band's own size (as the
+    # pipeline node does), so a band is never letterboxed into another input size
+    rebuild = bool(args.crop) and args.backend != "torch" and not args.imgsz and Path(str(model)).suffix == ".pt"
+    by_size = {}
+
+    def detector_for(w: int, h: int):
+        if not rebuild:
+            return det
+        v0, v1, u0, u1 = args.crop if len(args.crop) == 4 else (*args.crop, 0, w)
+        size = (round_up32(max(1, (u1 - u0) // args.downscale)), round_up32(max(1, (v1 - v0) // args.downscale)))
+        if size == det.imgsz:
+            return det
+        if size not in by_size:
+            by_size[size] = Detector.load(model, backend=args.backend, conf=args.conf, iou=args.iou, imgsz=size)
+        return by_size[size]
     try:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         fh = args.out.open("w", encoding="utf-8")
@@ -131,7 +147,7 @@ def run(args: argparse.Namespace) -> int:
                 skipped.append(f"{name}: {err}")
                 continue
             h, w = img.shape[:2]
-            boxes, scale = detect_one(det, img, name, args.crop, args.downscale, args.imgsz)
+            boxes, scale = detect_one(detector_for(w, h), img, name, args.crop, args.downscale, args.imgsz)
             write_prediction(fh, name, w, h, boxes, input_scale=scale)
             n += 1
             if args.save_vis:

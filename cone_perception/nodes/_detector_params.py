@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from rclpy.node import Node
 
-from ..detector import Detector, default_model_path
+from ..detector import Detector, default_model_path, round_up32
 
 
 def load_detector(node: Node, band_wh: tuple[int, int] | None = None) -> Detector:
@@ -15,9 +15,13 @@ def load_detector(node: Node, band_wh: tuple[int, int] | None = None) -> Detecto
     that size makes the first real frame as fast as the rest.
     """
     model = node.declare_parameter("model", "").value or str(default_model_path())
+    backend = node.declare_parameter("backend", "torch").value
+    # fixed-size backends built from a checkpoint are built for the band's own size (no letterbox)
+    imgsz = (round_up32(band_wh[0]), round_up32(band_wh[1])) if band_wh and backend != "torch" and model.endswith(".pt") else None
     det = Detector.load(
         model,
-        backend=node.declare_parameter("backend", "torch").value,
+        backend=backend,
+        imgsz=imgsz,
         device=node.declare_parameter("device", "cpu").value,
         fp16=bool(node.declare_parameter("fp16", False).value),
         conf=float(node.declare_parameter("conf", 0.25).value),
