@@ -236,6 +236,15 @@ class Detector:
 
     # -- loading -----------------------------------------------------------------------------
     @classmethod
+    def load_for_band(cls, path: str | Path, band_wh: tuple[int, int], **kw) -> "Detector":
+        """Load for images of one band size (W, H), as the car feeds them: a checkpoint is built
+        for the band's size rounded up to a multiple of 32 (fixed-size backends included), so the
+        band is padded, never letterboxed into another size. Exported files keep their own size.
+        ``kw`` as for :meth:`load`."""
+        imgsz = (round_up32(band_wh[0]), round_up32(band_wh[1])) if Path(path).suffix == ".pt" else None
+        return cls.load(path, imgsz=imgsz, **kw)
+
+    @classmethod
     def load(
         cls,
         path: str | Path,

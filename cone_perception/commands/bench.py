@@ -151,12 +151,11 @@ def bench_pipeline(calib, det, frames: list[bytes], n_frames: int, warmup: int =
 
 
 def load_for_crop(model: str | None, backend: str, crop: CropSpec, threads: int, **kw):
-    """The detector for a band: fixed-size backends are built for the band's own input size
-    (rounded up to a multiple of 32, padded), so no setting is letterboxed to another size."""
-    from ..detector import Detector, default_model_path, round_up32
+    """The detector for a band (:meth:`Detector.load_for_band`): no setting is letterboxed into another size."""
+    from ..detector import Detector, default_model_path
 
-    imgsz = (round_up32(crop.out_width), round_up32(crop.out_height))
-    return Detector.load(model or default_model_path(), backend=backend, threads=threads, imgsz=imgsz, **kw)
+    return Detector.load_for_band(model or default_model_path(), (crop.out_width, crop.out_height),
+                                  backend=backend, threads=threads, **kw)
 
 
 def _bench_pipeline(args: argparse.Namespace, calib) -> dict:

@@ -111,28 +111,25 @@ def detect_one(det, img: np.ndarray, name: str, crop: tuple[int, ...] | None = N
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..detector import Detector, default_model_path, round_up32
+    from ..detector import Detector, default_model_path
     from ..predictions import write_prediction
     from ..vis import draw_boxes
 
     model = args.model or default_model_path()
     det = Detector.load(model, backend=args.backend, conf=args.conf, iou=args.iou,
                         imgsz=args.imgsz if args.backend != "torch" else None)
-    # a fixed-size backend built from a checkpoint is rebuilt for the band's own size (as the
-    # pipeline node does), so a band is never letterboxed into another input size
-    rebuild = bool(args.crop) and args.backend != "torch" and not args.imgsz and Path(str(model)).suffix == ".pt"
-    by_size = {}
+    # with --crop the detector is built for the band's own size (as the pipeline node does), so a
+    # fixed-size backend never letterboxes the band into another input size
+    by_band = {}
 
     def detector_for(w: int, h: int):
-        if not rebuild:
+        if not args.crop or args.imgsz:
             return det
         v0, v1, u0, u1 = args.crop if len(args.crop) == 4 else (*args.crop, 0, w)
-        size = (round_up32(max(1, (u1 - u0) // args.downscale)), round_up32(max(1, (v1 - v0) // args.downscale)))
-        if size == det.imgsz:
-            return det
-        if size not in by_size:
-            by_size[size] = Detector.load(model, backend=args.backend, conf=args.conf, iou=args.iou, imgsz=size)
-        return by_size[size]
+        band = (max(1, (u1 - u0) // args.downscale), max(1, (v1 - v0) // args.downscale))
+        if band not in by_band:
+            by_band[band] = Detector.load_for_band(model, band, backend=args.backend, conf=args.conf, iou=args.iou)
+        return by_band[band]
     try:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         fh = args.out.open("w", encoding="utf-8")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from rclpy.node import Node
 
-from ..detector import Detector, default_model_path, round_up32
+from ..detector import Detector, default_model_path
 
 
 def load_detector(node: Node, band_wh: tuple[int, int] | None = None) -> Detector:
@@ -15,13 +15,12 @@ def load_detector(node: Node, band_wh: tuple[int, int] | None = None) -> Detecto
     that size makes the first real frame as fast as the rest.
     """
     model = node.declare_parameter("model", "").value or str(default_model_path())
-    backend = node.declare_parameter("backend", "torch").value
-    # fixed-size backends built from a checkpoint are built for the band's own size (no letterbox)
-    imgsz = (round_up32(band_wh[0]), round_up32(band_wh[1])) if band_wh and backend != "torch" and model.endswith(".pt") else None
-    det = Detector.load(
+    # with a known band, a checkpoint is built for the band's own size (no letterbox, also for
+    # fixed-size backends); the detection node learns the band only later and uses the model's size
+    load = (lambda path, **kw: Detector.load_for_band(path, band_wh, **kw)) if band_wh else Detector.load
+    det = load(
         model,
-        backend=backend,
-        imgsz=imgsz,
+        backend=node.declare_parameter("backend", "torch").value,
         device=node.declare_parameter("device", "cpu").value,
         fp16=bool(node.declare_parameter("fp16", False).value),
         conf=float(node.declare_parameter("conf", 0.25).value),
