@@ -288,3 +288,13 @@ def test_detect_command_onnx_band_runs_at_its_own_size(trained, tmp_path):
     assert len(got["torch"][0]) == len(got["onnx"][0]) > 0
     np.testing.assert_allclose(got["onnx"][0], got["torch"][0], atol=0.02)
     np.testing.assert_allclose(got["onnx"][1], got["torch"][1], atol=2e-3)
+
+
+def test_load_for_band_sizes_checkpoints_but_not_exported_files(trained, tmp_path):
+    ckpt, _ = trained
+    band = (500, 190)  # -> padded to 512x192
+    for backend in ("torch", "onnx"):
+        assert Detector.load_for_band(ckpt, band, backend=backend).imgsz == (512, 192)
+    onnx_path = export_model(load_checkpoint(ckpt).build_model(), SMOKE_SIZE, "onnx", tmp_path / "m.onnx")
+    write_sidecar(onnx_path, list(CLASS_NAMES), SMOKE_SIZE)
+    assert Detector.load_for_band(onnx_path, band, backend="onnx").imgsz == SMOKE_SIZE  # a fixed graph keeps its size
