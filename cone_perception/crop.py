@@ -21,6 +21,11 @@ ALLOWED_DOWNSCALE = (1, 2, 4)
 #: The thesis's runtime-table inputs: whole image or the band, each at full or half resolution.
 INPUT_SETTINGS = ("full", "half", "crop", "crop_half")
 
+#: A cone cut by the edge of a band or a training window still counts when at least this
+#: fraction of its box area remains inside (training keeps such boxes clipped; ``eval --band``
+#: scores them clipped and ignores the rest).
+MIN_VISIBLE = 0.3
+
 
 @dataclass(frozen=True)
 class CropSpec:

@@ -366,7 +366,8 @@ def write_report(res: EvalResult, out: Path, pred_source: str, gt_source: str) -
     md = [
         "# Evaluation report", "",
         f"- predictions: `{pred_source}`", f"- ground truth: `{gt_source}`",
-        f"- images {inp['images']}, ground-truth cones {inp['gt_boxes']} (+ {inp['gt_ignored_boxes']} ignored: too small or hidden), "
+        f"- images {inp['images']}, ground-truth cones {inp['gt_boxes']} (+ {inp['gt_ignored_boxes']} ignored: too small, hidden"
+        f"{' or outside the band' if 'band_rows' in m.get('ground_truth', {}) else ''}), "
         f"detections {inp['predictions']} ({inp['predictions_at_conf']} with score >= {inp['conf']:g})",
         f"- operating point: score >= {inp['conf']:g}, IoU >= {inp['iou']:g}; mAP by pycocotools over all scores",
         f"- calibration: `{inp['calibration']}`" if inp["calibration"] else "- calibration: none",

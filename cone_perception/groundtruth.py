@@ -19,12 +19,13 @@ the file name, or the stem. Every mismatch is an error naming the file and line.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from .classes import NUM_CLASSES
+from .crop import MIN_VISIBLE
 from .errors import ConfigError
 from .predictions import ImagePrediction, iter_json_lines
 from .records import boxes_to_arrays
@@ -77,6 +78,30 @@ class EvalImage:
     pred_scores: np.ndarray  # (K,) float64
     pred_classes: np.ndarray  # (K,) int64
     input_scale: float | None = None  # model input px per image px (from the prediction file)
+
+
+def restrict_to_band(images: list[EvalImage], rows: tuple[int, int], min_visible: float = MIN_VISIBLE) -> tuple[list[EvalImage], int]:
+    """Score only what a band of image rows ``[v0, v1)`` shows (the car's crop).
+
+    Ground-truth boxes are clipped to the band's rows, as training clips a cone cut by its window;
+    a box with less than ``min_visible`` of its height inside becomes an ignore region (no miss, and a
+    detection on it is not false). ``rows`` are px of the prediction's image. Returns the new images
+    and how many boxes became ignore regions.
+    """
+    v0, v1 = float(rows[0]), float(rows[1])
+    if not 0 <= v0 < v1:
+        raise ValueError(f"band rows must satisfy 0 <= v0 < v1, got {rows}")
+    out, n_out = [], 0
+    for im in images:
+        b = np.array(im.gt_boxes, np.float64).reshape(-1, 4)
+        h0 = np.maximum(b[:, 3] - b[:, 1], 1e-9)
+        c = b.copy()
+        c[:, 1] = c[:, 1].clip(v0, v1)
+        c[:, 3] = c[:, 3].clip(v0, v1)
+        outside = (c[:, 3] - c[:, 1]) < min_visible * h0
+        n_out += int((outside & ~im.gt_ignore).sum())
+        out.append(replace(im, gt_boxes=np.where(outside[:, None], b, c), gt_ignore=im.gt_ignore | outside))
+    return out, n_out
 
 
 def load_ground_truth(path: str | os.PathLike, names: list[str] | None = None) -> GroundTruth:

@@ -132,6 +132,9 @@ def test_table_applies_each_setting_to_the_val_frames(tmp_path, monkeypatch) -> 
     assert rows["full"]["map50"] == pytest.approx(1 / 3, abs=0.02)
     for s in ("half", "crop", "crop_half"):
         assert rows[s]["recall"] == 0.0 and rows[s]["map50"] == pytest.approx(0.0, abs=1e-9)
+    # in band: only the crop settings are scored a second time, on what the band shows
+    assert rows["full"]["map50_in_band"] is None and rows["half"]["recall_min_height_in_band"] is None
+    assert rows["crop"]["map50_in_band"] == pytest.approx(0.0, abs=1e-9)
     # the val frames were cut with the --band rows (96..672), the bench frames with the calibration's (384..960)
     preds = [json.loads(line) for line in (out / "preds" / "stub_crop.jsonl").read_text().splitlines()]
     assert len(preds) == 2 and preds[0]["boxes"][0][:4] == pytest.approx([x1, y1 + 96, x2, y2 + 96])

@@ -411,3 +411,48 @@ def test_prediction_input_scale_round_trip_and_bad_value(tmp_path):
     p.write_text(json.dumps({"image": "a", "width": 4, "height": 4, "boxes": [], "input_scale": -1}) + "\n")
     with pytest.raises(ConfigError, match="line 1.*input_scale"):
         list(read_predictions(p))
+
+
+def test_eval_band_clips_cut_cones_and_ignores_those_outside(tmp_path, capsys):
+    """`eval --band`: a detector that sees only the band, boxes clipped there as training clips them."""
+    from cone_perception.groundtruth import EvalImage, restrict_to_band
+
+    band = (300, 700)
+    gt = np.array([
+        [100, 400, 140, 460],  # inside: found
+        [300, 660, 360, 760],  # 40 % inside, cut by the band's bottom: found as its visible part (660-700)
+        [500, 680, 560, 780],  # 20 % inside: not visible to the car -> ignore region
+        [700, 800, 760, 880],  # wholly below the band -> ignore region
+        [900, 500, 930, 540],  # inside: missed
+    ], float)
+    cls = np.full(5, BLUE)
+    seen = np.array([[100, 400, 140, 460], [300, 660, 360, 700]], float)
+
+    # library: clipped boxes and ignore flags
+    im = EvalImage("a", W, H, gt, cls, np.zeros(5, bool), None, seen, np.ones(2), np.full(2, BLUE))
+    (out,), n = restrict_to_band([im], band)
+    assert n == 2 and out.gt_ignore.tolist() == [False, False, True, True, False]
+    assert out.gt_boxes[1].tolist() == [300, 660, 360, 700] and out.gt_boxes[0].tolist() == gt[0].tolist()
+    with pytest.raises(ValueError, match="band rows"):
+        restrict_to_band([im], (700, 300))
+
+    # command: without --band the cut cones are misses; with it, recall 2 / 3
+    root = tmp_path / "ds"
+    (root / "images").mkdir(parents=True)
+    (root / "labels").mkdir()
+    (root / "images" / "a.jpg").write_bytes(b"")
+    (root / "labels" / "a.txt").write_text("".join(
+        f"0 {(b[0] + b[2]) / 2 / W:.6f} {(b[1] + b[3]) / 2 / H:.6f} {(b[2] - b[0]) / W:.6f} {(b[3] - b[1]) / H:.6f}\n" for b in gt))
+    pred = write_pred(tmp_path / "p.jsonl", {"a.jpg": box_rows(seen, [BLUE, BLUE])})
+    for extra, n_gt, recall in (([], 5, 1 / 5), (["--band", "300,700"], 3, 2 / 3)):
+        out_dir = tmp_path / f"r{len(extra)}"
+        assert run_eval("--pred", pred, "--gt", root, "--gt-names", "blue_cone", "--out", out_dir, *extra) == 0
+        m = json.loads((out_dir / "metrics.json").read_text())
+        assert m["inputs"]["gt_boxes"] == n_gt
+        assert m["detection"]["operating_point"]["per_class"]["all"]["recall"] == pytest.approx(recall)
+    assert m["ground_truth"]["band_rows"] == [300, 700] and m["ground_truth"]["ignored_outside_band"] == 2
+    assert "outside the band" in (out_dir / "report.md").read_text()
+    capsys.readouterr()
+    with pytest.raises(SystemExit):
+        run_eval("--pred", pred, "--gt", root, "--out", tmp_path / "bad", "--band", "700,300")
+    assert "V0 < V1" in capsys.readouterr().err

@@ -1,7 +1,7 @@
 """``cone-perception eval``: a prediction file against ground truth -> report.md, metrics.json, PNGs.
 
   cone-perception eval --pred FILE.jsonl --gt DIR_OR_GT.jsonl [--calib FILE] --out DIR
-                       [--conf 0.25] [--iou 0.5] [--gt-names A,B,..] [--only-predicted]
+                       [--conf 0.25] [--iou 0.5] [--gt-names A,B,..] [--band V0,V1] [--only-predicted]
 
 Ground truth: a YOLO label folder (images/, labels/, data.yaml) or a synthetic gt.jsonl (with cone
 positions: localisation and the thesis's pair metric too). See ``cone_perception/eval_report.py``.
@@ -23,6 +23,16 @@ def _unit(text: str) -> float:
     return v
 
 
+def _rows(text: str) -> tuple[int, int]:
+    try:
+        v0, v1 = (int(t) for t in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be two integer rows V0,V1, got {text!r}") from None
+    if not 0 <= v0 < v1:
+        raise argparse.ArgumentTypeError(f"needs 0 <= V0 < V1, got {v0},{v1}")
+    return v0, v1
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.description = ("Evaluate a prediction file of `cone-perception detect` against ground truth: mAP (pycocotools), "
                      "precision/recall/F1, confusion matrix, PR curves, the same per distance group, localisation error "
@@ -40,6 +50,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--gt-names", default=None,
                    help="YOLO folder without data.yaml: its class names in id order, comma-separated "
                         "(e.g. blue_cone,large_orange_cone,orange_cone,yellow_cone)")
+    p.add_argument("--band", type=_rows, default=None, metavar="V0,V1",
+                   help="score only what the car's band of image rows V0-V1 shows (as `detect --crop V0,V1`): "
+                        "ground-truth boxes are clipped to it, and those less than 30 %% inside become ignore regions "
+                        "(default: every labelled cone of the frame counts)")
     p.add_argument("--only-predicted", action="store_true",
                    help="evaluate only the ground-truth images the prediction file has lines for (default: all must be there)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -47,18 +61,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def evaluate_predictions(pred: Path, gt_path: Path, gt_names: str | None = None, calib_arg: str | None = None,
                          conf: float = 0.25, iou: float = 0.5, only_predicted: bool = False, progress: bool = True,
-                         verbose: bool = True):
+                         verbose: bool = True, band: tuple[int, int] | None = None):
     """A prediction file against ground truth -> :class:`~cone_perception.eval_report.EvalResult`, as ``eval``
-    computes it (``gt_names`` comma-separated). Also used by ``bench table``."""
+    computes it (``gt_names`` comma-separated; ``band``: rows as ``eval --band``). Also used by ``bench table``."""
     from ..calib import load_calibration
     from ..eval_report import evaluate
-    from ..groundtruth import load_ground_truth, pair_with_predictions
+    from ..groundtruth import load_ground_truth, pair_with_predictions, restrict_to_band
     from ..predictions import read_predictions
 
     names = [n.strip() for n in gt_names.split(",") if n.strip()] if gt_names else None
     gt = load_ground_truth(gt_path, names)
     preds = list(read_predictions(pred))
     images, counts = pair_with_predictions(gt, preds, str(pred), only_predicted)
+    if band is not None:
+        images, n_out = restrict_to_band(images, band)
+        counts = {**counts, "band_rows": list(band), "ignored_outside_band": n_out}
     calib_path = calib_arg if calib_arg is not None else gt.calib_path
     calib = load_calibration(calib_path) if calib_path is not None else None
     if verbose and calib is not None and calib_arg is None:
@@ -82,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
     if args.out.exists() and not args.out.is_dir():
         raise ConfigError(str(args.out), None, "output exists and is not a directory")
     res = evaluate_predictions(args.pred, args.gt, args.gt_names, args.calib, args.conf, args.iou, args.only_predicted,
-                               progress=not args.no_progress)
+                               progress=not args.no_progress, band=args.band)
     try:
         files = write_report(res, args.out, str(args.pred), str(args.gt))
     except OSError as e:

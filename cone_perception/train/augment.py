@@ -14,6 +14,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from ..crop import MIN_VISIBLE
+
 PAD_VALUE = 114
 
 
@@ -28,7 +30,7 @@ class AugmentConfig:
     blur: float = 0.05
     noise: float = 0.1
     cutout: float = 0.2
-    min_visible: float = 0.3  # keep a clipped box if this fraction of it remains in the frame
+    min_visible: float = MIN_VISIBLE  # keep a clipped box if this fraction of it remains in the frame
     min_size_px: float = 2.0
 
     @classmethod
@@ -115,7 +117,7 @@ def mosaic4(parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]], out_wh: tupl
         bb[:, 0::2] = bb[:, 0::2].clip(x1a, x2a)
         bb[:, 1::2] = bb[:, 1::2].clip(y1a, y2a)
         vis = (bb[:, 2] - bb[:, 0]) * (bb[:, 3] - bb[:, 1])
-        keep = vis >= 0.3 * np.maximum(area0, 1e-6)
+        keep = vis >= MIN_VISIBLE * np.maximum(area0, 1e-6)
         all_b.append(bb[keep])
         all_c.append(c[keep])
     return canvas, np.concatenate(all_b).reshape(-1, 4), np.concatenate(all_c), (xc, yc)
