@@ -27,7 +27,7 @@ from .calib import Calibration
 from .classes import CLASS_NAMES, CLASS_RGBA
 from .evaluation import DISTANCE_GROUPS, LocalisationReport, PairDistanceReport, distance_group
 from .groundtruth import EvalImage
-from .metrics import RECALL_POINTS, ImageDetections, coco_map, greedy_match, operating_point
+from .metrics import RECALL_POINTS, ImageDetections, coco_map, greedy_match, match_by_class, operating_point
 from .records import CONE_DTYPE, boxes_from_arrays
 
 FILES = {
@@ -38,6 +38,7 @@ FILES = {
     "by_distance": "detection_by_distance.png",
     "localisation": "localisation_boxplots.png",
     "pairs": "pair_distance_error.png",
+    "worst": "worst_frames.jpg",
 }
 
 
@@ -48,6 +49,7 @@ class EvalResult:
     loc: LocalisationReport | None = None  # per-pair errors for the box plots
     pairs: PairDistanceReport | None = None
     notes: list[str] = field(default_factory=list)
+    images: list[EvalImage] = field(default_factory=list)  # what was scored (pictures of the worst frames)
 
 
 def _to_calib_px(boxes_px: np.ndarray, width: int, height: int, calib: Calibration) -> np.ndarray:
@@ -198,7 +200,7 @@ def evaluate(images: list[EvalImage], calib: Calibration | None, conf: float = 0
     if loc is not None:
         metrics["localisation"] = loc.summary()
         metrics["pair_distance"] = pairs.summary()
-    return EvalResult(metrics, confusion, loc, pairs, notes)
+    return EvalResult(metrics, confusion, loc, pairs, notes, images)
 
 
 # ------------------------------------------------------------------ pictures
@@ -354,8 +356,78 @@ def _detection_table(d: dict) -> list[str]:
     return rows
 
 
-def write_report(res: EvalResult, out: Path, pred_source: str, gt_source: str) -> dict[str, Path]:
-    """``metrics.json``, ``report.md`` and the PNGs into ``out``; returns the written files by key."""
+def frame_errors(im: EvalImage, conf: float, iou: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One image at the operating point (class-aware, as precision / recall): masks of true-positive and
+    false-positive detections (over ``im.pred_*``) and of missed cones (over ``im.gt_*``)."""
+    keep = np.flatnonzero(im.pred_scores >= conf)
+    keep = keep[np.argsort(-im.pred_scores[keep], kind="stable")]
+    to_gt, ignored = match_by_class(im.pred_boxes[keep], im.pred_classes[keep], im.gt_boxes, im.gt_classes, im.gt_ignore, iou)
+    tp, fp = np.zeros(len(im.pred_boxes), bool), np.zeros(len(im.pred_boxes), bool)
+    tp[keep[to_gt >= 0]] = True
+    fp[keep[(to_gt < 0) & ~ignored]] = True
+    missed = ~im.gt_ignore.copy()
+    missed[to_gt[to_gt >= 0]] = False
+    return tp, fp, missed
+
+
+def plot_worst_frames(images: list[EvalImage], conf: float, iou: float, path: Path, n: int = 6,
+                      band_rows: tuple[int, int] | None = None) -> tuple[Path | None, list[dict]]:
+    """The ``n`` frames with the most misses + false detections, drawn: detections found (green, thin),
+    false detections (red, class and score), missed cones (magenta, class), ignore regions (grey), the
+    band's rows (cyan). Frames whose image file can't be read are skipped. -> (file or None, the frames' counts)."""
+    import cv2
+
+    from .vis import frame_strip
+
+    scored = []
+    for k, im in enumerate(images):
+        tp, fp, missed = frame_errors(im, conf, iou)
+        scored.append((int(fp.sum() + missed.sum()), k, tp, fp, missed))
+    scored.sort(key=lambda t: (-t[0], t[1]))
+    tiles, listed = [], []
+    for errors, k, tp, fp, missed in scored:
+        if len(tiles) == n or errors == 0:
+            break
+        im = images[k]
+        img = cv2.imread(im.path) if im.path else None
+        if img is None:
+            continue
+        sx, sy = img.shape[1] / im.width, img.shape[0] / im.height
+        s = np.array([sx, sy, sx, sy])
+        t = max(1, round(img.shape[1] / 960))
+
+        def rect(b, color, width, text=None):
+            x1, y1, x2, y2 = (int(round(v)) for v in b * s)
+            cv2.rectangle(img, (x1, y1), (x2, y2), color, width, cv2.LINE_AA)
+            if text:
+                cv2.putText(img, text, (x1, max(12, y1 - 4)), cv2.FONT_HERSHEY_SIMPLEX, 0.4 * t, color, t, cv2.LINE_AA)
+
+        if band_rows is not None:
+            for v in band_rows:
+                cv2.line(img, (0, int(round(v * sy))), (img.shape[1], int(round(v * sy))), (255, 255, 0), t, cv2.LINE_AA)
+        for b in im.gt_boxes[im.gt_ignore]:
+            rect(b, (128, 128, 128), t)
+        for b in im.pred_boxes[tp]:
+            rect(b, (0, 200, 0), t)
+        for b, c, sc in zip(im.pred_boxes[fp], im.pred_classes[fp], im.pred_scores[fp]):
+            rect(b, (0, 0, 255), t, f"{CLASS_NAMES[c]} {sc:.2f}")
+        for b, c in zip(im.gt_boxes[missed], im.gt_classes[missed]):
+            rect(b, (255, 0, 255), 2 * t, f"missed {CLASS_NAMES[c]}")
+        head = f"{Path(im.image).name}: {int(missed.sum())} missed, {int(fp.sum())} false, {int(tp.sum())} found"
+        cv2.putText(img, head, (10, 30 * t), cv2.FONT_HERSHEY_SIMPLEX, 0.8 * t, (0, 0, 0), 4 * t, cv2.LINE_AA)
+        cv2.putText(img, head, (10, 30 * t), cv2.FONT_HERSHEY_SIMPLEX, 0.8 * t, (255, 255, 255), t, cv2.LINE_AA)
+        tiles.append(img)
+        listed.append({"image": im.image, "missed": int(missed.sum()), "false": int(fp.sum()), "found": int(tp.sum())})
+    if not tiles:
+        return None, listed
+    path.parent.mkdir(parents=True, exist_ok=True)
+    cv2.imwrite(str(path), frame_strip(tiles, width=960, cols=2), [cv2.IMWRITE_JPEG_QUALITY, 88])
+    return path, listed
+
+
+def write_report(res: EvalResult, out: Path, pred_source: str, gt_source: str, worst: int = 6) -> dict[str, Path]:
+    """``metrics.json``, ``report.md`` and the PNGs into ``out`` (with ``worst`` > 0 also a picture of the
+    frames with most errors); returns the written files by key."""
     out.mkdir(parents=True, exist_ok=True)
     m = res.metrics
     inp = m["inputs"]
@@ -367,7 +439,8 @@ def write_report(res: EvalResult, out: Path, pred_source: str, gt_source: str) -
         "# Evaluation report", "",
         f"- predictions: `{pred_source}`", f"- ground truth: `{gt_source}`",
         f"- images {inp['images']}, ground-truth cones {inp['gt_boxes']} (+ {inp['gt_ignored_boxes']} ignored: too small, hidden"
-        f"{' or outside the band' if 'band_rows' in m.get('ground_truth', {}) else ''}), "
+        f"{' or outside the band' if 'band_rows' in m.get('ground_truth', {}) else ''}"
+        f"{' or below --min-height' if 'min_height_px' in m.get('ground_truth', {}) else ''}), "
         f"detections {inp['predictions']} ({inp['predictions_at_conf']} with score >= {inp['conf']:g})",
         f"- operating point: score >= {inp['conf']:g}, IoU >= {inp['iou']:g}; mAP by pycocotools over all scores",
         f"- calibration: `{inp['calibration']}`" if inp["calibration"] else "- calibration: none",
@@ -424,6 +497,20 @@ def write_report(res: EvalResult, out: Path, pred_source: str, gt_source: str) -
             md.append(f"| {name} | {s['n_pairs']} | {s['n_measured']} | {_f(s['median_err_m'])} | {_f(s['median_abs_err_m'])} | "
                       f"{_f(s['mean_abs_err_m'])} | {_f(s['p90_abs_err_m'])} |")
         md += ["", f"![pair distance error]({FILES['pairs']})"]
+    if worst > 0:
+        band = m.get("ground_truth", {}).get("band_rows")
+        p, listed = plot_worst_frames(res.images, inp["conf"], inp["iou"], out / FILES["worst"], worst,
+                                      tuple(band) if band else None)
+        md += ["", "## Frames with the most errors", ""]
+        if p is None:
+            md.append("No frame with errors could be drawn (no errors, or the image files are not readable).")
+        else:
+            files["worst"] = p
+            md += [f"At the operating point: green = found, red = false detection, magenta = missed cone, grey = ignore region"
+                   f"{', cyan = the band' if band else ''}.", "",
+                   "| frame | missed | false | found |", "|---|---|---|---|"]
+            md += [f"| {d['image']} | {d['missed']} | {d['false']} | {d['found']} |" for d in listed]
+            md += ["", f"![frames with the most errors]({FILES['worst']})"]
     md += ["", f"Every figure is in [{FILES['metrics']}]({FILES['metrics']}).", ""]
     (out / FILES["report"]).write_text("\n".join(md), encoding="utf-8")
     files["report"] = out / FILES["report"]

@@ -48,6 +48,7 @@ class GroundTruthImage:
     ignore: np.ndarray  # (M,) bool
     xy_m: np.ndarray | None = None  # (M, 2) float64 rear_axle m, None without positions
     where: str = ""  # file (and line) it came from
+    path: str | None = None  # the image file, where known (pictures in the report)
 
 
 @dataclass
@@ -78,6 +79,7 @@ class EvalImage:
     pred_scores: np.ndarray  # (K,) float64
     pred_classes: np.ndarray  # (K,) int64
     input_scale: float | None = None  # model input px per image px (from the prediction file)
+    path: str | None = None  # the image file, where known
 
 
 def restrict_to_band(images: list[EvalImage], rows: tuple[int, int], min_visible: float = MIN_VISIBLE) -> tuple[list[EvalImage], int]:
@@ -102,6 +104,36 @@ def restrict_to_band(images: list[EvalImage], rows: tuple[int, int], min_visible
         n_out += int((outside & ~im.gt_ignore).sum())
         out.append(replace(im, gt_boxes=np.where(outside[:, None], b, c), gt_ignore=im.gt_ignore | outside))
     return out, n_out
+
+
+def restrict_to_min_height(images: list[EvalImage], min_height: float, iou: float = 0.5) -> tuple[list[EvalImage], int, int]:
+    """Score only cones at least ``min_height`` px tall at the model input (image px x ``input_scale``;
+    image px where the prediction file has no scale), the way COCO scores an area range.
+
+    Shorter ground-truth boxes become ignore regions; a shorter detection is dropped unless it overlaps
+    (IoU >= ``iou``) a kept box of its class, so a cone of 12.5 px found as 11.5 px still counts.
+    Returns the new images, the boxes made ignore regions and the detections dropped.
+    """
+    from .metrics import box_iou
+
+    if not min_height > 0:
+        raise ValueError(f"min_height must be > 0 px, got {min_height}")
+    out, n_gt, n_pred = [], 0, 0
+    for im in images:
+        s = im.input_scale or 1.0
+        small_gt = (im.gt_boxes[:, 3] - im.gt_boxes[:, 1]) * s < min_height
+        ign = im.gt_ignore | small_gt
+        n_gt += int((small_gt & ~im.gt_ignore).sum())
+        small_pred = (im.pred_boxes[:, 3] - im.pred_boxes[:, 1]) * s < min_height
+        keep = ~small_pred
+        if small_pred.any() and (~ign).any():
+            ious = box_iou(im.pred_boxes[small_pred], im.gt_boxes[~ign])
+            same = im.pred_classes[small_pred][:, None] == im.gt_classes[~ign][None, :]
+            keep[np.flatnonzero(small_pred)] = np.any((ious >= iou) & same, axis=1)
+        n_pred += int((~keep).sum())
+        out.append(replace(im, gt_ignore=ign, pred_boxes=im.pred_boxes[keep], pred_scores=im.pred_scores[keep],
+                           pred_classes=im.pred_classes[keep]))
+    return out, n_gt, n_pred
 
 
 def load_ground_truth(path: str | os.PathLike, names: list[str] | None = None) -> GroundTruth:
@@ -155,7 +187,7 @@ def _load_yolo(root: Path, names: list[str] | None) -> GroundTruth:
             boxes = np.c_[cx - w / 2, cy - h / 2, cx + w / 2, cy + h / 2].clip(0.0, 1.0).reshape(-1, 4)
             rel = img.relative_to(root).as_posix()
             out.append(GroundTruthImage(rel, None, None, boxes, c.astype(np.int64), np.zeros(len(c), bool),
-                                        None, str(ent.labels_dir / f"{img.stem}.txt")))
+                                        None, str(ent.labels_dir / f"{img.stem}.txt"), str(img)))
     return GroundTruth(str(root), "yolo", out, _beside(root, "calib.yaml"), info)
 
 
@@ -182,7 +214,8 @@ def _load_jsonl(path: Path) -> GroundTruth:
         a = np.asarray(rows, np.float64).reshape(-1, 8)
         wh = a[:, 2:4] - a[:, 0:2]
         ignore = (wh[:, 0] < LABEL_MIN_BOX_PX) | (wh[:, 1] < LABEL_MIN_BOX_PX) | (a[:, 6] < LABEL_MIN_VISIBLE)
-        out.append(GroundTruthImage(str(d["image"]), W, H, a[:, :4], a[:, 7].astype(np.int64), ignore, a[:, 4:6], f"{src}: {where}"))
+        out.append(GroundTruthImage(str(d["image"]), W, H, a[:, :4], a[:, 7].astype(np.int64), ignore, a[:, 4:6], f"{src}: {where}",
+                                    str(path.parent / str(d["image"]))))
     if not out:
         raise ConfigError(src, None, "no ground-truth lines")
     stem = path.name[: -len("gt.jsonl")] if path.name.endswith("gt.jsonl") else ""
@@ -243,7 +276,7 @@ def pair_with_predictions(gt: GroundTruth, preds: list[ImagePrediction], pred_so
             resized += int((g.width, g.height) != (p.width, p.height))
         b, s, c = boxes_to_arrays(p.boxes)
         out.append(EvalImage(p.image, p.width, p.height, g.boxes * np.array([sx, sy, sx, sy]), g.class_ids, g.ignore,
-                             g.xy_m, b.astype(np.float64), s.astype(np.float64), c, p.input_scale))
+                             g.xy_m, b.astype(np.float64), s.astype(np.float64), c, p.input_scale, g.path))
     missing = [g.image for k, g in enumerate(gt.images) if k not in seen]
     if missing and not only_predicted:
         raise ConfigError(pred_source, None, f"has no line for {len(missing)} of {len(gt.images)} ground-truth images of {gt.source} "

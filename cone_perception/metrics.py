@@ -151,6 +151,19 @@ def _prf(tp: int, fp: int, fn: int) -> dict:
     return {"tp": int(tp), "fp": int(fp), "fn": int(fn), "precision": p, "recall": r, "f1": f1}
 
 
+def box_iou(a: np.ndarray, b: np.ndarray, b_ignore: np.ndarray | None = None) -> np.ndarray:
+    """(K, M) IoU of x1 y1 x2 y2 boxes, as COCO computes it; against an ignore box (``b_ignore``) the
+    overlap is divided by the first box's own area instead."""
+    from pycocotools import mask as mask_utils
+
+    a, b = np.asarray(a, np.float64).reshape(-1, 4), np.asarray(b, np.float64).reshape(-1, 4)
+    if len(a) == 0 or len(b) == 0:
+        return np.zeros((len(a), len(b)))
+    crowd = np.zeros(len(b), np.uint8) if b_ignore is None else np.asarray(b_ignore, bool).reshape(-1).astype(np.uint8)
+    xywh = lambda x: np.c_[x[:, :2], x[:, 2:] - x[:, :2]]  # noqa: E731
+    return np.asarray(mask_utils.iou(xywh(a), xywh(b), crowd.tolist())).reshape(len(a), len(b))
+
+
 def greedy_match(pred_boxes: np.ndarray, gt_boxes: np.ndarray, gt_ignore: np.ndarray, iou: float) -> tuple[np.ndarray, np.ndarray]:
     """COCO's matching at one IoU threshold, predictions given best score first.
 
@@ -159,15 +172,12 @@ def greedy_match(pred_boxes: np.ndarray, gt_boxes: np.ndarray, gt_ignore: np.nda
     Boxes x1 y1 x2 y2 px: ``pred_boxes`` (K, 4), ``gt_boxes`` (M, 4), ``gt_ignore`` (M,) bool.
     Returns ((K,) int ground-truth index or -1, (K,) bool ignored).
     """
-    from pycocotools import mask as mask_utils
-
     pb, gb = np.asarray(pred_boxes, np.float64).reshape(-1, 4), np.asarray(gt_boxes, np.float64).reshape(-1, 4)
     ign = np.asarray(gt_ignore, bool).reshape(-1)
     to_gt, ignored = np.full(len(pb), -1, np.int64), np.zeros(len(pb), bool)
     if len(pb) == 0 or len(gb) == 0:
         return to_gt, ignored
-    xywh = lambda b: np.c_[b[:, :2], b[:, 2:] - b[:, :2]]  # noqa: E731
-    ious = np.asarray(mask_utils.iou(xywh(pb), xywh(gb), ign.astype(np.uint8).tolist())).reshape(len(pb), len(gb))
+    ious = box_iou(pb, gb, ign)
     used = ign.copy()
     for k in range(len(pb)):
         cand = np.where(used, -1.0, ious[k])
@@ -176,6 +186,22 @@ def greedy_match(pred_boxes: np.ndarray, gt_boxes: np.ndarray, gt_ignore: np.nda
             to_gt[k], used[j] = j, True
         elif np.any(ious[k, ign] >= iou):
             ignored[k] = True
+    return to_gt, ignored
+
+
+def match_by_class(pred_boxes: np.ndarray, pred_classes: np.ndarray, gt_boxes: np.ndarray, gt_classes: np.ndarray,
+                   gt_ignore: np.ndarray, iou: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`greedy_match` within each class (predictions best score first): a prediction matches only a
+    box of its own class. Returns ((K,) ground-truth index into ``gt_boxes`` or -1, (K,) bool ignored)."""
+    pb, gb = np.asarray(pred_boxes, np.float64).reshape(-1, 4), np.asarray(gt_boxes, np.float64).reshape(-1, 4)
+    pc, gc = np.asarray(pred_classes, np.int64).reshape(-1), np.asarray(gt_classes, np.int64).reshape(-1)
+    gi = np.asarray(gt_ignore, bool).reshape(-1)
+    to_gt, ignored = np.full(len(pb), -1, np.int64), np.zeros(len(pb), bool)
+    for c in np.unique(pc):
+        mp, mg = np.flatnonzero(pc == c), np.flatnonzero(gc == c)
+        t, ig = greedy_match(pb[mp], gb[mg], gi[mg], iou)
+        to_gt[mp] = np.where(t >= 0, mg[np.maximum(t, 0)] if len(mg) else -1, -1)
+        ignored[mp] = ig
     return to_gt, ignored
 
 
@@ -192,12 +218,13 @@ def operating_point(images: list[ImageDetections], conf: float = 0.25, iou: floa
         keep = np.flatnonzero(ps >= conf)
         keep = keep[np.argsort(-ps[keep], kind="stable")]
         pb, pc = np.asarray(im.pred_boxes, np.float64).reshape(-1, 4)[keep], np.asarray(im.pred_classes, np.int64).reshape(-1)[keep]
-        for c in range(C):  # class-aware: precision / recall / F1
-            mp, mg = pc == c, gc == c
-            to_gt, ignored = greedy_match(pb[mp], gb[mg], gi[mg], iou)
-            tp[c] += int((to_gt >= 0).sum())
-            fp[c] += int(((to_gt < 0) & ~ignored).sum())
-            fn[c] += int((~gi[mg]).sum()) - int((to_gt >= 0).sum())
+        to_gt_c, ignored_c = match_by_class(pb, pc, gb, gc, gi, iou)  # class-aware: precision / recall / F1
+        hit_c = np.zeros(len(gb), bool)
+        hit_c[to_gt_c[to_gt_c >= 0]] = True
+        for c in range(C):
+            tp[c] += int((hit_c & (gc == c)).sum())
+            fp[c] += int(((to_gt_c < 0) & ~ignored_c & (pc == c)).sum())
+            fn[c] += int((~hit_c & ~gi & (gc == c)).sum())
         to_gt, ignored = greedy_match(pb, gb, gi, iou)  # class-agnostic: confusion matrix
         for k, j in enumerate(to_gt):
             if j >= 0:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -456,3 +457,54 @@ def test_eval_band_clips_cut_cones_and_ignores_those_outside(tmp_path, capsys):
     with pytest.raises(SystemExit):
         run_eval("--pred", pred, "--gt", root, "--out", tmp_path / "bad", "--band", "700,300")
     assert "V0 < V1" in capsys.readouterr().err
+
+
+def test_min_height_scores_cones_as_coco_scores_an_area_range():
+    from cone_perception.groundtruth import EvalImage, restrict_to_min_height
+
+    # image px; input_scale 0.5 -> heights at the model input 30, 10, 25 px
+    gt = np.array([[0, 0, 40, 60], [100, 0, 110, 20], [200, 0, 230, 50]], float)
+    pred = np.array([
+        [0, 0, 40, 60],       # big cone found
+        [100, 0, 110, 20],    # on the small cone: dropped (its cone is ignored)
+        [200, 2, 230, 48],    # 23 px at the input, cone 25 px: kept
+        [500, 0, 505, 10],    # small, on nothing (an unlabelled far cone): dropped
+        [200, 0, 230, 23.5],  # small (11.75 px), on the kept cone but IoU < 0.5: dropped
+    ], float)
+    im = EvalImage("a", W, H, gt, np.full(3, BLUE), np.zeros(3, bool), None, pred, np.ones(5), np.full(5, BLUE), 0.5)
+    (out,), n_gt, n_pred = restrict_to_min_height([im], 24.0)
+    assert out.gt_ignore.tolist() == [False, True, False] and n_gt == 1 and n_pred == 3
+    assert out.pred_boxes.tolist() == [pred[0].tolist(), pred[2].tolist()]
+    # a small detection that matches a kept cone is kept (COCO: matched before the range applies)
+    im2 = replace(im, pred_boxes=pred[[0, 2]], pred_scores=np.ones(2), pred_classes=np.full(2, BLUE))
+    (out2,), _, dropped = restrict_to_min_height([im2], 24.0)
+    assert dropped == 0 and len(out2.pred_boxes) == 2
+    (out3,), n_gt3, _ = restrict_to_min_height([replace(im, input_scale=None)], 24.0)  # image px
+    assert out3.gt_ignore.tolist() == [False, True, False] and n_gt3 == 1
+    with pytest.raises(ValueError, match="min_height"):
+        restrict_to_min_height([im], 0)
+
+
+def test_worst_frames_picture_ranks_frames_by_errors(tmp_path, scene):
+    import cv2
+
+    boxes, cls = scene
+    root = write_yolo(tmp_path / "ds", {"good": (boxes, cls), "bad": (boxes, cls)}, ["yellow_cone", "blue_cone", "large_orange_cone", "orange_cone"])
+    for name in ("good", "bad"):
+        cv2.imwrite(str(root / "images" / f"{name}.jpg"), np.full((H // 4, W // 4, 3), 90, np.uint8))  # other size: boxes scale
+    pred = write_pred(tmp_path / "p.jsonl", {"good.jpg": box_rows(boxes, cls), "bad.jpg": box_rows(boxes[:7], cls[:7]) + [[5, 5, 50, 50, 0.9, BLUE]]})
+    out = tmp_path / "r"
+    assert run_eval("--pred", pred, "--gt", root, "--out", out, "--worst", "3") == 0
+    report = (out / "report.md").read_text()
+    assert "| bad.jpg | 3 | 1 | 7 |" in report and "| good.jpg" not in report  # a frame without errors is not shown
+    img = cv2.imread(str(out / "worst_frames.jpg"))
+    assert img is not None and img.shape[1] == 2 * 960
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["detection"]["operating_point"]["per_class"]["all"]["fn"] == 3
+    assert run_eval("--pred", pred, "--gt", root, "--out", tmp_path / "r0", "--worst", "0") == 0
+    assert not (tmp_path / "r0" / "worst_frames.jpg").exists()
+    # --min-height through the command: 12 px at the (unscaled) image keeps every cone of this scene
+    assert run_eval("--pred", pred, "--gt", root, "--out", tmp_path / "mh", "--min-height", "12", "--worst", "0") == 0
+    mh = json.loads((tmp_path / "mh" / "metrics.json").read_text())
+    assert mh["ground_truth"]["min_height_px"] == 12 and mh["inputs"]["gt_boxes"] == m["inputs"]["gt_boxes"]
+    assert run_eval("--pred", pred, "--gt", root, "--out", tmp_path / "mh0", "--min-height", "0") == 2

@@ -1,7 +1,7 @@
 """``cone-perception eval``: a prediction file against ground truth -> report.md, metrics.json, PNGs.
 
   cone-perception eval --pred FILE.jsonl --gt DIR_OR_GT.jsonl [--calib FILE] --out DIR
-                       [--conf 0.25] [--iou 0.5] [--gt-names A,B,..] [--band V0,V1] [--only-predicted]
+                       [--conf 0.25] [--iou 0.5] [--gt-names A,B,..] [--band V0,V1] [--min-height PX] [--worst N] [--only-predicted]
 
 Ground truth: a YOLO label folder (images/, labels/, data.yaml) or a synthetic gt.jsonl (with cone
 positions: localisation and the thesis's pair metric too). See ``cone_perception/eval_report.py``.
@@ -56,17 +56,24 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "(default: every labelled cone of the frame counts)")
     p.add_argument("--only-predicted", action="store_true",
                    help="evaluate only the ground-truth images the prediction file has lines for (default: all must be there)")
+    p.add_argument("--min-height", type=float, default=None, metavar="PX",
+                   help="score only cones at least PX tall at the model input, as COCO scores an area range: shorter "
+                        "boxes become ignore regions, shorter detections count only where they match a kept cone "
+                        "(default: every size counts)")
+    p.add_argument("--worst", type=int, default=6, metavar="N",
+                   help="draw the N frames with the most misses + false detections into worst_frames.jpg (default %(default)s; 0 = none)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
 def evaluate_predictions(pred: Path, gt_path: Path, gt_names: str | None = None, calib_arg: str | None = None,
                          conf: float = 0.25, iou: float = 0.5, only_predicted: bool = False, progress: bool = True,
-                         verbose: bool = True, band: tuple[int, int] | None = None):
+                         verbose: bool = True, band: tuple[int, int] | None = None, min_height: float | None = None):
     """A prediction file against ground truth -> :class:`~cone_perception.eval_report.EvalResult`, as ``eval``
-    computes it (``gt_names`` comma-separated; ``band``: rows as ``eval --band``). Also used by ``bench table``."""
+    computes it (``gt_names`` comma-separated; ``band``, ``min_height``: as ``eval --band``, ``--min-height``). Also used by ``bench table``."""
     from ..calib import load_calibration
+    from ..errors import ConfigError
     from ..eval_report import evaluate
-    from ..groundtruth import load_ground_truth, pair_with_predictions, restrict_to_band
+    from ..groundtruth import load_ground_truth, pair_with_predictions, restrict_to_band, restrict_to_min_height
     from ..predictions import read_predictions
 
     names = [n.strip() for n in gt_names.split(",") if n.strip()] if gt_names else None
@@ -76,6 +83,11 @@ def evaluate_predictions(pred: Path, gt_path: Path, gt_names: str | None = None,
     if band is not None:
         images, n_out = restrict_to_band(images, band)
         counts = {**counts, "band_rows": list(band), "ignored_outside_band": n_out}
+    if min_height is not None:
+        if not min_height > 0:
+            raise ConfigError("eval", "--min-height", f"must be > 0 px, got {min_height:g}")
+        images, n_gt, n_pred = restrict_to_min_height(images, min_height, iou)
+        counts = {**counts, "min_height_px": min_height, "ignored_below_min_height": n_gt, "detections_dropped_below_min_height": n_pred}
     calib_path = calib_arg if calib_arg is not None else gt.calib_path
     calib = load_calibration(calib_path) if calib_path is not None else None
     if verbose and calib is not None and calib_arg is None:
@@ -99,9 +111,9 @@ def run(args: argparse.Namespace) -> int:
     if args.out.exists() and not args.out.is_dir():
         raise ConfigError(str(args.out), None, "output exists and is not a directory")
     res = evaluate_predictions(args.pred, args.gt, args.gt_names, args.calib, args.conf, args.iou, args.only_predicted,
-                               progress=not args.no_progress, band=args.band)
+                               progress=not args.no_progress, band=args.band, min_height=args.min_height)
     try:
-        files = write_report(res, args.out, str(args.pred), str(args.gt))
+        files = write_report(res, args.out, str(args.pred), str(args.gt), worst=max(0, args.worst))
     except OSError as e:
         raise ConfigError(str(args.out), None, f"cannot write: {e.strerror}") from None
     print(format_summary(res))
