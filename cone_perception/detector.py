@@ -104,8 +104,9 @@ def preprocess(bgr: np.ndarray, in_w: int, in_h: int) -> tuple[np.ndarray, Lette
 
 
 class _TorchRunner:
-    def __init__(self, module: Callable, device: str, fp16: bool, channels_last: bool):
+    def __init__(self, module: Callable, device: str, fp16: bool, channels_last: bool, bf16: bool = False):
         self.module, self.device, self.fp16, self.channels_last = module, torch.device(device), fp16, channels_last
+        self.bf16 = bf16  # CPU bfloat16 autocast (weights stay fp32)
 
     def __call__(self, blob: np.ndarray) -> np.ndarray:
         x = torch.from_numpy(blob).to(self.device)
@@ -113,7 +114,7 @@ class _TorchRunner:
             x = x.contiguous(memory_format=torch.channels_last)
         if self.fp16:
             x = x.half()
-        with torch.inference_mode():
+        with torch.inference_mode(), torch.autocast("cpu", dtype=torch.bfloat16, enabled=self.bf16):
             y = self.module(x)
         if isinstance(y, (list, tuple)):
             y = y[0]
@@ -230,6 +231,7 @@ class Detector:
         self.source = source
         self.conf, self.iou, self.max_det = float(conf), float(iou), int(max_det)
         self.checkpoint = checkpoint
+        self.precision = "fp32"  # what the network computes in: fp32, fp16 (CUDA) or bf16 (CPU autocast)
         self.timing: dict[str, float] = {"preprocess_ms": 0.0, "forward_ms": 0.0, "postprocess_ms": 0.0}
         self._said: set[tuple] = set()
         self._checked_output = False
@@ -256,9 +258,11 @@ class Detector:
         max_det: int = 300,
         imgsz: tuple[int, int] | None = None,
         threads: int | None = None,
+        bf16: bool = False,
     ) -> "Detector":
         """Load a model file for ``backend`` (see module doc). ``imgsz`` (W, H) overrides the input
-        size of fixed-size backends; ``threads`` sets torch / ONNX Runtime intra-op threads."""
+        size of fixed-size backends; ``threads`` sets torch / ONNX Runtime intra-op threads; ``bf16``:
+        bfloat16 autocast on the CPU (backend torch, a checkpoint), fast where the CPU has native bf16."""
         path = Path(path)
         src = str(path)
         if backend not in BACKENDS:
@@ -273,6 +277,8 @@ class Detector:
             raise ConfigError(src, None, f"model file not found; {RESTORE_HINT}")
         kw = dict(conf=conf, iou=iou, max_det=max_det)
         suffix = path.suffix.lower()
+        if bf16 and suffix in (".torchscript", ".ts", ".onnx"):
+            raise ConfigError(src, "bf16", "bf16 runs a checkpoint (.pt) with backend 'torch', not an exported model")
         if suffix in (".torchscript", ".ts", ".onnx"):
             side = path.with_suffix(".yaml")
             if suffix == ".onnx":
@@ -306,7 +312,7 @@ class Detector:
             det._check_output_shape()
             return det
 
-        return cls.from_checkpoint(load_checkpoint(path), backend, device, fp16, imgsz=imgsz, threads=threads, **kw)
+        return cls.from_checkpoint(load_checkpoint(path), backend, device, fp16, imgsz=imgsz, threads=threads, bf16=bf16, **kw)
 
     @classmethod
     def from_checkpoint(
@@ -317,9 +323,13 @@ class Detector:
         fp16: bool = False,
         imgsz: tuple[int, int] | None = None,
         threads: int | None = None,
+        bf16: bool = False,
         **kw,
     ) -> "Detector":
         """A detector from a loaded checkpoint (or one made in memory, see :meth:`from_model`)."""
+        if bf16 and (backend != "torch" or device != "cpu" or fp16):
+            raise ConfigError(ck.path, "bf16", f"bf16 is CPU autocast for backend 'torch' (got backend {backend!r}, "
+                              f"device {device!r}{', fp16' if fp16 else ''}); on a GPU use fp16")
         class_map = class_map_from_names(ck.class_names, ck.path)
         size = (int(imgsz[0]), int(imgsz[1])) if imgsz else ck.imgsz
         model = ck.build_model()
@@ -339,7 +349,9 @@ class Detector:
         if backend != "torch":
             raise ConfigError(ck.path, "backend", f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
         model = model.to(memory_format=torch.channels_last)
-        return cls(_TorchRunner(model, device, fp16, True), class_map, size, False, "torch", ck.path, checkpoint=ck, **kw)
+        det = cls(_TorchRunner(model, device, fp16, True, bf16=bf16), class_map, size, False, "torch", ck.path, checkpoint=ck, **kw)
+        det.precision = "bf16" if bf16 else ("fp16" if fp16 else "fp32")
+        return det
 
     @classmethod
     def from_model(cls, model, imgsz: tuple[int, int], backend: str = "torch", **kw) -> "Detector":

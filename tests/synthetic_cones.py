@@ -93,7 +93,7 @@ def trained_smoke_model() -> tuple[Path, Path, dict]:
     cfg = TrainConfig(
         data=str(root / "overfit.yaml"), out=str(work / "run"), model="p", epochs=40, batch=4, imgsz=SMOKE_SIZE,
         lr0=0.01, workers=0, threads=1, augment=AugmentConfig.off(), warmup_epochs=0, warmup_min_iters=10,
-        patience=1000, close_mosaic=0, ema_tau=20, seed=0,
+        patience=1000, close_mosaic=0, ema_tau=20, seed=0, precision="fp32",
     )
     result = train(cfg, progress=False)
     return work / "run" / "best.pt", root, result

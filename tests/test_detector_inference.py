@@ -56,6 +56,31 @@ def test_backends_give_eager_boxes(trained, backend):
     assert n_boxes >= len(images)
 
 
+def test_bf16_gives_the_fp32_boxes_and_is_refused_where_it_does_not_apply(trained, tmp_path):
+    """bf16 autocast on the CPU: same cones (box decoding stays fp32, so boxes within a fraction of a
+    pixel and scores within bf16 rounding); refused for other backends, GPUs and exported files."""
+    ckpt, images = trained
+    fp32 = Detector.load(ckpt, backend="torch")
+    bf16 = Detector.load(ckpt, backend="torch", bf16=True)
+    assert (fp32.precision, bf16.precision) == ("fp32", "bf16")
+    n = 0
+    for img in images:
+        b0, s0, c0 = _as_arrays(fp32.detect_image(img))
+        b1, s1, c1 = _as_arrays(bf16.detect_image(img))
+        assert len(b0) == len(b1) > 0 and np.array_equal(c0, c1)
+        np.testing.assert_allclose(b1, b0, atol=1.0)
+        np.testing.assert_allclose(s1, s0, atol=0.03)
+        n += len(b0)
+    assert n >= len(images)
+    for kw in ({"backend": "onnx"}, {"backend": "torchscript"}):
+        with pytest.raises(ConfigError, match="bf16"):
+            Detector.load(ckpt, bf16=True, **kw)
+    onnx = tmp_path / "m.onnx"
+    export_model(load_checkpoint(ckpt).build_model(), SMOKE_SIZE, "onnx", onnx)
+    with pytest.raises(ConfigError, match="bf16.*exported"):
+        Detector.load(onnx, backend="onnx", bf16=True)
+
+
 def test_detect_maps_crop_and_downscale_to_full_image(trained):
     ckpt, images = trained
     det = Detector.load(ckpt)
@@ -233,10 +258,10 @@ def test_external_names_embedded_like_other_yolo_tools(tmp_path, trained):
 def test_speed_command_reports_each_case(capsys):
     import json
 
-    rc = cli_main(["speed", "--sizes", "p", "--backends", "torch", "onnx", "--imgsz", "128x64", "--frames", "3", "--json"])
+    rc = cli_main(["speed", "--sizes", "p", "--backends", "torch", "onnx", "--bf16", "--imgsz", "128x64", "--frames", "3", "--json"])
     assert rc == 0
     rows = json.loads(capsys.readouterr().out)
-    assert [(r["model"], r["backend"]) for r in rows] == [("p", "torch"), ("p", "onnx")]
+    assert [(r["model"], r["backend"]) for r in rows] == [("p", "torch"), ("p", "onnx"), ("p", "torch-bf16")]
     assert all(0 < r["min_ms"] <= r["median_ms"] <= r["max_ms"] for r in rows) and rows[0]["gflops"] > 0
 
 

@@ -29,26 +29,63 @@ def test_overfits_8_synthetic_images():
     assert ckpt.is_file() and (ckpt.parent / "last.pt").is_file()
 
 
-def _tiny_cfg(root, out, epochs):
+def _tiny_cfg(root, out, epochs, precision="fp32"):
     return TrainConfig(
         data=str(root / "d.yaml"), out=str(out), model="p", epochs=epochs, batch=4, imgsz=(128, 64), lr0=0.005,
         workers=0, threads=2, warmup_epochs=0, warmup_min_iters=2, close_mosaic=1, seed=3, patience=100,
-        augment=AugmentConfig(mosaic=0.5, cutout=0.5, blur=0.5, noise=0.5),
+        augment=AugmentConfig(mosaic=0.5, cutout=0.5, blur=0.5, noise=0.5), precision=precision,
     )
 
 
-def test_resume_reproduces_the_loss_curve(tmp_path):
+@pytest.mark.parametrize("precision", ["fp32", "bf16"])
+def test_resume_reproduces_the_loss_curve(tmp_path, precision):
     root = write_dataset(tmp_path / "d", n_images=8, size=(128, 64), seed=1)
     (root / "d.yaml").write_text(yaml.safe_dump({"train": [{"path": "."}], "val": [{"path": "."}]}))
-    full = train(_tiny_cfg(root, tmp_path / "full", 4), progress=False)["history"]
-    train(_tiny_cfg(root, tmp_path / "part", 4), progress=False, stop_after=2)  # the session is cut
-    resumed = train(_tiny_cfg(root, tmp_path / "part", 4), resume=True, progress=False)["history"]
+    full = train(_tiny_cfg(root, tmp_path / "full", 4, precision), progress=False)["history"]
+    train(_tiny_cfg(root, tmp_path / "part", 4, precision), progress=False, stop_after=2)  # the session is cut
+    resumed = train(_tiny_cfg(root, tmp_path / "part", 4, "fp32"), resume=True, progress=False)["history"]  # keeps its own
     assert [h["epoch"] for h in resumed] == [0, 1, 2, 3]
     for a, b in zip(full, resumed):
         for k in ("box_loss", "cls_loss", "dfl_loss", "map50"):
             assert a[k] == pytest.approx(b[k], rel=1e-5, abs=1e-6), (a["epoch"], k)
     with pytest.raises(ConfigError, match="nothing to resume"):
         train(_tiny_cfg(root, tmp_path / "none", 2), resume=True, progress=False)
+
+
+def test_bf16_training_learns_and_keeps_fp32_weights(tmp_path):
+    """bf16 autocast (channels-last) overfits the same 8 images as the fp32 smoke test; the checkpoint
+    holds fp32 weights that load into a plain model, and a pre-precision run resumes as fp32."""
+    import torch
+
+    from cone_perception.checkpoint import load_checkpoint
+    from cone_perception.train.trainer import resolve_precision
+    from synthetic_cones import SMOKE_SIZE
+
+    root = write_dataset(tmp_path / "d", n_images=8, size=SMOKE_SIZE, seed=0)
+    (root / "o.yaml").write_text(yaml.safe_dump({"train": [{"path": "."}], "val": [{"path": "."}]}))
+    cfg = TrainConfig(data=str(root / "o.yaml"), out=str(tmp_path / "run"), model="p", epochs=40, batch=4, imgsz=SMOKE_SIZE,
+                      lr0=0.01, workers=0, threads=1, augment=AugmentConfig.off(), warmup_epochs=0, warmup_min_iters=10,
+                      patience=1000, close_mosaic=0, ema_tau=20, seed=0, precision="bf16")
+    hist = train(cfg, progress=False)["history"]
+    assert hist[-1]["map50"] >= 0.9, [round(h["map50"], 3) for h in hist]
+    ck = load_checkpoint(tmp_path / "run" / "last.pt")
+    assert all(v.dtype == torch.float32 for v in ck.state_dict.values() if v.is_floating_point())
+    assert ck.train["config"]["precision"] == "bf16"
+    model = ck.build_model().eval()
+    with torch.no_grad():
+        assert torch.isfinite(model(torch.rand(1, 3, SMOKE_SIZE[1], SMOKE_SIZE[0]))).all()
+
+    # a run saved before the precision setting existed resumes in fp32, as it was trained
+    del ck.train["config"]["precision"]
+    torch.save({**torch.load(tmp_path / "run" / "last.pt", weights_only=False), "train": ck.train}, tmp_path / "run" / "last.pt")
+    cfg2 = TrainConfig(**{**cfg.__dict__, "epochs": 41, "precision": "auto"})
+    assert len(train(cfg2, resume=True, progress=False)["history"]) == 41
+    assert load_checkpoint(tmp_path / "run" / "last.pt").train["config"]["precision"] == "fp32"
+
+    assert resolve_precision("fp32") == "fp32" and resolve_precision("bf16") == "bf16"
+    assert resolve_precision("auto") in ("fp32", "bf16")
+    with pytest.raises(ConfigError, match="precision"):
+        resolve_precision("fp8")
 
 
 def test_dataset_bad_lines_missing_images_and_names(tmp_path, caplog):

@@ -50,6 +50,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--threads", type=int, default=2, help="OpenCV, torch and ONNX Runtime threads (default %(default)s)")
     p.add_argument("--model", default=None, help="pipeline: model file (default: the shipped default model)")
     p.add_argument("--backend", default="torch", choices=["torch", "torchscript", "onnx"], help="pipeline, table: inference backend (fixed-size ones are built for each band's input size)")
+    p.add_argument("--bf16", action="store_true", help="pipeline, table: backend torch with bfloat16 autocast on the CPU")
     p.add_argument("--scenes", type=int, default=16, help="pipeline, table: distinct rendered scenes, cycled (default %(default)s)")
     p.add_argument("--input", default=None, choices=INPUT_SETTINGS,
                    help="pipeline: override the calibration's crop: full = all rows, downscale 1; half = all rows, "
@@ -161,7 +162,7 @@ def load_for_crop(model: str | None, backend: str, crop: CropSpec, threads: int,
 def _bench_pipeline(args: argparse.Namespace, calib) -> dict:
     if args.input:
         calib = replace(calib, crop=calib.crop.for_setting(args.input, calib.image_width, calib.image_height))
-    det = load_for_crop(args.model, args.backend, calib.crop, args.threads)
+    det = load_for_crop(args.model, args.backend, calib.crop, args.threads, bf16=args.bf16)
     result = bench_pipeline(calib, det, rendered_frames(calib, max(1, args.scenes)), args.frames, args.warmup)
     result["setting"] = args.input or "calibration"
     result["threads"] = args.threads

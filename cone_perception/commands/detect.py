@@ -42,6 +42,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, required=True, help="JSON-lines output file")
     p.add_argument("--model", default=None, help="model file (default: the shipped default model)")
     p.add_argument("--backend", default="torch", choices=["torch", "torchscript", "onnx"], help="inference backend")
+    p.add_argument("--bf16", action="store_true",
+                   help="backend torch on the CPU: bfloat16 autocast (about 1.5-2x faster where the CPU has native bf16)")
     p.add_argument("--imgsz", type=parse_size, default=None, help="letterbox each image to this model input WxH")
     p.add_argument("--crop", type=parse_crop, default=None, help="band V0,V1[,U0,U1] in image px, cut before the model")
     p.add_argument("--downscale", type=int, default=1, choices=[1, 2, 4], help="with --crop: integer downscale")
@@ -117,7 +119,7 @@ def run(args: argparse.Namespace) -> int:
 
     model = args.model or default_model_path()
     det = Detector.load(model, backend=args.backend, conf=args.conf, iou=args.iou,
-                        imgsz=args.imgsz if args.backend != "torch" else None)
+                        imgsz=args.imgsz if args.backend != "torch" else None, bf16=args.bf16)
     # with --crop the detector is built for the band's own size (as the pipeline node does), so a
     # fixed-size backend never letterboxes the band into another input size
     by_band = {}
@@ -128,7 +130,8 @@ def run(args: argparse.Namespace) -> int:
         v0, v1, u0, u1 = args.crop if len(args.crop) == 4 else (*args.crop, 0, w)
         band = (max(1, (u1 - u0) // args.downscale), max(1, (v1 - v0) // args.downscale))
         if band not in by_band:
-            by_band[band] = Detector.load_for_band(model, band, backend=args.backend, conf=args.conf, iou=args.iou)
+            by_band[band] = Detector.load_for_band(model, band, backend=args.backend, conf=args.conf, iou=args.iou,
+                                                   bf16=args.bf16)
         return by_band[band]
     try:
         args.out.parent.mkdir(parents=True, exist_ok=True)

@@ -33,6 +33,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--backend", default="torch", choices=["torch", "torchscript", "onnx"], help="inference backend")
     p.add_argument("--conf", type=float, default=0.25, help="confidence threshold (default %(default)s)")
     p.add_argument("--threads", type=int, default=0, help="torch / ONNX Runtime threads (0 = library default)")
+    p.add_argument("--bf16", action="store_true", help="backend torch with bfloat16 autocast on the CPU")
     p.add_argument("--topic", default=None, help="camera topic (default: the bag's only image topic)")
     p.add_argument("--out", type=Path, default=None, help="write /cone_boxes and /cones to this new bag (MCAP)")
     p.add_argument("--gt-topic", default=None, help="ground-truth cones topic (e.g. /cones_gt): print the localisation table")
@@ -68,7 +69,8 @@ def _run_offline(args, calib) -> dict:
     from ..pipeline import Pipeline
     from ..replay import offline_replay
 
-    det = Detector.load(args.model or default_model_path(), backend=args.backend, conf=args.conf, threads=args.threads or None)
+    det = Detector.load(args.model or default_model_path(), backend=args.backend, conf=args.conf, threads=args.threads or None,
+                        bf16=args.bf16)
     det.warmup()
     res = offline_replay(args.bag, Pipeline(calib, det), args.topic, args.out, args.gt_topic, _progress(args.no_progress))
     stages = res.timer.summary()
@@ -95,6 +97,8 @@ def _run_live(args, calib) -> dict:
         params["model"] = str(Path(args.model).resolve())
     if args.threads:
         params["threads"] = args.threads
+    if args.bf16:
+        params["bf16"] = True
     res = live_replay(args.bag, mode=args.live, topic=args.topic, params=params, pace=args.pace,
                       progress=_progress(args.no_progress))
     got = len(res.cones)

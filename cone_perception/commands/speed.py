@@ -13,6 +13,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--sizes", nargs="+", default=list(MODEL_SIZES), help=f"model sizes, random weights (default: {' '.join(MODEL_SIZES)})")
     p.add_argument("--model", default=None, help="time this checkpoint / exported model instead of --sizes")
     p.add_argument("--backends", nargs="+", default=["torch", "onnx"], choices=("torch", "torchscript", "onnx"), help="backends (default torch onnx)")
+    p.add_argument("--bf16", action="store_true", help="also time backend torch with bfloat16 autocast (row 'torch-bf16')")
     p.add_argument("--imgsz", type=parse_size, default=(960, 288), help="input WxH px (default 960x288)")
     p.add_argument("--threads", type=int, default=2, help="intra-op threads (default 2)")
     p.add_argument("--frames", type=int, default=50, help="timed forwards per case (default 50)")
@@ -30,18 +31,19 @@ def run(args: argparse.Namespace) -> int:
     rows = []
     cases = [(args.model, None)] if args.model else [(None, s) for s in args.sizes]
     for path, size in cases:
-        for backend in args.backends:
+        runs = [(b, False) for b in args.backends] + ([("torch", True)] if args.bf16 else [])
+        for backend, bf16 in runs:
             if path:
-                det = Detector.load(path, backend=backend, imgsz=args.imgsz, threads=args.threads)
+                det = Detector.load(path, backend=backend, imgsz=args.imgsz, threads=args.threads, bf16=bf16)
                 name, gf, params = path, None, None
             else:
                 torch.manual_seed(0)
                 model = ConeYOLO(model_config(size))
                 gf, params = gflops(model, args.imgsz), model.num_params()
-                det = Detector.from_model(model, args.imgsz, backend, threads=args.threads)
+                det = Detector.from_model(model, args.imgsz, backend, threads=args.threads, bf16=bf16)
                 name = size
             r = time_forward(det, args.frames)
-            rows.append({"model": name, "backend": backend, "imgsz": list(args.imgsz), "threads": args.threads,
+            rows.append({"model": name, "backend": backend + ("-bf16" if bf16 else ""), "imgsz": list(args.imgsz), "threads": args.threads,
                          "params": params, "gflops": gf, **r})
     if args.json:
         print(json.dumps(rows))

@@ -23,7 +23,7 @@ def parse_size(text: str) -> tuple[int, int]:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from ..train.trainer import TrainConfig
+    from ..train.trainer import PRECISIONS, TrainConfig
 
     d = TrainConfig(data="", out="")
     p.add_argument("--data", required=True, help="data YAML listing train / val datasets (see README, 'train')")
@@ -42,6 +42,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=d.seed, help="random seed (default 0)")
     p.add_argument("--mosaic", type=float, default=d.augment.mosaic, help=f"mosaic probability (default {d.augment.mosaic})")
     p.add_argument("--close-mosaic", type=int, default=d.close_mosaic, help=f"last N epochs without mosaic (default {d.close_mosaic})")
+    p.add_argument("--precision", choices=PRECISIONS, default=None,
+                   help="fp32, or bf16 (autocast with channels-last: about 2x the images/s on a CPU with native "
+                        "bfloat16, e.g. AVX512-BF16; weights, optimizer and loss stay fp32); auto = bf16 where the CPU "
+                        "has it (default auto; with --resume: keep the run's own unless given)")
     p.add_argument("--no-augment", action="store_true", help="switch every augmentation off")
     p.add_argument("--max-batches", type=int, default=0, help="cap batches per epoch (quick trials; 0 = all)")
     p.add_argument("--json", action="store_true", help="print the final summary as JSON")
@@ -59,8 +63,9 @@ def run(args: argparse.Namespace) -> int:
         data=args.data, out=args.out, model=args.model, epochs=args.epochs, batch=args.batch, imgsz=args.imgsz,
         optimizer=args.optimizer, lr0=args.lr0, patience=args.patience, workers=args.workers, threads=args.threads,
         seed=args.seed, close_mosaic=args.close_mosaic, max_batches=args.max_batches, augment=aug,
+        precision=args.precision or "auto",
     )
-    result = train(cfg, resume=args.resume)
+    result = train(cfg, resume=args.resume, precision=args.precision)
     last = result["history"][-1] if result["history"] else {}
     summary = {"out": result["out"], "best_epoch": result["best_epoch"], "best_fitness": result["best_fitness"], "last": last}
     if args.json:

@@ -42,7 +42,8 @@ class ConeYOLO(nn.Module):
         feats = self.forward_raw(x)
         if self.training:
             return feats
-        return decode_outputs(feats, self.strides, self.cfg.reg_max, self.cfg.num_classes)
+        # decoding in fp32 whatever the network computed in (bf16 autocast: DFL expectations need the bits)
+        return decode_outputs([f.float() for f in feats], self.strides, self.cfg.reg_max, self.cfg.num_classes)
 
     @torch.no_grad()
     def fuse(self) -> "ConeYOLO":

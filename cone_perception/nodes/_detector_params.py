@@ -23,6 +23,7 @@ def load_detector(node: Node, band_wh: tuple[int, int] | None = None) -> Detecto
         backend=node.declare_parameter("backend", "torch").value,
         device=node.declare_parameter("device", "cpu").value,
         fp16=bool(node.declare_parameter("fp16", False).value),
+        bf16=bool(node.declare_parameter("bf16", False).value),
         conf=float(node.declare_parameter("conf", 0.25).value),
         iou=float(node.declare_parameter("iou", 0.45).value),
         max_det=int(node.declare_parameter("max_det", 100).value),
@@ -33,5 +34,5 @@ def load_detector(node: Node, band_wh: tuple[int, int] | None = None) -> Detecto
     else:
         for _ in range(3):
             det.infer(np.zeros((band_wh[1], band_wh[0], 3), np.uint8))
-    node.get_logger().info(f"model {det.source} ({det.backend}, input {det.imgsz[0]}x{det.imgsz[1]}) loaded and warm")
+    node.get_logger().info(f"model {det.source} ({det.backend} {det.precision}, input {det.imgsz[0]}x{det.imgsz[1]}) loaded and warm")
     return det

@@ -3,7 +3,7 @@
 ``image_raw`` (or ``image_raw/compressed``) in; ``cone_boxes``, ``/cones`` and ``/cones/markers`` out.
 
 Parameters: those of ``driver_adapter`` (calibration, input_transport), ``mapping``
-(publish_markers) and ``detection`` (model, backend, device, fp16, conf, iou, max_det, threads).
+(publish_markers) and ``detection`` (model, backend, device, fp16, bf16, conf, iou, max_det, threads).
 """
 
 from __future__ import annotations

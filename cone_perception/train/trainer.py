@@ -59,6 +59,7 @@ class TrainConfig:
     seed: int = 0
     close_mosaic: int = 5  # last N epochs without mosaic
     max_batches: int = 0  # > 0: cap on batches per epoch (quick runs)
+    precision: str = "auto"  # "fp32", "bf16" (autocast + channels-last) or "auto" (bf16 where the CPU has it natively)
     val_conf: float = 0.001
     val_iou: float = 0.6
     augment: AugmentConfig = field(default_factory=AugmentConfig)
@@ -94,6 +95,28 @@ class ModelEMA:
                 v.mul_(d).add_(msd[k].detach(), alpha=1 - d)
             else:
                 v.copy_(msd[k])
+
+
+PRECISIONS = ("auto", "fp32", "bf16")
+
+
+def native_bf16() -> bool:
+    """Whether this CPU computes bfloat16 natively (x86 AVX512-BF16 or AMX), so bf16 autocast pays."""
+    cpu = getattr(torch, "cpu", None)
+    probes = ("_is_avx512_bf16_supported", "_is_amx_tile_supported")
+    try:
+        return any(bool(getattr(cpu, n)()) for n in probes if hasattr(cpu, n))
+    except RuntimeError:
+        return False
+
+
+def resolve_precision(precision: str) -> str:
+    """``auto`` -> ``bf16`` on a CPU with native bfloat16, else ``fp32``; a bad name is a ConfigError."""
+    if precision not in PRECISIONS:
+        raise ConfigError("train", "precision", f"unknown precision {precision!r}; choose {', '.join(PRECISIONS)}")
+    if precision == "auto":
+        return "bf16" if native_bf16() else "fp32"
+    return precision
 
 
 def round_imgsz(imgsz: tuple[int, int]) -> tuple[int, int]:
@@ -154,11 +177,13 @@ def _set_rng_state(s: dict) -> None:
     torch.set_rng_state(s["torch"])
 
 
-def train(cfg: TrainConfig, resume: bool = False, progress: bool = True, stop_after: int | None = None) -> dict:
+def train(cfg: TrainConfig, resume: bool = False, progress: bool = True, stop_after: int | None = None,
+          precision: str | None = None) -> dict:
     """Train; returns the history (one dict per epoch). Writes ``last.pt``, ``best.pt``, ``results.csv`` to ``cfg.out``.
 
     ``stop_after``: leave after this many epochs of this call (a run spread over
-    sessions; continue with ``resume=True``)."""
+    sessions; continue with ``resume=True``). ``precision``: on resume, switch the run's
+    precision (default: keep it; runs saved before precision existed were fp32)."""
     out = Path(cfg.out)
     last_path, best_path = out / "last.pt", out / "best.pt"
     state = None
@@ -169,9 +194,13 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True, stop_af
         if not ck.train:
             raise ConfigError(str(last_path), "train", "checkpoint holds no training state (is it a best.pt?)")
         state = ck.train
-        saved = TrainConfig.from_dict(state["config"])
-        cfg = TrainConfig.from_dict({**saved.to_dict(), "epochs": cfg.epochs, "out": cfg.out})
+        saved = TrainConfig.from_dict({"precision": "fp32", **state["config"]})
+        cfg = TrainConfig.from_dict({**saved.to_dict(), "epochs": cfg.epochs, "out": cfg.out,
+                                     "precision": precision or saved.precision})
     cfg.imgsz = round_imgsz(cfg.imgsz)
+    bf16 = resolve_precision(cfg.precision) == "bf16"
+    log.info("precision: %s%s", "bf16 autocast, channels-last" if bf16 else "fp32",
+             " (auto)" if cfg.precision == "auto" else "")
     torch.set_num_threads(cfg.threads)
     _seed_all(cfg.seed)
 
@@ -184,6 +213,8 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True, stop_af
     else:
         model = load_checkpoint(cfg.model).build_model()
     model.train()
+    if bf16:  # bf16 convolutions run fastest on channels-last tensors; weights and optimizer stay fp32
+        model = model.to(memory_format=torch.channels_last)
     criterion = DetectionLoss(model.cfg.num_classes, model.cfg.reg_max, model.strides)
     optimizer = build_optimizer(model, cfg)
     ema = ModelEMA(model, cfg.ema_decay, cfg.ema_tau)
@@ -222,7 +253,14 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True, stop_af
             lr = lr_at(epoch * nb + i, nb, cfg)
             for g in optimizer.param_groups:
                 g["lr"] = lr
-            loss, parts = criterion(model(imgs.float().div_(255)), targets)
+            x = imgs.float().div_(255)
+            if bf16:
+                with torch.autocast("cpu", dtype=torch.bfloat16):
+                    feats = model(x.contiguous(memory_format=torch.channels_last))
+                feats = [f.float() for f in feats]  # the loss (assignment, BCE, IoU, DFL) in fp32
+            else:
+                feats = model(x)
+            loss, parts = criterion(feats, targets)
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             torch.nn.utils.clip_grad_norm_(model.parameters(), 10.0)
