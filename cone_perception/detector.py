@@ -231,10 +231,15 @@ class Detector:
         self.source = source
         self.conf, self.iou, self.max_det = float(conf), float(iou), int(max_det)
         self.checkpoint = checkpoint
-        self.precision = "fp32"  # what the network computes in: fp32, fp16 (CUDA) or bf16 (CPU autocast)
         self.timing: dict[str, float] = {"preprocess_ms": 0.0, "forward_ms": 0.0, "postprocess_ms": 0.0}
         self._said: set[tuple] = set()
         self._checked_output = False
+
+    @property
+    def precision(self) -> str:
+        """What the network computes in: ``fp32``, ``fp16`` (CUDA, or an fp16 ONNX file) or ``bf16`` (CPU autocast)."""
+        run = self._run
+        return "bf16" if getattr(run, "bf16", False) else ("fp16" if getattr(run, "fp16", False) else "fp32")
 
     # -- loading -----------------------------------------------------------------------------
     @classmethod
@@ -349,9 +354,7 @@ class Detector:
         if backend != "torch":
             raise ConfigError(ck.path, "backend", f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
         model = model.to(memory_format=torch.channels_last)
-        det = cls(_TorchRunner(model, device, fp16, True, bf16=bf16), class_map, size, False, "torch", ck.path, checkpoint=ck, **kw)
-        det.precision = "bf16" if bf16 else ("fp16" if fp16 else "fp32")
-        return det
+        return cls(_TorchRunner(model, device, fp16, True, bf16=bf16), class_map, size, False, "torch", ck.path, checkpoint=ck, **kw)
 
     @classmethod
     def from_model(cls, model, imgsz: tuple[int, int], backend: str = "torch", **kw) -> "Detector":

@@ -27,7 +27,7 @@ from .calib import Calibration
 from .classes import CLASS_NAMES, CLASS_RGBA
 from .evaluation import DISTANCE_GROUPS, LocalisationReport, PairDistanceReport, distance_group
 from .groundtruth import EvalImage
-from .metrics import RECALL_POINTS, ImageDetections, coco_map, greedy_match, match_by_class, operating_point
+from .metrics import RECALL_POINTS, ImageDetections, at_conf, coco_map, greedy_match, match_by_class, operating_point
 from .records import CONE_DTYPE, boxes_from_arrays
 
 FILES = {
@@ -359,8 +359,7 @@ def _detection_table(d: dict) -> list[str]:
 def frame_errors(im: EvalImage, conf: float, iou: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One image at the operating point (class-aware, as precision / recall): masks of true-positive and
     false-positive detections (over ``im.pred_*``) and of missed cones (over ``im.gt_*``)."""
-    keep = np.flatnonzero(im.pred_scores >= conf)
-    keep = keep[np.argsort(-im.pred_scores[keep], kind="stable")]
+    keep = at_conf(im.pred_scores, conf)
     to_gt, ignored = match_by_class(im.pred_boxes[keep], im.pred_classes[keep], im.gt_boxes, im.gt_classes, im.gt_ignore, iou)
     tp, fp = np.zeros(len(im.pred_boxes), bool), np.zeros(len(im.pred_boxes), bool)
     tp[keep[to_gt >= 0]] = True

@@ -205,6 +205,13 @@ def match_by_class(pred_boxes: np.ndarray, pred_classes: np.ndarray, gt_boxes: n
     return to_gt, ignored
 
 
+def at_conf(scores: np.ndarray, conf: float) -> np.ndarray:
+    """Indices of the detections with score >= ``conf``, best score first (the order matching needs)."""
+    ps = np.asarray(scores, np.float64).reshape(-1)
+    keep = np.flatnonzero(ps >= conf)
+    return keep[np.argsort(-ps[keep], kind="stable")]
+
+
 def operating_point(images: list[ImageDetections], conf: float = 0.25, iou: float = 0.5,
                     class_names: tuple[str, ...] = CLASS_NAMES) -> OperatingPoint:
     """Precision / recall / F1 counts and the confusion matrix of detections with score >= ``conf``."""
@@ -214,9 +221,7 @@ def operating_point(images: list[ImageDetections], conf: float = 0.25, iou: floa
     for im in images:
         gb, gc = np.asarray(im.gt_boxes, np.float64).reshape(-1, 4), np.asarray(im.gt_classes, np.int64).reshape(-1)
         gi = np.zeros(len(gb), bool) if im.gt_ignore is None else np.asarray(im.gt_ignore, bool).reshape(-1)
-        ps = np.asarray(im.pred_scores, np.float64).reshape(-1)
-        keep = np.flatnonzero(ps >= conf)
-        keep = keep[np.argsort(-ps[keep], kind="stable")]
+        keep = at_conf(im.pred_scores, conf)
         pb, pc = np.asarray(im.pred_boxes, np.float64).reshape(-1, 4)[keep], np.asarray(im.pred_classes, np.int64).reshape(-1)[keep]
         to_gt_c, ignored_c = match_by_class(pb, pc, gb, gc, gi, iou)  # class-aware: precision / recall / F1
         hit_c = np.zeros(len(gb), bool)

@@ -121,7 +121,7 @@ def test_table_applies_each_setting_to_the_val_frames(tmp_path, monkeypatch) -> 
     out = tmp_path / "out"
     args = argparse.Namespace(models=None, val=val, gt_names="blue_cone", band=(96, 672), out=out,
                               settings=",".join(INPUT_SETTINGS), det_conf=0.001, conf=0.25, frames=2, warmup=0,
-                              backend="torch", threads=1, scenes=1)
+                              backend="torch", bf16=False, threads=1, scenes=1)
     assert _table.run_table(args, load_calibration("example_mainhoop")) == 0
 
     doc = json.loads((out / "table.json").read_text())

@@ -142,7 +142,7 @@ def run_table(args: argparse.Namespace, calib) -> int:
     for model, setting in bar:
         bar.set_postfix_str(f"{Path(model).stem if model else 'default'} {setting}")
         bench_calib = replace(calib, crop=calib.crop.for_setting(setting, calib.image_width, calib.image_height))
-        det = load_for_crop(model, args.backend, bench_calib.crop, args.threads, bf16=getattr(args, "bf16", False))
+        det = load_for_crop(model, args.backend, bench_calib.crop, args.threads, bf16=args.bf16)
         tag = f"{Path(det.source).stem}" + (f" ({det.checkpoint.cfg.name})" if det.checkpoint else "")
         b = bench_pipeline(bench_calib, det, frames, args.frames, args.warmup)
 

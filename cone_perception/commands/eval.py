@@ -24,13 +24,14 @@ def _unit(text: str) -> float:
 
 
 def _rows(text: str) -> tuple[int, int]:
-    try:
-        v0, v1 = (int(t) for t in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be two integer rows V0,V1, got {text!r}") from None
-    if not 0 <= v0 < v1:
-        raise argparse.ArgumentTypeError(f"needs 0 <= V0 < V1, got {v0},{v1}")
-    return v0, v1
+    from .detect import parse_crop
+
+    vals = parse_crop(text)
+    if len(vals) != 2:
+        raise argparse.ArgumentTypeError(f"must be two integer rows V0,V1, got {text!r}")
+    if not 0 <= vals[0] < vals[1]:
+        raise argparse.ArgumentTypeError(f"needs 0 <= V0 < V1, got {vals[0]},{vals[1]}")
+    return vals
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -84,9 +85,10 @@ def evaluate_predictions(pred: Path, gt_path: Path, gt_names: str | None = None,
         images, n_out = restrict_to_band(images, band)
         counts = {**counts, "band_rows": list(band), "ignored_outside_band": n_out}
     if min_height is not None:
-        if not min_height > 0:
-            raise ConfigError("eval", "--min-height", f"must be > 0 px, got {min_height:g}")
-        images, n_gt, n_pred = restrict_to_min_height(images, min_height, iou)
+        try:
+            images, n_gt, n_pred = restrict_to_min_height(images, min_height, iou)
+        except ValueError as e:
+            raise ConfigError("eval", "--min-height", str(e)) from None
         counts = {**counts, "min_height_px": min_height, "ignored_below_min_height": n_gt, "detections_dropped_below_min_height": n_pred}
     calib_path = calib_arg if calib_arg is not None else gt.calib_path
     calib = load_calibration(calib_path) if calib_path is not None else None
