@@ -37,6 +37,7 @@ import torch
 import yaml
 
 from . import records
+from .adapter import pin_opencv_threads
 from .classes import CLASS_NAMES
 from .checkpoint import RESTORE_HINT, Checkpoint, class_map_from_names, load_checkpoint
 from .crop import CropSpec
@@ -278,6 +279,7 @@ class Detector:
             raise ConfigError(src, "fp16", "fp16 needs a CUDA device (CPU half precision is slower than fp32)")
         if threads:
             torch.set_num_threads(int(threads))
+        pin_opencv_threads()
         if not path.is_file():
             raise ConfigError(src, None, f"model file not found; {RESTORE_HINT}")
         kw = dict(conf=conf, iou=iou, max_det=max_det)

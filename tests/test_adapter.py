@@ -158,3 +158,21 @@ def test_bad_crop_is_a_config_error(crop: CropSpec, field: str) -> None:
     with pytest.raises(ConfigError) as e:
         DriverAdapter(crop, W, H)
     assert e.value.field == field
+
+
+def test_adapter_switches_opencv_thread_pool_off() -> None:
+    """The adapter's conversion runs on the calling thread: a spinning OpenCV pool took a core from
+    the network's threads and doubled the forward of 1-2 % of frames on two cores."""
+    from cone_perception.adapter import OPENCV_THREADS
+    from cone_perception.detector import Detector, default_model_path
+
+    before = cv2.getNumThreads()
+    try:
+        cv2.setNumThreads(4)
+        DriverAdapter(CropSpec(0, 64, 0, 64, 1), 64, 64)
+        assert cv2.getNumThreads() == OPENCV_THREADS == 1
+        cv2.setNumThreads(4)  # the detector's input preparation (blobFromImage) runs in its own node
+        Detector.load(default_model_path())
+        assert cv2.getNumThreads() == 1
+    finally:
+        cv2.setNumThreads(before)

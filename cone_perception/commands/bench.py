@@ -47,7 +47,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--warmup", type=int, default=20, help="untimed warm-up frames (default %(default)s)")
     p.add_argument("--calib", default=DEFAULT_CAMERA, help="calibration (crop, downscale, image size); default %(default)s")
     p.add_argument("--encoding", default="yuv422_yuy2", choices=sorted(_BYTES_PER_PX), help="input encoding")
-    p.add_argument("--threads", type=int, default=2, help="OpenCV, torch and ONNX Runtime threads (default %(default)s)")
+    p.add_argument("--threads", type=int, default=2, help="torch and ONNX Runtime threads of the network (default %(default)s; OpenCV runs on one, see adapter.OPENCV_THREADS)")
     p.add_argument("--model", default=None, help="pipeline: model file (default: the shipped default model)")
     p.add_argument("--backend", default="torch", choices=["torch", "torchscript", "onnx"], help="pipeline, table: inference backend (fixed-size ones are built for each band's input size)")
     p.add_argument("--bf16", action="store_true", help="pipeline, table: backend torch with bfloat16 autocast on the CPU")
@@ -172,7 +172,6 @@ def _bench_pipeline(args: argparse.Namespace, calib) -> dict:
 def run(args: argparse.Namespace) -> int:
     if args.frames < 1 or args.warmup < 0:
         raise ConfigError("bench", "--frames/--warmup", "need --frames >= 1 and --warmup >= 0")
-    cv2.setNumThreads(args.threads)
     calib = load_calibration(args.calib)
     if args.target == "table":
         from ._table import run_table
