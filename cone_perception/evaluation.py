@@ -95,7 +95,10 @@ class LocalisationReport:
             self.same_class.append(int(pred["class_id"][i]) == int(truth["class_id"][j]))
         self.true_range.extend(t_r.tolist())
         self.true_matched.extend(matched.tolist())
-        self.false_positives += len(pred) - len(pairs)
+        # unmatched detections beyond the range are of cones outside it (ignored like those), not false
+        unmatched = np.ones(len(pred), dtype=bool)
+        unmatched[[i for i, _, _ in pairs]] = False
+        self.false_positives += int(np.count_nonzero(unmatched & (np.hypot(p_xy[:, 0], p_xy[:, 1]) <= self.max_range_m)))
         return [(i, int(t_index[j]), d) for i, j, d in pairs]
 
     def summary(self) -> dict:

@@ -45,3 +45,14 @@ def test_report_recall_errors_and_false_positives() -> None:
     assert g["far 7-15 m"]["class_accuracy"] == 0.0  # predicted yellow where a blue stands
     assert g["very far >15 m"]["recall"] == 0.0
     assert s["all"]["recall"] == 0.5 and s["false_positives"] == 1 and s["frames"] == 1
+
+
+def test_detections_beyond_the_range_are_not_false_positives() -> None:
+    """With ``max_range_m`` the true cones beyond it are ignored; so are the detections there."""
+    rep = LocalisationReport(max_range_m=15.0)
+    truth = _cones([[5.0, 1.5], [20.0, -2.0]], [0, 1])
+    pred = _cones([[5.1, 1.5], [20.2, -2.0], [12.0, 0.0], [25.0, 3.0]], [0, 1, 0, 1])
+    rep.add_frame(pred, truth)
+    s = rep.summary()
+    assert s["all"]["n_true"] == 1 and s["all"]["recall"] == 1.0
+    assert s["false_positives"] == 1  # the one at 12 m; those at 20 and 25 m are beyond the range
