@@ -1,6 +1,6 @@
 """Run the cone detector on images: backends, pre- and post-processing.
 
-    det = Detector.load(default_model_path(), backend="torch")   # or "torchscript", "onnx"
+    det = Detector.load(default_model_path())  # backend "auto"; or "torch", "torchscript", "onnx"
     det.warmup()
     boxes = det.detect(bgr_cropped, crop)    # BOX_DTYPE records, FULL-image px
     det.timing                                # last frame's preprocess / forward / postprocess ms
@@ -50,7 +50,39 @@ log = logging.getLogger(__name__)
 #: File name of the shipped default model under ``models/``.
 DEFAULT_MODEL_NAME = "cone_detector.pt"
 BACKENDS = ("torch", "torchscript", "onnx")
+#: What ``backend`` may be: a backend, or ``auto`` (:func:`resolve_backend`), the default everywhere.
+BACKEND_CHOICES = ("auto", *BACKENDS)
+DEFAULT_BACKEND = "auto"
+#: The network's CPU threads where the car runs it (the nodes, ``bench``, ``replay``): one. With
+#: every core busy, any other process that wakes (SLAM, planning, the OS) takes a core from one of
+#: the threads for a scheduler tick and the whole forward waits for it; one thread leaves a core
+#: free for them. On this 2-core machine ONNX Runtime on one thread is as fast as eager torch on two
+#: and its p99 stays near the median (README, "Tail latency and threads").
+RUNTIME_THREADS = 1
 PAD_VALUE = 114
+
+
+def resolve_backend(backend: str, path: str | Path | None = None, device: str = "cpu", bf16: bool = False,
+                    fp16: bool = False) -> str:
+    """The backend ``backend`` stands for: itself, or for ``auto`` the fastest one the model can run
+    with here: an exported file's own (``.onnx`` -> onnx, ``.torchscript`` / ``.ts`` -> torchscript);
+    a checkpoint (``path`` ``.pt`` or None = in memory) ONNX Runtime on the CPU when it is installed
+    (forward 2.3x eager torch's, same boxes), eager torch on a GPU, with ``bf16``/``fp16`` or
+    without onnxruntime. The loaded detector's :attr:`Detector.backend` says which it became."""
+    if backend != "auto":
+        return backend
+    suffix = Path(path).suffix.lower() if path is not None else ".pt"
+    if suffix == ".onnx":
+        return "onnx"
+    if suffix in (".torchscript", ".ts"):
+        return "torchscript"
+    if device != "cpu" or bf16 or fp16:
+        return "torch"
+    try:
+        import onnxruntime  # noqa: F401
+    except ImportError:
+        return "torch"
+    return "onnx"
 
 
 def default_model_path() -> Path:
@@ -256,7 +288,7 @@ class Detector:
     def load(
         cls,
         path: str | Path,
-        backend: str = "torch",
+        backend: str = DEFAULT_BACKEND,
         device: str = "cpu",
         fp16: bool = False,
         conf: float = 0.25,
@@ -266,13 +298,14 @@ class Detector:
         threads: int | None = None,
         bf16: bool = False,
     ) -> "Detector":
-        """Load a model file for ``backend`` (see module doc). ``imgsz`` (W, H) overrides the input
-        size of fixed-size backends; ``threads`` sets torch / ONNX Runtime intra-op threads; ``bf16``:
+        """Load a model file for ``backend`` (see module doc; ``auto``: :func:`resolve_backend`).
+        ``imgsz`` (W, H) overrides the input size of fixed-size backends; ``threads`` sets torch / ONNX Runtime intra-op threads; ``bf16``:
         bfloat16 autocast on the CPU (backend torch, a checkpoint), fast where the CPU has native bf16."""
         path = Path(path)
         src = str(path)
-        if backend not in BACKENDS:
-            raise ConfigError(src, "backend", f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
+        if backend not in BACKEND_CHOICES:
+            raise ConfigError(src, "backend", f"unknown backend {backend!r}; choose one of {', '.join(BACKEND_CHOICES)}")
+        backend = resolve_backend(backend, path, device, bf16=bf16, fp16=fp16)
         if device.startswith("cuda") and not torch.cuda.is_available():
             raise ConfigError(src, "device", f"device {device!r} requested but CUDA is not available")
         if fp16 and not device.startswith("cuda"):
@@ -325,7 +358,7 @@ class Detector:
     def from_checkpoint(
         cls,
         ck: Checkpoint,
-        backend: str = "torch",
+        backend: str = DEFAULT_BACKEND,
         device: str = "cpu",
         fp16: bool = False,
         imgsz: tuple[int, int] | None = None,
@@ -334,6 +367,7 @@ class Detector:
         **kw,
     ) -> "Detector":
         """A detector from a loaded checkpoint (or one made in memory, see :meth:`from_model`)."""
+        backend = resolve_backend(backend, None, device, bf16=bf16, fp16=fp16)
         if bf16 and (backend != "torch" or device != "cpu" or fp16):
             raise ConfigError(ck.path, "bf16", f"bf16 is CPU autocast for backend 'torch' (got backend {backend!r}, "
                               f"device {device!r}{', fp16' if fp16 else ''}); on a GPU use fp16")
@@ -354,12 +388,12 @@ class Detector:
             module = trace(model, size, device=device, fp16=fp16)
             return cls(_TorchRunner(module, device, fp16, False), class_map, size, True, "torchscript", ck.path, checkpoint=ck, **kw)
         if backend != "torch":
-            raise ConfigError(ck.path, "backend", f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
+            raise ConfigError(ck.path, "backend", f"unknown backend {backend!r}; choose one of {', '.join(BACKEND_CHOICES)}")
         model = model.to(memory_format=torch.channels_last)
         return cls(_TorchRunner(model, device, fp16, True, bf16=bf16), class_map, size, False, "torch", ck.path, checkpoint=ck, **kw)
 
     @classmethod
-    def from_model(cls, model, imgsz: tuple[int, int], backend: str = "torch", **kw) -> "Detector":
+    def from_model(cls, model, imgsz: tuple[int, int], backend: str = DEFAULT_BACKEND, **kw) -> "Detector":
         """A detector around an in-memory :class:`ConeYOLO` (benchmarks, tests); classes in project order."""
         ck = Checkpoint(model.cfg, list(CLASS_NAMES[: model.cfg.num_classes]), tuple(imgsz),
                         {k: v.detach().clone() for k, v in model.state_dict().items()}, path=f"<{model.cfg.name} in memory>")

@@ -15,7 +15,7 @@ from cone_perception.checkpoint import load_checkpoint, save_checkpoint
 from cone_perception.classes import CLASS_NAMES
 from cone_perception.cli import main as cli_main
 from cone_perception.crop import CropSpec
-from cone_perception.detector import Detector, default_model_path, write_sidecar
+from cone_perception.detector import Detector, default_model_path, resolve_backend, write_sidecar
 from cone_perception.errors import ConfigError
 from cone_perception.export import export_model, onnx_bytes
 from cone_perception.model import ConeYOLO, model_config
@@ -56,6 +56,27 @@ def test_backends_give_eager_boxes(trained, backend):
     assert n_boxes >= len(images)
 
 
+
+def test_auto_backend_picks_onnx_runtime_on_the_cpu_and_keeps_the_boxes(trained, monkeypatch):
+    """``auto`` (the default): ONNX Runtime for a checkpoint on the CPU, with eager torch's boxes;
+    torch where ONNX Runtime cannot serve (bf16, a GPU, not installed); an exported file its own."""
+    ckpt, images = trained
+    det = Detector.load(ckpt)
+    assert det.backend == "onnx" and "backend onnx" in det.describe()
+    eager = Detector.load(ckpt, backend="torch")
+    for img in images[:3]:
+        np.testing.assert_allclose(_as_arrays(det.detect_image(img))[0], _as_arrays(eager.detect_image(img))[0], atol=1e-3)
+    assert Detector.load(ckpt, bf16=True).backend == "torch"
+    assert resolve_backend("auto", "m.pt", device="cuda") == "torch"
+    assert resolve_backend("auto", "m.pt", fp16=True) == "torch"
+    assert resolve_backend("auto", "m.onnx") == "onnx" and resolve_backend("auto", "m.torchscript") == "torchscript"
+    assert resolve_backend("torch", "m.pt") == "torch"
+    monkeypatch.setitem(__import__("sys").modules, "onnxruntime", None)  # import fails: not installed
+    assert resolve_backend("auto", "m.pt") == "torch"
+    assert Detector.load(ckpt).backend == "torch"
+    with pytest.raises(ConfigError, match="unknown backend 'tensorrt'.*auto, torch"):
+        Detector.load(ckpt, backend="tensorrt")
+
 def test_bf16_gives_the_fp32_boxes_and_is_refused_where_it_does_not_apply(trained, tmp_path):
     """bf16 autocast on the CPU: same cones (box decoding stays fp32, so boxes within a fraction of a
     pixel and scores within bf16 rounding); refused for other backends, GPUs and exported files."""
@@ -83,7 +104,7 @@ def test_bf16_gives_the_fp32_boxes_and_is_refused_where_it_does_not_apply(traine
 
 def test_detect_maps_crop_and_downscale_to_full_image(trained):
     ckpt, images = trained
-    det = Detector.load(ckpt)
+    det = Detector.load(ckpt, backend="torch")
     img = images[0]
     crop = CropSpec(v0=400, v1=400 + 2 * img.shape[0], u0=100, u1=100 + 2 * img.shape[1], downscale=2)
     full = det.detect(img, crop)
@@ -99,7 +120,7 @@ def test_detect_maps_crop_and_downscale_to_full_image(trained):
 
 def test_size_not_multiple_of_32_is_padded_and_said_once(trained, caplog):
     ckpt, images = trained
-    det = Detector.load(ckpt)
+    det = Detector.load(ckpt, backend="torch")
     img = images[1]
     odd = np.ascontiguousarray(img[:90, :250])  # 250x90 -> padded to 256x96
     with caplog.at_level(logging.WARNING):
@@ -139,7 +160,7 @@ def test_external_layout_with_permuted_class_names(tmp_path, trained):
     # ONNX sidecar as {index: name} and without imgsz: the ONNX input shape gives it
     (tmp_path / "foreign_onnx.yaml").write_text(yaml.safe_dump({"names": {i: n for i, n in enumerate(foreign_names)}}))
 
-    eager = Detector.load(ckpt)
+    eager = Detector.load(ckpt, backend="torch")
     for path, backend in ((ts_path, "torchscript"), (onnx_path, "onnx")):
         det = Detector.load(path, backend=backend)
         assert det.imgsz == SMOKE_SIZE
@@ -219,7 +240,7 @@ def test_export_command_verifies(tmp_path, trained, capsys, fmt):
     side = yaml.safe_load(out.with_suffix(".yaml").read_text())
     assert side["names"] == list(CLASS_NAMES) and side["imgsz"] == list(SMOKE_SIZE)
     det = Detector.load(out, backend=fmt)
-    eager = Detector.load(ckpt)
+    eager = Detector.load(ckpt, backend="torch")
     be, _, ce = _as_arrays(eager.detect_image(images[2]))
     bo, _, co = _as_arrays(det.detect_image(images[2]))
     np.testing.assert_allclose(bo, be, atol=1e-3)
@@ -245,7 +266,7 @@ def test_external_names_embedded_like_other_yolo_tools(tmp_path, trained):
     ts = torch.jit.trace(model, torch.rand(1, 3, h, w))
     torch.jit.save(ts, str(tmp_path / "ext.torchscript"),
                    _extra_files={"config.txt": json.dumps({"names": {str(i): n for i, n in enumerate(CLASS_NAMES)}, "imgsz": [h, w]})})
-    eager = Detector.load(ckpt)
+    eager = Detector.load(ckpt, backend="torch")
     be, _, ce = _as_arrays(eager.detect_image(images[0]))
     for f, backend in (("ext.onnx", "onnx"), ("ext.torchscript", "torchscript")):
         det = Detector.load(tmp_path / f, backend=backend)

@@ -32,6 +32,7 @@ from ..adapter import DriverAdapter, bgr_to_yuyv
 from ..benchmark import StageTimer, format_table, peak_rss_mb
 from ..calib import DEFAULT_CAMERA, load_calibration
 from ..crop import INPUT_SETTINGS, CropSpec
+from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, RUNTIME_THREADS
 from ..errors import ConfigError
 from .detect import parse_crop
 
@@ -47,9 +48,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--warmup", type=int, default=20, help="untimed warm-up frames (default %(default)s)")
     p.add_argument("--calib", default=DEFAULT_CAMERA, help="calibration (crop, downscale, image size); default %(default)s")
     p.add_argument("--encoding", default="yuv422_yuy2", choices=sorted(_BYTES_PER_PX), help="input encoding")
-    p.add_argument("--threads", type=int, default=2, help="torch and ONNX Runtime threads of the network (default %(default)s; OpenCV runs on one, see adapter.OPENCV_THREADS)")
+    p.add_argument("--threads", type=int, default=RUNTIME_THREADS,
+                   help="torch and ONNX Runtime threads of the network (default %(default)s, as the nodes; "
+                        "OpenCV runs on one, see adapter.OPENCV_THREADS)")
     p.add_argument("--model", default=None, help="pipeline: model file (default: the shipped default model)")
-    p.add_argument("--backend", default="torch", choices=["torch", "torchscript", "onnx"], help="pipeline, table: inference backend (fixed-size ones are built for each band's input size)")
+    p.add_argument("--backend", default=DEFAULT_BACKEND, choices=BACKEND_CHOICES,
+                   help="pipeline, table: inference backend (default %(default)s: ONNX Runtime on the CPU where "
+                        "installed, else torch; fixed-size ones are built for each band's input size)")
     p.add_argument("--bf16", action="store_true", help="pipeline, table: backend torch with bfloat16 autocast on the CPU")
     p.add_argument("--scenes", type=int, default=16, help="pipeline, table: distinct rendered scenes, cycled (default %(default)s)")
     p.add_argument("--input", default=None, choices=INPUT_SETTINGS,

@@ -20,6 +20,7 @@ import numpy as np
 from tqdm import tqdm
 
 from ..crop import CropSpec
+from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, Detector, default_model_path, resolve_backend
 from ..errors import ConfigError, FrameError
 from .train import parse_size
 
@@ -41,7 +42,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("source", type=Path, help="image file, folder of images, or rosbag2 directory")
     p.add_argument("--out", type=Path, required=True, help="JSON-lines output file")
     p.add_argument("--model", default=None, help="model file (default: the shipped default model)")
-    p.add_argument("--backend", default="torch", choices=["torch", "torchscript", "onnx"], help="inference backend")
+    p.add_argument("--backend", default=DEFAULT_BACKEND, choices=BACKEND_CHOICES,
+                   help="inference backend (default %(default)s: ONNX Runtime on the CPU where installed, else torch)")
     p.add_argument("--bf16", action="store_true",
                    help="backend torch on the CPU: bfloat16 autocast (about 1.5-2x faster where the CPU has native bf16)")
     p.add_argument("--imgsz", type=parse_size, default=None, help="letterbox each image to this model input WxH")
@@ -113,13 +115,13 @@ def detect_one(det, img: np.ndarray, name: str, crop: tuple[int, ...] | None = N
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..detector import Detector, default_model_path
     from ..predictions import write_prediction
     from ..vis import draw_boxes
 
     model = args.model or default_model_path()
-    det = Detector.load(model, backend=args.backend, conf=args.conf, iou=args.iou,
-                        imgsz=args.imgsz if args.backend != "torch" else None, bf16=args.bf16)
+    backend = resolve_backend(args.backend, model, bf16=args.bf16)
+    det = Detector.load(model, backend=backend, conf=args.conf, iou=args.iou,
+                        imgsz=args.imgsz if backend != "torch" else None, bf16=args.bf16)
     # with --crop the detector is built for the band's own size (as the pipeline node does), so a
     # fixed-size backend never letterboxes the band into another input size
     by_band = {}
@@ -130,7 +132,7 @@ def run(args: argparse.Namespace) -> int:
         v0, v1, u0, u1 = args.crop if len(args.crop) == 4 else (*args.crop, 0, w)
         band = (max(1, (u1 - u0) // args.downscale), max(1, (v1 - v0) // args.downscale))
         if band not in by_band:
-            by_band[band] = Detector.load_for_band(model, band, backend=args.backend, conf=args.conf, iou=args.iou,
+            by_band[band] = Detector.load_for_band(model, band, backend=backend, conf=args.conf, iou=args.iou,
                                                    bf16=args.bf16)
         return by_band[band]
     try:

@@ -22,6 +22,7 @@ from tqdm import tqdm
 
 from ..benchmark import format_table, summarize
 from ..calib import DEFAULT_CAMERA, load_calibration, resolve_calibration_path
+from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, RUNTIME_THREADS, Detector, default_model_path
 from ..evaluation import LocalisationReport, format_localisation
 
 
@@ -30,9 +31,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("bag", type=Path, help="rosbag2 directory (MCAP or sqlite3)")
     p.add_argument("--calib", default=DEFAULT_CAMERA, help="calibration YAML or shipped camera name (default: %(default)s)")
     p.add_argument("--model", default=None, help="model file (default: the shipped default model)")
-    p.add_argument("--backend", default="torch", choices=["torch", "torchscript", "onnx"], help="inference backend")
+    p.add_argument("--backend", default=DEFAULT_BACKEND, choices=BACKEND_CHOICES,
+                   help="inference backend (default %(default)s: ONNX Runtime on the CPU where installed, else torch)")
     p.add_argument("--conf", type=float, default=0.25, help="confidence threshold (default %(default)s)")
-    p.add_argument("--threads", type=int, default=0, help="torch / ONNX Runtime threads (0 = library default)")
+    p.add_argument("--threads", type=int, default=RUNTIME_THREADS,
+                   help="torch / ONNX Runtime threads of the network (default %(default)s, as the nodes; 0 = library default)")
     p.add_argument("--bf16", action="store_true", help="backend torch with bfloat16 autocast on the CPU")
     p.add_argument("--topic", default=None, help="camera topic (default: the bag's only image topic)")
     p.add_argument("--out", type=Path, default=None, help="write /cone_boxes and /cones to this new bag (MCAP)")
@@ -65,12 +68,12 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run_offline(args, calib) -> dict:
-    from ..detector import Detector, default_model_path
     from ..pipeline import Pipeline
     from ..replay import offline_replay
 
-    det = Detector.load(args.model or default_model_path(), backend=args.backend, conf=args.conf, threads=args.threads or None,
-                        bf16=args.bf16)
+    # built for the calibration's band, as the pipeline node does (a fixed-size backend never letterboxes)
+    det = Detector.load_for_band(args.model or default_model_path(), (calib.crop.out_width, calib.crop.out_height),
+                                 backend=args.backend, conf=args.conf, threads=args.threads or None, bf16=args.bf16)
     det.warmup()
     res = offline_replay(args.bag, Pipeline(calib, det), args.topic, args.out, args.gt_topic, _progress(args.no_progress))
     stages = res.timer.summary()
@@ -95,8 +98,7 @@ def _run_live(args, calib) -> dict:
     params = {"calibration": str(resolve_calibration_path(args.calib)), "backend": args.backend, "conf": args.conf}
     if args.model:
         params["model"] = str(Path(args.model).resolve())
-    if args.threads:
-        params["threads"] = args.threads
+    params["threads"] = args.threads
     if args.bf16:
         params["bf16"] = True
     res = live_replay(args.bag, mode=args.live, topic=args.topic, params=params, pace=args.pace,

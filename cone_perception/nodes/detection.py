@@ -1,9 +1,10 @@
 """detection node: ``image_cropped`` (bgr8) + its ``camera_info`` -> ``cone_boxes`` (full-image px).
 
 Parameters
-  model (str, "" = the shipped default model), backend ("torch" | "torchscript" | "onnx"),
-  device ("cpu" | "cuda" | "cuda:N"), fp16 (bool, CUDA only), bf16 (bool, CPU autocast, backend torch), conf (0.25), iou (0.45),
-  max_det (100), threads (0 = library default).
+  model (str, "" = the shipped default model), backend ("auto" | "torch" | "torchscript" | "onnx";
+  auto: ONNX Runtime on the CPU where installed, else torch), device ("cpu" | "cuda" | "cuda:N"),
+  fp16 (bool, CUDA only), bf16 (bool, CPU autocast, backend torch), conf (0.25), iou (0.45),
+  max_det (100), threads (1, see detector.RUNTIME_THREADS; 0 = library default).
 The crop and downscale of each image come from the newest ``image_cropped/camera_info``
 (``roi``, ``binning``), so boxes go out in full-image pixels whatever the band.
 """
