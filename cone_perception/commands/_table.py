@@ -99,7 +99,7 @@ def format_markdown(doc: dict) -> str:
         f"Command: `{head['command']}` ({head['date']}).",
         f"Speed: `bench pipeline --input SETTING` code path, {head['frames']} timed frames (+{head['warmup']} warm-up) of "
         f"rendered {head['bench_image']} YUYV scenes, band rows {head['bench_band']} of `{head['calibration']}`, "
-        f"backend {head['backend']}, {head['threads']} threads, {head['cpu']}. End to end = YUYV frame in -> "
+        f"backend {head['backend']}, {head['threads']} network thread(s), {head['cpu']}. End to end = YUYV frame in -> "
         "boxes and cones packed as PointCloud2.",
         f"Accuracy: {head['val_images']} real validation frames ({head['val']}, {head['val_size']}), "
         f"{head['val_boxes']} boxes; crop settings use rows {head['val_band']}, where "
@@ -197,7 +197,8 @@ def run_table(args: argparse.Namespace, calib) -> int:
             else "cone-perception bench table ...",
             "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
             "cpu": f"{platform.machine()} {os.cpu_count()} cores",
-            "backend": args.backend, "threads": args.threads, "frames": args.frames, "warmup": args.warmup,
+            "backend": ", ".join(sorted({r["bench"]["backend"] for r in raw}))
+            + (f" ({args.backend})" if args.backend == "auto" else ""), "threads": args.threads, "frames": args.frames, "warmup": args.warmup,
             "calibration": calib.source, "bench_image": f"{calib.image_width}x{calib.image_height}",
             "bench_band": f"{calib.crop.v0}-{calib.crop.v1}",
             "val": str(args.val), "val_images": len(heights), "val_size": f"{val_size[0]}x{val_size[1]}",
