@@ -74,3 +74,44 @@ def format_table(summary: dict[str, dict[str, float]]) -> str:
             f"{s['min_ms']:>10.3f}{s['max_ms']:>10.3f}"
         )
     return "\n".join(rows)
+
+
+#: The tail the real-time target allows: end-to-end p99 at most this many times the median.
+TAIL_LIMIT = 1.5
+
+
+def summarize_runs(runs: list[dict], tail_limit: float = TAIL_LIMIT) -> dict:
+    """Repeated ``bench pipeline`` results (each with ``stages.end_to_end``, ``fps``,
+    ``peak_rss_mb``) -> the spread across runs: median end to end and frames/s min-max, each run's
+    p99 / median, and how many runs kept p99 within ``tail_limit`` x the median."""
+    if not runs:
+        raise ValueError("summarize_runs needs at least one run")
+    med = np.array([r["stages"]["end_to_end"]["median_ms"] for r in runs])
+    ratio = np.array([r["stages"]["end_to_end"]["p99_ms"] for r in runs]) / med
+    fwd = np.array([r["stages"]["forward"]["median_ms"] for r in runs if "forward" in r["stages"]])
+    return {
+        "runs": len(runs),
+        "median_ms": {"min": float(med.min()), "median": float(np.median(med)), "max": float(med.max())},
+        "fps": {"min": float(1e3 / med.max()), "max": float(1e3 / med.min())},
+        "forward_median_ms": {"min": float(fwd.min()), "max": float(fwd.max())} if fwd.size else None,
+        "p99_over_median": [round(float(x), 3) for x in ratio],
+        "p99_over_median_median": float(np.median(ratio)),
+        "tail_limit": tail_limit,
+        "runs_within_tail_limit": int((ratio <= tail_limit).sum()),
+        "peak_rss_mb_max": float(max(r["peak_rss_mb"] for r in runs)),
+    }
+
+
+def format_runs(s: dict) -> str:
+    """One paragraph of a :func:`summarize_runs` result."""
+    m, f = s["median_ms"], s["fps"]
+    lines = [
+        f"{s['runs']} runs: end to end median {m['min']:.2f}-{m['max']:.2f} ms (median run {m['median']:.2f}), "
+        f"{f['min']:.0f}-{f['max']:.0f} frames/s",
+        f"p99 / median per run: {', '.join(f'{x:.2f}' for x in sorted(s['p99_over_median']))}",
+        f"runs with p99 <= {s['tail_limit']:g}x median: {s['runs_within_tail_limit']} of {s['runs']} "
+        f"(median run {s['p99_over_median_median']:.2f}x); peak RSS up to {s['peak_rss_mb_max']:.0f} MiB",
+    ]
+    if s["forward_median_ms"]:
+        lines.insert(1, f"forward median {s['forward_median_ms']['min']:.2f}-{s['forward_median_ms']['max']:.2f} ms")
+    return "\n".join(lines)

@@ -2,7 +2,7 @@
 
   cone-perception bench adapter  [--frames 300] [--calib CAL] [--encoding yuv422_yuy2] [--json]
   cone-perception bench pipeline [--frames 300] [--calib CAL] [--model M] [--backend B] [--threads N]
-                                 [--input full|half|crop|crop_half] [--json]
+                                 [--input full|half|crop|crop_half] [--repeat N] [--json]
   cone-perception bench table --models A.pt[,B.pt] --val DIR --gt-names A,B,.. --band V0,V1 --out DIR [--frames N]
 
 ``adapter``: 1920x1080 frames (size from the calibration) in the given encoding -> cropped,
@@ -13,7 +13,8 @@ into PointCloud2 messages, as the ``pipeline`` node runs them. ``--input`` repla
 calibration's crop and downscale by one of the runtime-table settings (:meth:`CropSpec.for_setting`).
 ``table``: the runtime table (see ``bench_table.py``).
 Warm-up frames are excluded; median, p90, p99, min-max (noise) and frames/s (from the median
-end-to-end time) are reported, plus peak RSS.
+end-to-end time) are reported, plus peak RSS. ``pipeline --repeat N`` runs it N times, each in a
+fresh process, and reports the spread across runs (:func:`benchmark.summarize_runs`).
 """
 
 from __future__ import annotations
@@ -62,6 +63,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "downscale 2; crop = the calibration's band, downscale 1; crop_half = the band, downscale 2 "
                         "(default: the calibration's own crop and downscale)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
+    p.add_argument("--repeat", type=int, default=1,
+                   help="pipeline: run it this many times, each in a fresh process (this machine's speed varies "
+                        "between processes), and report the spread: median range, each run's p99 / median, "
+                        "how many runs kept p99 within 1.5x the median (default %(default)s)")
     t = p.add_argument_group("table", "bench table: for each model and input setting, bench pipeline + detect + eval on real frames")
     t.add_argument("--models", default=None, help="table: model files, comma-separated (default: the shipped default model)")
     t.add_argument("--val", type=Path, default=None, help="table: YOLO folder (images/, labels/) of real validation frames")
@@ -174,14 +179,50 @@ def _bench_pipeline(args: argparse.Namespace, calib) -> dict:
     return result
 
 
+def _repeat_pipeline(args: argparse.Namespace) -> int:
+    """``bench pipeline --repeat N``: N runs of ``bench pipeline --json``, each in its own process."""
+    import subprocess
+
+    from tqdm import tqdm
+
+    from ..benchmark import format_runs, summarize_runs
+
+    cmd = [sys.executable, "-m", "cone_perception.cli", "bench", "pipeline", "--json",
+           "--frames", str(args.frames), "--warmup", str(args.warmup), "--calib", str(args.calib),
+           "--threads", str(args.threads), "--backend", args.backend, "--scenes", str(args.scenes)]
+    cmd += (["--model", str(args.model)] if args.model else []) + (["--bf16"] if args.bf16 else [])
+    cmd += ["--input", args.input] if args.input else []
+    runs = []
+    for i in tqdm(range(args.repeat), unit="run", desc="bench pipeline", file=sys.stderr, disable=args.json):
+        proc = subprocess.run(cmd, capture_output=True, text=True)
+        if proc.returncode != 0:
+            raise ConfigError("bench", "--repeat", f"run {i + 1} failed (exit {proc.returncode}): "
+                              f"{proc.stderr.strip().splitlines()[-1] if proc.stderr.strip() else 'no message'}")
+        runs.append(json.loads(proc.stdout))
+    summary = summarize_runs(runs)
+    if args.json:
+        json.dump({"summary": summary, "runs": runs}, sys.stdout, indent=1)
+        print()
+        return 0
+    r0 = runs[0]
+    print(f"bench pipeline ({r0['setting']}) x {args.repeat} processes: {r0['input']} -> {r0['output']}; model "
+          f"{r0['model']} ({r0['backend']}, {r0['threads']} threads), {args.frames} frames each")
+    print(format_runs(summary))
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     if args.frames < 1 or args.warmup < 0:
         raise ConfigError("bench", "--frames/--warmup", "need --frames >= 1 and --warmup >= 0")
+    if args.repeat < 1 or (args.repeat > 1 and args.target != "pipeline"):
+        raise ConfigError("bench", "--repeat", "need --repeat >= 1; more than one run is for `bench pipeline`")
     calib = load_calibration(args.calib)
     if args.target == "table":
         from ._table import run_table
 
         return run_table(args, calib)
+    if args.target == "pipeline" and args.repeat > 1:
+        return _repeat_pipeline(args)
     if args.target == "pipeline":
         result = _bench_pipeline(args, calib)
         if args.json:
