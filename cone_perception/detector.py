@@ -57,7 +57,7 @@ DEFAULT_BACKEND = "auto"
 #: every core busy, any other process that wakes (SLAM, planning, the OS) takes a core from one of
 #: the threads for a scheduler tick and the whole forward waits for it; one thread leaves a core
 #: free for them. On this 2-core machine ONNX Runtime on one thread is as fast as eager torch on two
-#: and its p99 stays near the median (README, "Tail latency and threads").
+#: and its p99 stays nearest the median (README, "Backend and threads").
 RUNTIME_THREADS = 1
 PAD_VALUE = 114
 
@@ -67,7 +67,7 @@ def resolve_backend(backend: str, path: str | Path | None = None, device: str = 
     """The backend ``backend`` stands for: itself, or for ``auto`` the fastest one the model can run
     with here: an exported file's own (``.onnx`` -> onnx, ``.torchscript`` / ``.ts`` -> torchscript);
     a checkpoint (``path`` ``.pt`` or None = in memory) ONNX Runtime on the CPU when it is installed
-    (forward 2.3x eager torch's, same boxes), eager torch on a GPU, with ``bf16``/``fp16`` or
+    (a faster forward than eager torch's, the same boxes), eager torch on a GPU, with ``bf16``/``fp16`` or
     without onnxruntime. The loaded detector's :attr:`Detector.backend` says which it became."""
     if backend != "auto":
         return backend

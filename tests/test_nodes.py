@@ -7,6 +7,7 @@ executables with ``--ros-args --params-file`` and remapping, as ``ros2 run`` sta
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -190,3 +191,35 @@ def test_shipped_params_files_start_the_nodes(params: Path) -> None:
     for n in procs:
         assert alive[n], f"{n} exited with {params.name}:\n{outs[n]}"
         assert "calibration" in outs[n] and "error" not in outs[n].lower(), outs[n]
+
+
+def test_detection_node_builds_a_fixed_size_network_for_the_band(ros: RosFixture) -> None:
+    """With the CPU default (ONNX Runtime, fixed input size) and a band other than the model's
+    960x288, the node rebuilds the network for the band on the first camera_info: its boxes are
+    eager torch's on the band as it is, not those of a letterboxed (half-resolution) band."""
+    from std_msgs.msg import Header
+
+    from cone_perception.commands.bench import rendered_frames
+    from cone_perception.detector import Detector, default_model_path
+    from cone_perception.nodes.detection import DetectionNode
+
+    node = ros.add(DetectionNode(context=ros.context))
+    assert node.detector.backend == "onnx" and node.detector.imgsz == (960, 288)
+    crop = replace(CALIB.crop, downscale=1)  # the full-resolution band, 1920x576
+    band = DriverAdapter(crop, W, H).from_raw("yuv422_yuy2", W, H, 2 * W, rendered_frames(CALIB, 1)[0])
+    t = ros.node("tester")
+    boxes = Inbox()
+    t.create_subscription(PointCloud2, "cone_boxes", boxes, 2)
+    pub_info = t.create_publisher(CameraInfo, "image_cropped/camera_info", 2)
+    pub_img = t.create_publisher(Image, "image_cropped", 2)
+    assert ros.spin_until(lambda: pub_img.get_subscription_count() > 0 and pub_info.get_subscription_count() > 0)
+    header = Header(frame_id="camera_optical")
+    header.stamp.sec = 5
+    info = _msgs.camera_info(crop.camera_info_fields(W, H), header)
+    img = _msgs.bgr_image(band, header)
+    assert ros.spin_until(lambda: (pub_info.publish(info) or pub_img.publish(img) or True) and len(boxes.msgs) > 0, 30)
+    assert node.detector.backend == "onnx" and node.detector.imgsz == (1920, 576)
+    got = _msgs.boxes_from_msg(boxes.msgs[0])
+    want = Detector.load(default_model_path(), backend="torch", max_det=100).detect(band, crop)
+    assert len(got) == len(want) > 0
+    np.testing.assert_allclose(np.sort(got["u1"]), np.sort(want["u1"]), atol=0.05)

@@ -6,7 +6,9 @@ Parameters
   fp16 (bool, CUDA only), bf16 (bool, CPU autocast, backend torch), conf (0.25), iou (0.45),
   max_det (100), threads (1, see detector.RUNTIME_THREADS; 0 = library default).
 The crop and downscale of each image come from the newest ``image_cropped/camera_info``
-(``roi``, ``binning``), so boxes go out in full-image pixels whatever the band.
+(``roi``, ``binning``), so boxes go out in full-image pixels whatever the band. A fixed-size network
+built from a checkpoint (ONNX Runtime, the CPU default) is rebuilt for the band's size when the
+first ``camera_info`` shows another one (once; frames meanwhile are dropped as any late frame).
 """
 
 from __future__ import annotations
@@ -19,13 +21,14 @@ from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
 from ..errors import FrameError
 from . import _msgs
-from ._detector_params import load_detector
+from ._detector_params import DetectorLoader, needs_rebuild
 
 
 class DetectionNode(PerceptionNode):
     def __init__(self, **node_kwargs):
         super().__init__("detection", **node_kwargs)
-        self.detector = load_detector(self)
+        self.loader = DetectorLoader(self)
+        self.detector = self.loader.load()
         self.crop = None
         self.pending = None  # newest image received before any camera_info
         self.pub_boxes = self.create_publisher(PointCloud2, "cone_boxes", QOS_DATA)
@@ -38,6 +41,11 @@ class DetectionNode(PerceptionNode):
         except ValueError as e:
             self.get_logger().warning(f"ignoring camera_info: {e}", throttle_duration_sec=5.0)
             return
+        band = (self.crop.out_width, self.crop.out_height)
+        if needs_rebuild(self.detector, band):  # a fixed-size network would letterbox this band
+            self.get_logger().info(f"band {band[0]}x{band[1]} is not the model input "
+                                   f"{self.detector.imgsz[0]}x{self.detector.imgsz[1]}: building the network for it")
+            self.detector = self.loader.load(band)
         if self.pending is not None:  # an image that came before the first camera_info
             pending, self.pending = self.pending, None
             self.guarded(self.on_image)(pending)
