@@ -66,7 +66,7 @@ def resolve_backend(backend: str, path: str | Path | None = None, device: str = 
                     fp16: bool = False) -> str:
     """The backend ``backend`` stands for: itself, or for ``auto`` the fastest one the model can run
     with here: an exported file's own (``.onnx`` -> onnx, ``.torchscript`` / ``.ts`` -> torchscript);
-    a checkpoint (``path`` ``.pt`` or None = in memory) ONNX Runtime on the CPU when it is installed
+    a checkpoint (``path`` ``.pt`` or None = in memory) ONNX Runtime on the CPU when it and ``onnx`` are installed
     (a faster forward than eager torch's, the same boxes), eager torch on a GPU, with ``bf16``/``fp16`` or
     without onnxruntime. The loaded detector's :attr:`Detector.backend` says which it became."""
     if backend != "auto":
@@ -78,7 +78,8 @@ def resolve_backend(backend: str, path: str | Path | None = None, device: str = 
         return "torchscript"
     if device != "cpu" or bf16 or fp16:
         return "torch"
-    try:
+    try:  # ONNX Runtime runs it; torch's exporter needs the onnx package to build it
+        import onnx  # noqa: F401
         import onnxruntime  # noqa: F401
     except ImportError:
         return "torch"

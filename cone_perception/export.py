@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from .errors import ConfigError
 from .model import ConeYOLO
 
 ONNX_OPSET = 17
@@ -36,6 +37,11 @@ def trace(model: ConeYOLO, imgsz: tuple[int, int], device: str = "cpu", fp16: bo
 
 def onnx_bytes(model: ConeYOLO, imgsz: tuple[int, int]) -> bytes:
     """ONNX (opset 17, fixed input size (W, H)) of the model in eval mode."""
+    try:
+        import onnx  # noqa: F401 - torch's exporter needs it
+    except ImportError as e:
+        raise ConfigError("ONNX export", "onnx", "torch's ONNX exporter needs the onnx package: pip install onnx "
+                          "(or use backend 'torch')") from e
     model = model.eval().float().cpu()
     buf = io.BytesIO()
     with torch.no_grad(), warnings.catch_warnings():

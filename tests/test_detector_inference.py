@@ -71,7 +71,13 @@ def test_auto_backend_picks_onnx_runtime_on_the_cpu_and_keeps_the_boxes(trained,
     assert resolve_backend("auto", "m.pt", fp16=True) == "torch"
     assert resolve_backend("auto", "m.onnx") == "onnx" and resolve_backend("auto", "m.torchscript") == "torchscript"
     assert resolve_backend("torch", "m.pt") == "torch"
-    monkeypatch.setitem(__import__("sys").modules, "onnxruntime", None)  # import fails: not installed
+    modules = __import__("sys").modules
+    with monkeypatch.context() as m:  # onnx missing: torch's exporter cannot build the ONNX network
+        m.setitem(modules, "onnx", None)
+        assert Detector.load(ckpt).backend == "torch"
+        with pytest.raises(ConfigError, match="pip install onnx"):
+            Detector.load(ckpt, backend="onnx")
+    monkeypatch.setitem(modules, "onnxruntime", None)  # import fails: not installed
     assert resolve_backend("auto", "m.pt") == "torch"
     assert Detector.load(ckpt).backend == "torch"
     with pytest.raises(ConfigError, match="unknown backend 'tensorrt'.*auto, torch"):
