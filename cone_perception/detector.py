@@ -449,7 +449,8 @@ class Detector:
             if not self.fixed_size:
                 self._say_once(("pad", w, h), f"image {w}x{h} is not a multiple of 32: padded to {in_w}x{in_h}")
             elif in_size is None:
-                self._say_once(("fit", w, h), f"image {w}x{h} letterboxed to the model input {in_w}x{in_h}")
+                how = "padded" if min(in_w / w, in_h / h) == 1.0 else "letterboxed"  # scale 1: as the padding above
+                self._say_once(("fit", w, h), f"image {w}x{h} {how} to the model input {in_w}x{in_h}")
         blob, lb = preprocess(bgr, in_w, in_h)
         t1 = time.perf_counter()
         pred = self._run(blob)

@@ -139,6 +139,20 @@ def test_size_not_multiple_of_32_is_padded_and_said_once(trained, caplog):
     del a
 
 
+
+def test_fixed_size_backend_says_padded_or_letterboxed(trained, caplog):
+    """A fixed-size network pads an image that fits at scale 1 (as eager torch does) and says so
+    (the runtime table's 960x540 in 960x544); only an image that must be scaled is called letterboxed."""
+    ckpt, images = trained
+    det = Detector.load(ckpt, backend="onnx")
+    w, h = det.imgsz
+    with caplog.at_level(logging.WARNING):
+        det.infer(np.ascontiguousarray(images[1][: h - 6, :w]))  # full width: scale 1, rows padded
+        det.infer(cv2.resize(images[1], (2 * w, 2 * h)))
+    msgs = [r.message for r in caplog.records]
+    assert f"image {w}x{h - 6} padded to the model input {w}x{h}" in msgs
+    assert f"image {2 * w}x{2 * h} letterboxed to the model input {w}x{h}" in msgs
+
 def test_external_layout_with_permuted_class_names(tmp_path, trained):
     """An export in the common layout whose classes are in another tool's order and naming."""
     ckpt, images = trained
