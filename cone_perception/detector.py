@@ -66,9 +66,9 @@ def resolve_backend(backend: str, path: str | Path | None = None, device: str = 
                     fp16: bool = False) -> str:
     """The backend ``backend`` stands for: itself, or for ``auto`` the fastest one the model can run
     with here: an exported file's own (``.onnx`` -> onnx, ``.torchscript`` / ``.ts`` -> torchscript);
-    a checkpoint (``path`` ``.pt`` or None = in memory) ONNX Runtime on the CPU when it and ``onnx`` are installed
-    (a faster forward than eager torch's, the same boxes), eager torch on a GPU, with ``bf16``/``fp16`` or
-    without onnxruntime. The loaded detector's :attr:`Detector.backend` says which it became."""
+    for a checkpoint (``path`` ``.pt``, or None = in memory) ONNX Runtime on the CPU when it and
+    ``onnx`` are installed (a faster forward than eager torch's, the same boxes), else eager torch
+    (a GPU, ``bf16`` / ``fp16``). The loaded detector's :attr:`Detector.backend` says which."""
     if backend != "auto":
         return backend
     suffix = Path(path).suffix.lower() if path is not None else ".pt"
@@ -300,8 +300,9 @@ class Detector:
         bf16: bool = False,
     ) -> "Detector":
         """Load a model file for ``backend`` (see module doc; ``auto``: :func:`resolve_backend`).
-        ``imgsz`` (W, H) overrides the input size of fixed-size backends; ``threads`` sets torch / ONNX Runtime intra-op threads; ``bf16``:
-        bfloat16 autocast on the CPU (backend torch, a checkpoint), fast where the CPU has native bf16."""
+        ``imgsz`` (W, H) overrides the input size of fixed-size backends; ``threads`` sets torch /
+        ONNX Runtime intra-op threads (None: the library's default); ``bf16``: bfloat16 autocast on
+        the CPU (backend torch, a checkpoint), fast where the CPU has native bf16."""
         path = Path(path)
         src = str(path)
         if backend not in BACKEND_CHOICES:
