@@ -95,6 +95,12 @@ def round_up32(n: int) -> int:
     return int(-(-int(n) // 32) * 32)
 
 
+def band_input_size(band_wh: tuple[int, int]) -> tuple[int, int]:
+    """The network input (W, H) a checkpoint is built for to run a band of ``band_wh`` as it is:
+    each side rounded up to a multiple of 32 (the band is padded, never scaled)."""
+    return round_up32(band_wh[0]), round_up32(band_wh[1])
+
+
 @dataclass(frozen=True)
 class Letterbox:
     """How an image was fitted into the network input: scale, then pad right / bottom."""
@@ -282,8 +288,14 @@ class Detector:
         for the band's size rounded up to a multiple of 32 (fixed-size backends included), so the
         band is padded, never letterboxed into another size. Exported files keep their own size.
         ``kw`` as for :meth:`load`."""
-        imgsz = (round_up32(band_wh[0]), round_up32(band_wh[1])) if Path(path).suffix == ".pt" else None
+        imgsz = band_input_size(band_wh) if Path(path).suffix == ".pt" else None
         return cls.load(path, imgsz=imgsz, **kw)
+
+    def runs_band_as_is(self, band_wh: tuple[int, int]) -> bool:
+        """False for a fixed-size network built from a checkpoint for another size than
+        :func:`band_input_size` of the band: it would letterbox the band; :meth:`load_for_band`
+        builds one that does not."""
+        return not (self.fixed_size and self.checkpoint is not None) or tuple(self.imgsz) == band_input_size(band_wh)
 
     @classmethod
     def load(
@@ -436,7 +448,7 @@ class Detector:
         """Network input (W, H) used for an image of w x h as it is (no scaling if possible)."""
         if self.fixed_size:
             return self.imgsz
-        return round_up32(w), round_up32(h)
+        return band_input_size((w, h))
 
     def infer(self, bgr: np.ndarray, in_size: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Detect in a BGR image (h, w, 3) uint8 -> ((K, 4) float32 x1 y1 x2 y2 in THIS image's px,

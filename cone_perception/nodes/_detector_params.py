@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from rclpy.node import Node
 
-from ..detector import DEFAULT_BACKEND, RUNTIME_THREADS, Detector, default_model_path, round_up32
+from ..detector import DEFAULT_BACKEND, RUNTIME_THREADS, Detector, default_model_path
 
 
 class DetectorLoader:
@@ -41,13 +41,6 @@ class DetectorLoader:
             f"model {det.source} ({det.backend} {det.precision}, {self.threads or 'library default'} thread(s), "
             f"input {det.imgsz[0]}x{det.imgsz[1]}) loaded and warm")
         return det
-
-
-def needs_rebuild(det: Detector, band_wh: tuple[int, int]) -> bool:
-    """A fixed-size detector built from a checkpoint for another input size than the band's
-    (rounded up to a multiple of 32): rebuilt, it runs the band as it is instead of letterboxing it."""
-    want = (round_up32(band_wh[0]), round_up32(band_wh[1]))
-    return det.fixed_size and det.checkpoint is not None and tuple(det.imgsz) != want
 
 
 def load_detector(node: Node, band_wh: tuple[int, int] | None = None) -> Detector:

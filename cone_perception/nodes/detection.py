@@ -21,7 +21,7 @@ from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
 from ..errors import FrameError
 from . import _msgs
-from ._detector_params import DetectorLoader, needs_rebuild
+from ._detector_params import DetectorLoader
 
 
 class DetectionNode(PerceptionNode):
@@ -42,7 +42,7 @@ class DetectionNode(PerceptionNode):
             self.get_logger().warning(f"ignoring camera_info: {e}", throttle_duration_sec=5.0)
             return
         band = (self.crop.out_width, self.crop.out_height)
-        if needs_rebuild(self.detector, band):  # a fixed-size network would letterbox this band
+        if not self.detector.runs_band_as_is(band):  # a fixed-size network would letterbox this band
             self.get_logger().info(f"band {band[0]}x{band[1]} is not the model input "
                                    f"{self.detector.imgsz[0]}x{self.detector.imgsz[1]}: building the network for it")
             self.detector = self.loader.load(band)
