@@ -28,9 +28,9 @@ _ENCODINGS = {
 }
 SUPPORTED_ENCODINGS = tuple(_ENCODINGS)
 
-# OpenCV's own thread pool stays off: the band's conversion takes about 0.5 ms on one thread, and
-# pool workers that spin after it take a core from the network's threads. On two cores that doubled
-# the forward of 1-2 % of frames (p99 2.1-2.4x the median; mostly 1.1-1.4x without the pool).
+# OpenCV's own thread pool stays off: the band's conversion is short on one thread, and pool workers
+# that spin after it take a core from the network's threads, which slows some forwards down
+# (measured in docs/benchmarks.md, "Backend and threads").
 OPENCV_THREADS = 1
 
 

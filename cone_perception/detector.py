@@ -56,8 +56,7 @@ DEFAULT_BACKEND = "auto"
 #: The network's CPU threads where the car runs it (the nodes, ``bench``, ``replay``): one. With
 #: every core busy, any other process that wakes (SLAM, planning, the OS) takes a core from one of
 #: the threads for a scheduler tick and the whole forward waits for it; one thread leaves a core
-#: free for them. On this 2-core machine ONNX Runtime on one thread is as fast as eager torch on two
-#: and its p99 stays nearest the median (README, "Backend and threads").
+#: free for them. Measured per backend and thread count: docs/benchmarks.md, "Backend and threads".
 RUNTIME_THREADS = 1
 PAD_VALUE = 114
 

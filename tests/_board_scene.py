@@ -99,7 +99,7 @@ def render_views(cam: PinholeCamera, cols: int, rows: int, square_m: float, seed
 
 
 def write_example(out_dir: str) -> None:
-    """The README's example inputs: the synthetic main-hoop camera (1920x1080, 90 deg, 1.2 m, pitch 10 deg)
+    """The example inputs of docs/calibration.md: the synthetic main-hoop camera (1920x1080, 90 deg, 1.2 m, pitch 10 deg)
     seeing a 9x6 x 0.2 m board 4 m ahead of the rear axle, plus 8 cones at measured spots (exact pixels);
     the same with a wide-angle lens (``*_wide``) and its ``lens.yaml``."""
     from pathlib import Path

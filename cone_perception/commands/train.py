@@ -26,7 +26,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     from ..train.trainer import PRECISIONS, TrainConfig
 
     d = TrainConfig(data="", out="")
-    p.add_argument("--data", required=True, help="data YAML listing train / val datasets (see README, 'train')")
+    p.add_argument("--data", required=True, help="data YAML listing train / val datasets (see docs/training.md)")
     p.add_argument("--model", default=d.model,
                    help=f"model size ({', '.join(MODEL_SIZES)}) or a checkpoint to fine-tune (default {d.model})")
     p.add_argument("--epochs", type=int, default=d.epochs, help=f"epochs (default {d.epochs}; with --resume: new total)")

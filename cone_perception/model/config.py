@@ -6,7 +6,7 @@ depth (16-32-64-128-256 channels, one bottleneck per CSP block); ``t`` ("tiny")
 and ``p`` ("pico") are cone-sized: few channels at high resolution (8 in the
 stem), a lighter head and fewer DFL bins (7 bins x stride 32 = 224 px
 from a cell centre to each side is enough for cones). Measured forward speed:
-README, section 'Detector'; ``cone-perception speed`` measures it.
+docs/benchmarks.md, "Forward alone per detector size"; ``cone-perception speed`` measures it.
 """
 
 from __future__ import annotations
