@@ -276,10 +276,13 @@ def _names(args: argparse.Namespace) -> tuple[str, Path]:
 def _read_image(path: Path) -> np.ndarray:
     if not path.is_file():
         raise ConfigError(str(path), None, "image file not found")
-    img = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if img is None:
-        raise ConfigError(str(path), None, "cannot decode the image (not a PNG/JPEG/...?)")
-    return img
+    from ..adapter import decode_compressed
+    from ..errors import FrameError
+
+    try:  # the nodes' decoding: the header's size is checked before the decoder runs
+        return decode_compressed(path.read_bytes())
+    except FrameError as e:
+        raise ConfigError(str(path), None, f"cannot decode the image ({e.reason}): {e}") from None
 
 
 def _read_input_image(args: argparse.Namespace) -> tuple[np.ndarray | None, str]:
