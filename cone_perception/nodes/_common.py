@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import sys
+import traceback
 from typing import Callable
 
 from .. import ros_env
 from ..errors import ConePerceptionError, ConfigError, FrameError
-from ..stats import FrameStats
+from ..stats import ERROR, NodeHealth
 
 ros_env.apply()  # before rclpy loads the middleware
 
@@ -32,42 +33,82 @@ WARN_THROTTLE_S = 2.0
 
 
 class PerceptionNode(Node):
-    """A node that counts ok/dropped frames and publishes them on ``/diagnostics`` once a second."""
+    """A node that counts every input message (processed, or dropped by cause), watches its input
+    streams (stamp gaps, stamps backwards or repeated, stale frames, silence, a missing publisher:
+    :class:`~cone_perception.stats.NodeHealth`) and publishes its health on ``/diagnostics`` once
+    a second.
+
+    Parameters (every node): ``input_timeout_s`` (1.0; silence on an input longer than this is an
+    ERROR, 0 = never), ``max_frame_age_s`` (0.0 = off; a frame whose header stamp is older than this
+    on arrival is counted stale: set it on the car, where the camera stamps with the node's clock).
+    """
 
     def __init__(self, name: str, **kwargs):
         super().__init__(name, **kwargs)
-        self.stats = FrameStats()
+        timeout_s = float(self.declare_parameter("input_timeout_s", 1.0).value)
+        max_age_s = float(self.declare_parameter("max_frame_age_s", 0.0).value)
+        self.health = NodeHealth(timeout_s, max_age_s)
+        self.stats = self.health.stats
         self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._diag_timer = self.create_timer(1.0, self._publish_diagnostics)
 
-    def guarded(self, handler: Callable) -> Callable:
-        """Wrap a subscription callback: a :class:`FrameError` drops that frame, counted and logged.
+    def _now_ns(self) -> int:
+        return self.get_clock().now().nanoseconds
 
-        A handler that returns ``False`` has put the frame aside for later (not counted yet).
+    def guarded(self, handler: Callable, topic: str | None = None) -> Callable:
+        """Wrap a subscription callback so that no message can end the process.
+
+        A :class:`FrameError` drops the message, counted under its reason and logged (throttled); any
+        other exception drops it too, counted as ``exception_<Type>``, logged at warn level
+        (throttled) and, the first time for each type, with its traceback at debug level.
+        With ``topic`` (a frame input), every message is counted: ok when the handler returns (a
+        handler that returns ``False`` has put the frame aside for later: not counted yet), and
+        its header stamp goes to the topic's :class:`~cone_perception.stats.StreamMonitor`.
+        Without ``topic`` (``camera_info``), only drops are counted.
         """
+        stream = self.health.stream(self.resolve_topic_name(topic), self._now_ns()) if topic else None
 
         def callback(msg):
-            try:
-                done = handler(msg)
-            except FrameError as e:
-                n = self.stats.count_drop(e.reason)
-                self.get_logger().warning(
-                    f"dropped frame ({e.reason}, {n} so far): {e}", throttle_duration_sec=WARN_THROTTLE_S
-                )
-            else:
-                if done is not False:
-                    self.stats.count_ok()
+            if stream is not None:
+                try:
+                    stream.observe(_stamp_ns(msg), self._now_ns())
+                except Exception:  # noqa: BLE001 - a header that is not one: counted by run_guarded below
+                    pass
+            self.run_guarded(handler, msg, count_ok=stream is not None)
 
         return callback
+
+    def run_guarded(self, handler: Callable, msg, count_ok: bool = True) -> None:
+        """Call ``handler(msg)``, dropping and counting the message on any exception (:meth:`guarded`)."""
+        try:
+            done = handler(msg)
+        except FrameError as e:
+            n = self.stats.count_drop(e.reason)
+            self.get_logger().warning(
+                f"dropped message ({e.reason}, {n} so far): {e}", throttle_duration_sec=WARN_THROTTLE_S
+            )
+        except Exception as e:  # noqa: BLE001 - no message may end the node: drop it, count it, say so
+            reason = f"exception_{type(e).__name__}"
+            if reason not in self.stats.dropped:
+                self.get_logger().debug(f"first {reason}:\n{traceback.format_exc()}")
+            n = self.stats.count_drop(reason)
+            self.get_logger().warning(
+                f"dropped message on unexpected {type(e).__name__} ({n} so far): {e}",
+                throttle_duration_sec=WARN_THROTTLE_S,
+            )
+        else:
+            if done is not False and count_ok:
+                self.stats.count_ok()
 
     def subscribe_camera(self, transport: str) -> None:
         """Subscribe ``image_raw`` (``transport`` "raw") or ``image_raw/compressed`` ("compressed")
         to ``self.on_raw`` / ``self.on_compressed``, newest frame only."""
         if transport == "raw":
-            self.create_subscription(Image, "image_raw", self.guarded(self.on_raw), QOS_IMAGE_IN)
+            self.create_subscription(Image, "image_raw", self.guarded(self.on_raw, "image_raw"), QOS_IMAGE_IN)
         elif transport == "compressed":
             self.create_subscription(
-                CompressedImage, "image_raw/compressed", self.guarded(self.on_compressed), QOS_IMAGE_IN
+                CompressedImage, "image_raw/compressed", self.guarded(self.on_compressed, "image_raw/compressed"),
+                QOS_IMAGE_IN,
             )
         else:
             raise ConfigError("parameter", "input_transport", f"must be 'raw' or 'compressed', got {transport!r}")
@@ -86,18 +127,28 @@ class PerceptionNode(Node):
             self.pub_markers.publish(_msgs.cone_markers(cones, h))
 
     def _publish_diagnostics(self) -> None:
+        pubs = {t: self.count_publishers(t) for t in self.health.streams}
+        rep = self.health.assess(self._now_ns(), pubs)
         st = DiagnosticStatus()
         st.name = f"cone_perception/{self.get_name()}"
         st.hardware_id = "camera"
-        st.level = DiagnosticStatus.WARN if self.stats.dropped else DiagnosticStatus.OK
-        st.message = self.stats.summary()
-        st.values = [KeyValue(key="frames_ok", value=str(self.stats.ok))] + [
-            KeyValue(key=f"dropped_{k}", value=str(v)) for k, v in sorted(self.stats.dropped.items())
-        ]
+        st.level = bytes([rep.level])
+        st.message = rep.message
+        st.values = [KeyValue(key=k, value=v) for k, v in rep.values]
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()
         arr.status = [st]
         self._diag_pub.publish(arr)
+        if rep.level:
+            what = "input lost" if rep.level == ERROR else "input degraded"
+            self.get_logger().warning(f"{what}: {rep.message}", throttle_duration_sec=5.0)
+
+
+def _stamp_ns(msg) -> int | None:
+    header = getattr(msg, "header", None)
+    if header is None:
+        return None
+    return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
 
 
 def run_node(factory: Callable[[], Node], args: list[str] | None = None, name: str = "cone_perception") -> int:
@@ -118,7 +169,8 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None, name: s
     finally:
         if node is not None:
             if hasattr(node, "stats"):
-                print(f"[{name}] stopping: {node.stats.summary()}", file=sys.stderr)
+                print(f"[{name}] stopping: {node.health.summary() if hasattr(node, 'health') else node.stats.summary()}",
+                      file=sys.stderr)
             node.destroy_node()
         if rclpy.ok():
             rclpy.shutdown()
