@@ -69,12 +69,14 @@ class StreamMonitor:
 
     ``timeout_s``: silence longer than this is an ERROR (0 = never). ``max_age_s``: a frame whose
     stamp is older than this on arrival is stale (0 = not checked; e.g. a bag played with its
-    original stamps).
+    original stamps). ``period_s``: the publisher's nominal period (0 = learnt: the median of the
+    last stamp deltas, which misses skips of a consumer that never sees two frames in a row).
     """
 
     topic: str
     timeout_s: float = 1.0
     max_age_s: float = 0.0
+    period_s: float = 0.0
     received: int = 0
     skipped: int = 0
     backwards: int = 0
@@ -94,7 +96,9 @@ class StreamMonitor:
 
     @property
     def period_ns(self) -> float | None:
-        """The stream's period: the median of the last stamp deltas, once enough are seen."""
+        """The stream's period: ``period_s``, or the median of the last stamp deltas once enough are seen."""
+        if self.period_s > 0:
+            return self.period_s * 1e9
         return median(self._deltas) if len(self._deltas) >= MIN_PERIOD_SAMPLES else None
 
     def observe(self, stamp_ns: int | None, now_ns: int) -> list[str]:
@@ -161,15 +165,15 @@ class HealthReport:
 class NodeHealth:
     """A node's :class:`FrameStats` and one :class:`StreamMonitor` per input topic."""
 
-    def __init__(self, timeout_s: float = 1.0, max_age_s: float = 0.0) -> None:
+    def __init__(self, timeout_s: float = 1.0, max_age_s: float = 0.0, period_s: float = 0.0) -> None:
         self.stats = FrameStats()
         self.streams: dict[str, StreamMonitor] = {}
-        self.timeout_s, self.max_age_s = timeout_s, max_age_s
+        self.timeout_s, self.max_age_s, self.period_s = timeout_s, max_age_s, period_s
         self._last: dict[str, int] = {}
 
     def stream(self, topic: str, now_ns: int | None = None) -> StreamMonitor:
         if topic not in self.streams:
-            self.streams[topic] = StreamMonitor(topic, self.timeout_s, self.max_age_s)
+            self.streams[topic] = StreamMonitor(topic, self.timeout_s, self.max_age_s, self.period_s)
         if now_ns is not None:
             self.streams[topic].start(now_ns)
         return self.streams[topic]

@@ -64,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
         summary = _run_offline(args, calib)
     if args.json:
         args.json.write_text(json.dumps(summary, indent=1))
-    return 0
+    return 1 if summary.get("died") else 0
 
 
 def _run_offline(args, calib) -> dict:
@@ -106,6 +106,9 @@ def _run_live(args, calib) -> dict:
     got = len(res.cones)
     print(f"replay (live, {args.live} nodes, {args.pace}) {args.bag}: {res.sent} frames sent, {got} /cones received, "
           f"{len(res.lost)} lost")
+    for exe, code in res.died.items():
+        tail = "\n".join(res.node_output.get(exe, "").strip().splitlines()[-15:])
+        print(f"replay: node {exe} died during the replay (exit code {code}); its last output:\n{tail}", file=sys.stderr)
     lat = summarize([v / 1e3 for v in res.latency_ms.values()])
     print(format_table({"frame->/cones": lat}))
     if got:
@@ -123,4 +126,4 @@ def _run_live(args, calib) -> dict:
         write_result_bag(res, args.out)
         print(f"wrote {args.out}")
     return {"mode": f"live-{args.live}", "sent": res.sent, "received": got, "lost": len(res.lost),
-            "latency": lat, "wall_s": res.wall_s, "localisation": loc}
+            "latency": lat, "wall_s": res.wall_s, "localisation": loc, "died": res.died}

@@ -40,14 +40,17 @@ class PerceptionNode(Node):
 
     Parameters (every node): ``input_timeout_s`` (1.0; silence on an input longer than this is an
     ERROR, 0 = never), ``max_frame_age_s`` (0.0 = off; a frame whose header stamp is older than this
-    on arrival is counted stale: set it on the car, where the camera stamps with the node's clock).
+    on arrival is counted stale: set it on the car, where the camera stamps with the node's clock),
+    ``input_rate_hz`` (0.0 = learnt from the stamps; the publisher's rate, for counting the frames
+    replaced before processing from the gaps in its stamps).
     """
 
     def __init__(self, name: str, **kwargs):
         super().__init__(name, **kwargs)
         timeout_s = float(self.declare_parameter("input_timeout_s", 1.0).value)
         max_age_s = float(self.declare_parameter("max_frame_age_s", 0.0).value)
-        self.health = NodeHealth(timeout_s, max_age_s)
+        rate_hz = float(self.declare_parameter("input_rate_hz", 0.0).value)
+        self.health = NodeHealth(timeout_s, max_age_s, 1.0 / rate_hz if rate_hz > 0 else 0.0)
         self.stats = self.health.stats
         self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._diag_timer = self.create_timer(1.0, self._publish_diagnostics)
