@@ -78,6 +78,8 @@ class StreamMonitor:
     max_age_s: float = 0.0
     period_s: float = 0.0
     received: int = 0
+    ok: int = 0  # of ``received``: processed (counted by the node's guard)
+    dropped: int = 0  # of ``received``: dropped with a cause (in :class:`FrameStats`)
     skipped: int = 0
     backwards: int = 0
     repeated: int = 0
@@ -147,7 +149,7 @@ class StreamMonitor:
         return silent
 
     def counts(self) -> dict[str, int]:
-        return {"received": self.received, "skipped": self.skipped, "backwards": self.backwards,
+        return {"received": self.received, "ok": self.ok, "dropped": self.dropped, "skipped": self.skipped, "backwards": self.backwards,
                 "repeated": self.repeated, "stale": self.stale, "silences": self.silences}
 
 
@@ -220,7 +222,7 @@ class NodeHealth:
         """One line for the log: the frame counts and each stream's faults."""
         parts = [self.stats.summary()]
         for s in self.streams.values():
-            faults = {k: v for k, v in s.counts().items() if k != "received" and v}
+            faults = {k: v for k, v in s.counts().items() if k not in ("received", "ok", "dropped") and v}
             if faults:
                 parts.append(f"{s.topic}: " + ", ".join(f"{k}={v}" for k, v in faults.items()))
         return "; ".join(parts)

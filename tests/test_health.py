@@ -15,7 +15,7 @@ def _feed(mon: StreamMonitor, stamps_ms, lag_ms: float = 5.0) -> list[list[str]]
 def test_a_steady_stream_has_no_faults() -> None:
     mon = StreamMonitor("/image_raw")
     faults = _feed(mon, [i * 33 for i in range(100)])
-    assert not any(faults) and mon.counts() == {"received": 100, "skipped": 0, "backwards": 0, "repeated": 0,
+    assert not any(faults) and mon.counts() == {"received": 100, "ok": 0, "dropped": 0, "skipped": 0, "backwards": 0, "repeated": 0,
                                                 "stale": 0, "silences": 0}
 
 

@@ -74,7 +74,8 @@ def test_unexpected_exceptions_are_dropped_counted_by_type_and_logged(ros: RosFi
     assert dict(node.stats.dropped) == {"exception_KeyError": 3, "exception_MemoryError": 2}
     assert node.stats.ok == 0 and node.stats.received == 5
     assert len(debug) == 2 and all("Traceback" in d for d in debug)  # once per type, with the traceback
-    assert node.health.streams["/image_raw"].received == 5
+    st = node.health.streams["/image_raw"]
+    assert (st.received, st.ok, st.dropped) == (5, 0, 5)
 
 
 def test_compressed_bombs_do_not_kill_the_adapter_node(ros: RosFixture) -> None:
@@ -136,4 +137,6 @@ def test_detection_node_validates_camera_info_and_builds_at_most_a_few_networks(
     assert node.stats.dropped["band_limit"] == 2
     on_info(info())  # back to the model's own band: no rebuild
     assert node.detector.band == (960, 288) and len(built) == MAX_NETWORK_BANDS
-    assert node.stats.ok == 0  # camera_info is not a frame
+    assert node.stats.ok == 0  # camera_info is not a frame, but every one is counted on its topic
+    st = node.health.streams["/image_cropped/camera_info"]
+    assert st.received == st.ok + st.dropped == 1 + 4 + 8 + 1 and st.dropped == 4 + 2

@@ -8,7 +8,7 @@ from typing import Callable
 
 from .. import ros_env
 from ..errors import ConePerceptionError, ConfigError, FrameError
-from ..stats import ERROR, NodeHealth
+from ..stats import ERROR, NodeHealth, StreamMonitor
 
 ros_env.apply()  # before rclpy loads the middleware
 
@@ -58,50 +58,55 @@ class PerceptionNode(Node):
     def _now_ns(self) -> int:
         return self.get_clock().now().nanoseconds
 
-    def guarded(self, handler: Callable, topic: str | None = None) -> Callable:
-        """Wrap a subscription callback so that no message can end the process.
+    def guarded(self, handler: Callable, topic: str, frames: bool = True) -> Callable:
+        """Wrap the subscription callback of ``topic`` so that no message can end the process.
 
-        A :class:`FrameError` drops the message, counted under its reason and logged (throttled); any
-        other exception drops it too, counted as ``exception_<Type>``, logged at warn level
-        (throttled) and, the first time for each type, with its traceback at debug level.
-        With ``topic`` (a frame input), every message is counted: ok when the handler returns (a
-        handler that returns ``False`` has put the frame aside for later: not counted yet), and
-        its header stamp goes to the topic's :class:`~cone_perception.stats.StreamMonitor`.
-        Without ``topic`` (``camera_info``), only drops are counted.
+        Every message is counted once on the topic's :class:`~cone_perception.stats.StreamMonitor`
+        (which also gets its header stamp), as ok or dropped: a :class:`FrameError` drops the message,
+        counted under its reason and logged (throttled); any other exception drops it too, counted as
+        ``exception_<Type>``, logged at warn level (throttled) and, the first time for each type, with
+        its traceback at debug level. A handler that returns ``False`` has put the message aside for
+        later (:meth:`run_guarded` counts it then). ``frames``: processed messages also count as
+        frames ok (not for ``camera_info``); drops always go into the node's counts by cause.
         """
-        stream = self.health.stream(self.resolve_topic_name(topic), self._now_ns()) if topic else None
+        stream = self.health.stream(self.resolve_topic_name(topic), self._now_ns())
 
         def callback(msg):
-            if stream is not None:
-                try:
-                    stream.observe(_stamp_ns(msg), self._now_ns())
-                except Exception:  # noqa: BLE001 - a header that is not one: counted by run_guarded below
-                    pass
-            self.run_guarded(handler, msg, count_ok=stream is not None)
+            try:
+                stream.observe(_stamp_ns(msg), self._now_ns())
+            except Exception:  # noqa: BLE001 - a header that is not one: the handler's guard counts the message
+                pass
+            self.run_guarded(handler, msg, stream, frames)
 
         return callback
 
-    def run_guarded(self, handler: Callable, msg, count_ok: bool = True) -> None:
-        """Call ``handler(msg)``, dropping and counting the message on any exception (:meth:`guarded`)."""
+    def run_guarded(self, handler: Callable, msg, stream: StreamMonitor, frames: bool = True) -> None:
+        """Call ``handler(msg)``; count the message on ``stream`` as ok or dropped on any exception
+        (:meth:`guarded`)."""
         try:
             done = handler(msg)
         except FrameError as e:
+            stream.dropped += 1
             n = self.stats.count_drop(e.reason)
             self.get_logger().warning(
-                f"dropped message ({e.reason}, {n} so far): {e}", throttle_duration_sec=WARN_THROTTLE_S
+                f"dropped message on {stream.topic} ({e.reason}, {n} so far): {e}",
+                throttle_duration_sec=WARN_THROTTLE_S,
             )
         except Exception as e:  # noqa: BLE001 - no message may end the node: drop it, count it, say so
+            stream.dropped += 1
             reason = f"exception_{type(e).__name__}"
             if reason not in self.stats.dropped:
-                self.get_logger().debug(f"first {reason}:\n{traceback.format_exc()}")
+                self.get_logger().debug(f"first {reason} on {stream.topic}:\n{traceback.format_exc()}")
             n = self.stats.count_drop(reason)
             self.get_logger().warning(
-                f"dropped message on unexpected {type(e).__name__} ({n} so far): {e}",
+                f"dropped message on {stream.topic} on unexpected {type(e).__name__} ({n} so far): {e}",
                 throttle_duration_sec=WARN_THROTTLE_S,
             )
         else:
-            if done is not False and count_ok:
-                self.stats.count_ok()
+            if done is not False:
+                stream.ok += 1
+                if frames:
+                    self.stats.count_ok()
 
     def subscribe_camera(self, transport: str) -> None:
         """Subscribe ``image_raw`` (``transport`` "raw") or ``image_raw/compressed`` ("compressed")

@@ -40,8 +40,10 @@ class DetectionNode(PerceptionNode):
         self.pending = None  # newest image received before any camera_info
         self.networks = [self.detector]  # the model's own and those built for a band (MAX_NETWORK_BANDS more)
         self.pub_boxes = self.create_publisher(PointCloud2, "cone_boxes", QOS_DATA)
-        self.create_subscription(CameraInfo, "image_cropped/camera_info", self.guarded(self.on_info), QOS_IMAGE_IN)
+        on_info = self.guarded(self.on_info, "image_cropped/camera_info", frames=False)  # not a frame
+        self.create_subscription(CameraInfo, "image_cropped/camera_info", on_info, QOS_IMAGE_IN)
         self.create_subscription(Image, "image_cropped", self.guarded(self.on_image, "image_cropped"), QOS_IMAGE_IN)
+        self.image_stream = self.health.streams[self.resolve_topic_name("image_cropped")]
 
     def on_info(self, msg: CameraInfo) -> None:
         crop = _msgs.crop_from_camera_info(msg)  # validated: a bad camera_info is dropped and counted
@@ -60,7 +62,7 @@ class DetectionNode(PerceptionNode):
         self.crop = crop
         if self.pending is not None:  # an image that came before the first camera_info
             pending, self.pending = self.pending, None
-            self.run_guarded(self.on_image, pending)
+            self.run_guarded(self.on_image, pending, self.image_stream)
 
     def on_image(self, msg: Image) -> bool | None:
         if self.crop is None:
