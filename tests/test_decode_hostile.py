@@ -13,7 +13,7 @@ from cone_perception.adapter import DriverAdapter, decode_compressed
 from cone_perception.crop import CropSpec
 from cone_perception.errors import FrameError
 from cone_perception.imageheader import HeaderError, declared_size
-from hostile_inputs import BOMBS, bmp_bomb, jpeg_bomb, jpeg_with_size, png_bomb, pnm_bomb
+from cone_perception.hostile import BOMBS, bmp_bomb, jpeg_bomb, jpeg_with_size, png_bomb, pnm_bomb
 
 W, H = 640, 480
 

@@ -14,7 +14,7 @@ from cone_perception.crop import MAX_IMAGE_SIDE_PX, camera_info_crop
 from cone_perception.errors import FrameError
 from cone_perception.nodes import _msgs
 from cone_perception.nodes.driver_adapter import DriverAdapterNode
-from hostile_inputs import jpeg_bomb, png_bomb
+from cone_perception.hostile import jpeg_bomb, png_bomb
 
 from rosutil import RosFixture, ros  # noqa: F401 (ros is a fixture)
 

@@ -81,7 +81,7 @@ def test_corrupt_and_missing_bags(bad_bag: Path, tmp_path: Path, capsys) -> None
 
 def test_header_bombs_in_a_bag_are_dropped_and_the_rest_processed(tmp_path: Path, capsys) -> None:
     """Issue 20: one 69-byte PNG declaring 100000x100000 px killed replay and detect."""
-    from hostile_inputs import jpeg_bomb, png_bomb
+    from cone_perception.hostile import jpeg_bomb, png_bomb
 
     path = tmp_path / "bombs"
     with bagio.BagWriter(path, {"/camera/image_raw/compressed": bagio.COMPRESSED_IMAGE}) as w:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+import time
 import traceback
 from typing import Callable
 
@@ -52,6 +53,7 @@ class PerceptionNode(Node):
         rate_hz = float(self.declare_parameter("input_rate_hz", 0.0).value)
         self.health = NodeHealth(timeout_s, max_age_s, 1.0 / rate_hz if rate_hz > 0 else 0.0)
         self.stats = self.health.stats
+        self._last_warn: dict[str, float] = {}
         self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._diag_timer = self.create_timer(1.0, self._publish_diagnostics)
 
@@ -80,6 +82,15 @@ class PerceptionNode(Node):
 
         return callback
 
+    def _may_warn(self, reason: str) -> bool:
+        """At most one warning per cause every :data:`WARN_THROTTLE_S` (checked here: rclpy's own
+        throttle costs 0.2 ms a call, which a flood of bad messages would pay for each)."""
+        now = time.monotonic()
+        if now - self._last_warn.get(reason, -WARN_THROTTLE_S) < WARN_THROTTLE_S:
+            return False
+        self._last_warn[reason] = now
+        return True
+
     def run_guarded(self, handler: Callable, msg, stream: StreamMonitor, frames: bool = True) -> None:
         """Call ``handler(msg)``; count the message on ``stream`` as ok or dropped on any exception
         (:meth:`guarded`)."""
@@ -88,20 +99,17 @@ class PerceptionNode(Node):
         except FrameError as e:
             stream.dropped += 1
             n = self.stats.count_drop(e.reason)
-            self.get_logger().warning(
-                f"dropped message on {stream.topic} ({e.reason}, {n} so far): {e}",
-                throttle_duration_sec=WARN_THROTTLE_S,
-            )
+            if self._may_warn(e.reason):
+                self.get_logger().warning(f"dropped message on {stream.topic} ({e.reason}, {n} so far): {e}")
         except Exception as e:  # noqa: BLE001 - no message may end the node: drop it, count it, say so
             stream.dropped += 1
             reason = f"exception_{type(e).__name__}"
             if reason not in self.stats.dropped:
                 self.get_logger().debug(f"first {reason} on {stream.topic}:\n{traceback.format_exc()}")
             n = self.stats.count_drop(reason)
-            self.get_logger().warning(
-                f"dropped message on {stream.topic} on unexpected {type(e).__name__} ({n} so far): {e}",
-                throttle_duration_sec=WARN_THROTTLE_S,
-            )
+            if self._may_warn(reason):
+                self.get_logger().warning(
+                    f"dropped message on {stream.topic} on unexpected {type(e).__name__} ({n} so far): {e}")
         else:
             if done is not False:
                 stream.ok += 1

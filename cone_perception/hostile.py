@@ -1,4 +1,4 @@
-"""Crafted hostile inputs shared by the tests and ``cone-perception fuzz`` (ROS-free, no files).
+"""Crafted hostile inputs for the tests and ``cone-perception fuzz`` (ROS-free, bytes only).
 
 The decompression bombs of issue 20: a 69-byte PNG declaring 100000x100000 px (``cv2.imdecode``
 raises ``cv2.error``) and a JPEG of a few hundred bytes declaring 16000x16000 px (decoded in full:
