@@ -7,8 +7,8 @@
   frames the node never saw or should not trust: frames **skipped** before the callback (replaced
   in a depth-1 queue while the node was busy, or lost upstream: estimated from gaps in the
   publisher's stamps against the stream's own period), stamps going **backwards** or **repeated**,
-  **stale** frames (stamp older than ``max_age_s`` on arrival) and **silence** (no message for
-  ``timeout_s``).
+  **stale** frames (stamp older than ``max_age_s`` on arrival), **silence** (no message for
+  ``timeout_s``), and frames the middleware reports **lost** (DDS sample lost, where supported).
 * :class:`NodeHealth`: both, and :meth:`NodeHealth.assess`: OK / WARN / ERROR with the cause, as
   the nodes publish it on ``/diagnostics`` once a second: ERROR for silence or a topic without a
   publisher (a missing or dead upstream node), WARN for drops, skips, stamp faults or stale frames
@@ -81,6 +81,7 @@ class StreamMonitor:
     ok: int = 0  # of ``received``: processed (counted by the node's guard)
     dropped: int = 0  # of ``received``: dropped with a cause (in :class:`FrameStats`)
     skipped: int = 0
+    lost: int = 0  # reported lost by the middleware (DDS sample lost), where it reports it
     backwards: int = 0
     repeated: int = 0
     stale: int = 0
@@ -149,7 +150,8 @@ class StreamMonitor:
         return silent
 
     def counts(self) -> dict[str, int]:
-        return {"received": self.received, "ok": self.ok, "dropped": self.dropped, "skipped": self.skipped, "backwards": self.backwards,
+        return {"received": self.received, "ok": self.ok, "dropped": self.dropped, "skipped": self.skipped,
+                "lost": self.lost, "backwards": self.backwards,
                 "repeated": self.repeated, "stale": self.stale, "silences": self.silences}
 
 
@@ -183,7 +185,7 @@ class NodeHealth:
     def _totals(self) -> dict[str, int]:
         t = Counter({f"dropped_{k}": v for k, v in self.stats.dropped.items()})
         for s in self.streams.values():
-            for k in ("skipped", "backwards", "repeated", "stale"):
+            for k in ("skipped", "lost", "backwards", "repeated", "stale"):
                 t[f"{k}"] += getattr(s, k)
         return dict(t)
 
@@ -203,7 +205,7 @@ class NodeHealth:
         totals = self._totals()
         new = {k: v - self._last.get(k, 0) for k, v in totals.items() if v > self._last.get(k, 0)}
         self._last = totals
-        labels = {"skipped": "skipped before processing (stamp gaps)", "backwards": "stamps going backwards",
+        labels = {"skipped": "skipped before processing (stamp gaps)", "lost": "lost in transport (middleware)", "backwards": "stamps going backwards",
                   "repeated": "stamps repeated", "stale": "stale frames"}
         for k, v in sorted(new.items()):
             if k.startswith("dropped_"):

@@ -15,8 +15,8 @@ def _feed(mon: StreamMonitor, stamps_ms, lag_ms: float = 5.0) -> list[list[str]]
 def test_a_steady_stream_has_no_faults() -> None:
     mon = StreamMonitor("/image_raw")
     faults = _feed(mon, [i * 33 for i in range(100)])
-    assert not any(faults) and mon.counts() == {"received": 100, "ok": 0, "dropped": 0, "skipped": 0, "backwards": 0, "repeated": 0,
-                                                "stale": 0, "silences": 0}
+    assert not any(faults) and mon.counts() == {"received": 100, "ok": 0, "dropped": 0, "skipped": 0, "lost": 0,
+                                                "backwards": 0, "repeated": 0, "stale": 0, "silences": 0}
 
 
 def test_frames_replaced_in_the_queue_are_counted_from_stamp_gaps() -> None:
@@ -106,3 +106,18 @@ def test_the_node_publishes_its_health(ros) -> None:  # noqa: F811
 
 
 from rosutil import ros  # noqa: E402,F401 (a fixture)
+
+
+def test_middleware_lost_messages_are_counted_and_warned(ros) -> None:  # noqa: F811
+    from types import SimpleNamespace
+
+    from cone_perception.nodes.mapping import MappingNode
+
+    node = ros.add(MappingNode(context=ros.context))
+    sub = next(s for s in node.subscriptions if s.topic_name == "/cone_boxes")
+    lost = [h for h in sub.event_handlers if "lost" in getattr(h.callback, "__name__", "")]
+    assert len(lost) == 1  # Fast DDS reports sample-lost events
+    lost[0].callback(SimpleNamespace(total_count=3, total_count_change=3))
+    assert node.health.streams["/cone_boxes"].lost == 3
+    rep = node.health.assess(node._now_ns(), {"/cone_boxes": 1})
+    assert rep.level == WARN and "3 lost in transport" in rep.message

@@ -19,6 +19,10 @@ from sensor_msgs.msg import CompressedImage, Image, PointCloud2  # noqa: E402
 from visualization_msgs.msg import MarkerArray  # noqa: E402
 
 from . import _msgs  # noqa: E402
+try:  # noqa: E402 - Jazzy; Humble has the same classes in rclpy.qos_event
+    from rclpy.event_handler import SubscriptionEventCallbacks, UnsupportedEventTypeError
+except ImportError:  # pragma: no cover - Humble
+    from rclpy.qos_event import SubscriptionEventCallbacks, UnsupportedEventTypeError
 from rclpy.executors import ExternalShutdownException  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
@@ -120,14 +124,26 @@ class PerceptionNode(Node):
         """Subscribe ``image_raw`` (``transport`` "raw") or ``image_raw/compressed`` ("compressed")
         to ``self.on_raw`` / ``self.on_compressed``, newest frame only."""
         if transport == "raw":
-            self.create_subscription(Image, "image_raw", self.guarded(self.on_raw, "image_raw"), QOS_IMAGE_IN)
+            self.subscribe_frames(Image, "image_raw", self.on_raw)
         elif transport == "compressed":
-            self.create_subscription(
-                CompressedImage, "image_raw/compressed", self.guarded(self.on_compressed, "image_raw/compressed"),
-                QOS_IMAGE_IN,
-            )
+            self.subscribe_frames(CompressedImage, "image_raw/compressed", self.on_compressed)
         else:
             raise ConfigError("parameter", "input_transport", f"must be 'raw' or 'compressed', got {transport!r}")
+
+    def subscribe_frames(self, msgtype, topic: str, handler: Callable, qos: QoSProfile = QOS_IMAGE_IN, frames: bool = True):
+        """A guarded subscription (:meth:`guarded`) whose middleware-lost messages are counted too
+        (``lost`` on the topic's monitor; where the middleware has no such event, stamp gaps only)."""
+        callback = self.guarded(handler, topic, frames)
+        stream = self.health.streams[self.resolve_topic_name(topic)]
+
+        def on_lost(info) -> None:
+            stream.lost += int(info.total_count_change)
+
+        try:
+            return self.create_subscription(msgtype, topic, callback, qos,
+                                            event_callbacks=SubscriptionEventCallbacks(message_lost=on_lost))
+        except (UnsupportedEventTypeError, TypeError):  # no such event in this middleware / rclpy
+            return self.create_subscription(msgtype, topic, callback, qos)
 
     def advertise_cones(self, frame_id: str, markers: bool) -> None:
         """Publishers of ``/cones`` (and ``/cones/markers`` if ``markers``) in ``frame_id``."""

@@ -16,7 +16,7 @@ band's size when a ``camera_info`` shows another one: once per distinct band, at
 
 from __future__ import annotations
 
-from ._common import QOS_DATA, QOS_IMAGE_IN, PerceptionNode, run_node  # noqa: I001 (sets DDS env first)
+from ._common import QOS_DATA, PerceptionNode, run_node  # noqa: I001 (sets DDS env first)
 
 import time
 
@@ -40,9 +40,8 @@ class DetectionNode(PerceptionNode):
         self.pending = None  # newest image received before any camera_info
         self.networks = [self.detector]  # the model's own and those built for a band (MAX_NETWORK_BANDS more)
         self.pub_boxes = self.create_publisher(PointCloud2, "cone_boxes", QOS_DATA)
-        on_info = self.guarded(self.on_info, "image_cropped/camera_info", frames=False)  # not a frame
-        self.create_subscription(CameraInfo, "image_cropped/camera_info", on_info, QOS_IMAGE_IN)
-        self.create_subscription(Image, "image_cropped", self.guarded(self.on_image, "image_cropped"), QOS_IMAGE_IN)
+        self.subscribe_frames(CameraInfo, "image_cropped/camera_info", self.on_info, frames=False)  # not a frame
+        self.subscribe_frames(Image, "image_cropped", self.on_image)
         self.image_stream = self.health.streams[self.resolve_topic_name("image_cropped")]
 
     def on_info(self, msg: CameraInfo) -> None:
