@@ -20,8 +20,6 @@ from pathlib import Path
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from ..nodes.fuzz import TARGETS  # noqa: F401 - listed in the help below
-
     p.add_argument("--n", type=int, default=10_000, help="messages per node (default %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="generator seed: same seed, same messages (default 0)")
     p.add_argument("--targets", default="all",
