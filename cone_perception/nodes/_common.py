@@ -130,7 +130,9 @@ class PerceptionNode(Node):
         else:
             raise ConfigError("parameter", "input_transport", f"must be 'raw' or 'compressed', got {transport!r}")
 
-    def subscribe_frames(self, msgtype, topic: str, handler: Callable, qos: QoSProfile = QOS_IMAGE_IN, frames: bool = True):
+    def subscribe_frames(
+        self, msgtype, topic: str, handler: Callable, qos: QoSProfile = QOS_IMAGE_IN, frames: bool = True
+    ):
         """A guarded subscription (:meth:`guarded`) whose middleware-lost messages are counted too
         (``lost`` on the topic's monitor; where the middleware has no such event, stamp gaps only)."""
         callback = self.guarded(handler, topic, frames)
@@ -159,6 +161,13 @@ class PerceptionNode(Node):
             self.pub_markers.publish(_msgs.cone_markers(cones, h))
 
     def _publish_diagnostics(self) -> None:
+        try:  # a timer callback: nothing in it may end the node either
+            self._publish_health()
+        except Exception as e:  # noqa: BLE001
+            if self._may_warn("diagnostics"):
+                self.get_logger().warning(f"diagnostics not published: {type(e).__name__}: {e}")
+
+    def _publish_health(self) -> None:
         pubs = {t: self.count_publishers(t) for t in self.health.streams}
         rep = self.health.assess(self._now_ns(), pubs)
         st = DiagnosticStatus()
