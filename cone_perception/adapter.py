@@ -17,6 +17,7 @@ import numpy as np
 
 from .crop import CropSpec
 from .errors import FrameError
+from .imageheader import HeaderError, declared_size
 
 # encoding -> (canonical name, bytes per pixel)
 _ENCODINGS = {
@@ -87,14 +88,55 @@ def crop_bgr(bgr_full: np.ndarray, crop: CropSpec) -> np.ndarray:
     return _downscale(bgr_full[crop.v0 : crop.v1, crop.u0 : crop.u1], crop)
 
 
-def decode_compressed(data) -> np.ndarray:
-    """JPEG/PNG bytes -> full BGR image. Raises :class:`FrameError` if undecodable."""
+#: Limits of :func:`decode_compressed` where no calibration gives the image size (``detect``,
+#: ``calibrate``): larger declared images are refused before decoding (a 40 MP BGR image is 120 MB).
+MAX_DECODE_SIDE_PX = 16384
+MAX_DECODE_PIXELS = 40_000_000
+
+
+def decode_compressed(
+    data,
+    expect_wh: tuple[int, int] | None = None,
+    max_side_px: int = MAX_DECODE_SIDE_PX,
+    max_pixels: int = MAX_DECODE_PIXELS,
+) -> np.ndarray:
+    """JPEG/PNG/BMP/PNM/WebP bytes -> full BGR image ``(H, W, 3) uint8``; every problem is a
+    :class:`FrameError`.
+
+    The declared size is read from the header first (:func:`~cone_perception.imageheader.declared_size`,
+    no decoding) and the frame refused before the decoder runs when it is not ``expect_wh`` (W, H px:
+    the calibration's image; EXIF orientation is then ignored, as a camera's frames are in sensor
+    orientation) or, without ``expect_wh``, when a side exceeds ``max_side_px`` or the area
+    ``max_pixels``. A decoder error (``cv2.error`` or any other) is a dropped frame with its cause,
+    and so is a decoded image whose size is not the declared one.
+    The one decoding path of the nodes, ``replay``, ``detect`` and ``calibrate``.
+    """
     buf = np.frombuffer(data, dtype=np.uint8)
     if buf.size == 0:
         raise FrameError("undecodable", "compressed image has no data")
-    img = cv2.imdecode(buf, cv2.IMREAD_COLOR)
+    try:
+        fmt, w, h = declared_size(buf)
+    except HeaderError as e:
+        raise FrameError(e.reason, f"compressed image ({buf.size} bytes): {e}") from None
+    flags = cv2.IMREAD_COLOR
+    if expect_wh is not None:
+        if (w, h) != tuple(expect_wh):
+            reason = "too_large" if w > expect_wh[0] or h > expect_wh[1] else "wrong_size"
+            raise FrameError(reason, f"{fmt.upper()} header declares {w}x{h} px but the calibration is for "
+                                     f"{expect_wh[0]}x{expect_wh[1]} (not decoded)")
+        flags |= cv2.IMREAD_IGNORE_ORIENTATION
+    elif max(w, h) > max_side_px or w * h > max_pixels:
+        raise FrameError("too_large", f"{fmt.upper()} header declares {w}x{h} px, more than the limit of "
+                                      f"{max_side_px} px a side and {max_pixels / 1e6:g} MP (not decoded)")
+    try:
+        img = cv2.imdecode(buf, flags)
+    except Exception as e:  # noqa: BLE001 - cv2.error and whatever else a decoder raises: drop the frame
+        raise FrameError("decoder_error", f"{fmt.upper()} ({buf.size} bytes) failed to decode: "
+                                          f"{type(e).__name__}: {str(e).strip()[:200]}") from None
     if img is None:
-        raise FrameError("undecodable", f"compressed image ({buf.size} bytes) could not be decoded as JPEG/PNG")
+        raise FrameError("undecodable", f"compressed image ({buf.size} bytes) could not be decoded as {fmt.upper()}")
+    if img.ndim != 3 or (img.shape[1], img.shape[0]) not in ((w, h), (h, w)):  # (h, w): EXIF rotation
+        raise FrameError("wrong_size", f"{fmt.upper()} decoded to {img.shape} but its header declares {w}x{h}")
     return img
 
 
@@ -128,9 +170,9 @@ class DriverAdapter:
         return crop_raw_to_bgr(name, view, self.crop)
 
     def from_compressed(self, data) -> np.ndarray:
-        """sensor_msgs/CompressedImage data (JPEG/PNG) -> cropped BGR."""
-        img = decode_compressed(data)
-        self._check_size(img.shape[1], img.shape[0])
+        """sensor_msgs/CompressedImage data (JPEG/PNG/...) -> cropped BGR; a header declaring another
+        size than the calibration's is refused before decoding."""
+        img = decode_compressed(data, expect_wh=(self.image_width, self.image_height))
         return crop_bgr(img, self.crop)
 
     def camera_info_fields(self) -> dict:

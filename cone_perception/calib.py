@@ -22,7 +22,7 @@ import numpy as np
 import yaml
 
 from .classes import CLASS_NAMES
-from .crop import CropSpec
+from .crop import MAX_IMAGE_SIDE_PX, CropSpec
 from .errors import ConfigError
 from .geometry import FOOT_RULES, fix_homography_sign
 from .resources import calib_dir, resolve_in
@@ -221,6 +221,9 @@ def calibration_from_dict(data: dict, source: str = "<memory>") -> Calibration:
     camera = str(f.get("camera"))
     width = f.integer("image_width", positive=True)
     height = f.integer("image_height", positive=True)
+    for key, v in (("image_width", width), ("image_height", height)):
+        if v > MAX_IMAGE_SIDE_PX:
+            raise f.err(key, f"must be at most {MAX_IMAGE_SIDE_PX} px, got {v}")
 
     H_S_B = f.matrix("H_S_B", (3, 3))
     if abs(np.linalg.det(H_S_B)) < 1e-12 * max(1.0, np.abs(H_S_B).max() ** 3) or np.linalg.cond(H_S_B) > 1e15:

@@ -8,11 +8,17 @@ Layout (a ``torch.save`` dict)::
     imgsz: [W, H] (input px)           state_dict: weights (EMA when trained)
     data: {...} training data summary  metrics: {...} validation metrics
     train: {...} optimizer / RNG state for exact resume (``last.pt`` only)
+
+Loading cannot run code: ``torch.load(weights_only=True)`` with numpy arrays, dtypes and scalars as
+the only other types allowed (:func:`safe_torch_load`); what :func:`save_checkpoint` writes (tensors,
+lists, dicts, strings, numbers, numpy values) loads as it is, so no migration is needed. A file
+that names anything else, random bytes or a truncated zip is a :class:`ConfigError` naming the
+file; so are NaN or inf weights (:func:`check_finite`).
 """
 
 from __future__ import annotations
 
-import zipfile
+import pickle
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -97,16 +103,61 @@ def save_checkpoint(
     tmp.replace(path)
 
 
+def _safe_globals() -> list:
+    """The only classes and functions a checkpoint may name besides torch's own tensors and
+    containers: numpy arrays, dtypes and scalars (the numpy RNG state of ``last.pt``, numpy numbers
+    in metrics). None of them calls anything else: an array's contents are plain data."""
+    import numpy as np
+
+    try:
+        from numpy._core import multiarray  # numpy >= 2
+    except ImportError:  # numpy 1.x
+        from numpy.core import multiarray
+    out = [np.ndarray, np.dtype, multiarray._reconstruct, multiarray.scalar]
+    out += sorted({type(np.dtype(t)) for t in "?bBhHiIlLqQefdgFDGUS"}, key=str)  # numpy >= 1.25 dtype classes
+    return out
+
+
+def safe_torch_load(path: str | Path) -> Any:
+    """``torch.load`` that cannot run code: ``weights_only=True`` (tensors, containers, numbers,
+    strings) plus :func:`_safe_globals`. Anything else (a pickle naming another global: a crafted
+    file, random bytes, a truncated zip) is a :class:`ConfigError` naming the file."""
+    src = str(path)
+    try:
+        with torch.serialization.safe_globals(_safe_globals()):
+            return torch.load(path, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as e:
+        lines = [ln.strip() for ln in str(e).splitlines() if ln.strip()]
+        named = next((ln for ln in lines if "GLOBAL" in ln), None)
+        if named:
+            raise ConfigError(src, None, "refused: not a plain-data checkpoint (loading it would call what it "
+                                         f"names: {named[:200]}); {RESTORE_HINT}") from None
+        why = next((ln for ln in lines if ln.startswith("Unsupported")), "not a pickle of plain data")
+        raise ConfigError(src, None, f"not a readable checkpoint (corrupt: {why[:200]}); {RESTORE_HINT}") from None
+    except Exception as e:  # noqa: BLE001 - zip, EOF, OS, runtime errors: all mean "not a readable checkpoint"
+        raise ConfigError(src, None, f"not a readable checkpoint (truncated or corrupt: {type(e).__name__}: "
+                                     f"{str(e).strip()[:200]}); {RESTORE_HINT}") from None
+
+
+def check_finite(state_dict: Any, source: str) -> None:
+    """:class:`ConfigError` naming the first weight that is not a tensor or holds NaN or inf."""
+    if not isinstance(state_dict, dict):
+        raise ConfigError(source, "state_dict", f"must be a mapping of tensors, got {type(state_dict).__name__}")
+    for k, v in state_dict.items():
+        if not isinstance(v, torch.Tensor):
+            raise ConfigError(source, f"state_dict.{k}", f"must be a tensor, got {type(v).__name__}")
+        if v.is_floating_point() and not bool(torch.isfinite(v).all()):
+            n = int((~torch.isfinite(v)).sum())
+            raise ConfigError(source, f"state_dict.{k}", f"{n} of {v.numel()} weights are NaN or inf; {RESTORE_HINT}")
+
+
 def load_checkpoint(path: str | Path) -> Checkpoint:
     """Read and validate a checkpoint; every problem is a :class:`ConfigError` naming file and field."""
     src = str(path)
     p = Path(path)
     if not p.is_file():
         raise ConfigError(src, None, f"model file not found; {RESTORE_HINT}")
-    try:
-        obj = torch.load(p, map_location="cpu", weights_only=False)
-    except (RuntimeError, EOFError, zipfile.BadZipFile, OSError, ValueError, AttributeError, ModuleNotFoundError) as e:
-        raise ConfigError(src, None, f"not a readable checkpoint (truncated or corrupt: {type(e).__name__}: {e}); {RESTORE_HINT}") from e
+    obj = safe_torch_load(p)
     if not isinstance(obj, dict) or obj.get("format") != FORMAT:
         raise ConfigError(src, "format", f"not a cone_perception detector checkpoint (expected format {FORMAT!r})")
     missing = [k for k in REQUIRED_KEYS if k not in obj]
@@ -135,5 +186,6 @@ def load_checkpoint(path: str | Path) -> Checkpoint:
         train=obj.get("train"),
         path=src,
     )
+    check_finite(ck.state_dict, src)
     ck.build_model()  # validates the weights against the architecture
     return ck

@@ -27,6 +27,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "data": ("data", "dataset converters: fsoco-to-yolo, restore-aspect"),
     "speed": ("speed", "forward micro-benchmark of detector sizes and backends"),
     "eval": ("eval", "evaluate a prediction file against ground truth -> report.md, metrics.json, plots"),
+    "fuzz": ("fuzz", "malformed messages through the nodes' callbacks: crashes, counts, time, RSS"),
 }
 
 

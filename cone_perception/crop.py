@@ -145,3 +145,42 @@ class CropSpec:
         if roi_w == 0 or roi_h == 0:
             return cls(0, int(height), 0, int(width), bx)
         return cls(int(roi_y), int(roi_y + roi_h), int(roi_x), int(roi_x + roi_w), bx)
+
+
+#: Largest full image side a calibration or a ``camera_info`` may declare (px); a larger one is an
+#: error, not an allocation (``image_width: 1e9`` once ended in an out-of-memory traceback).
+MAX_IMAGE_SIDE_PX = 16384
+#: Largest band (after downscale) a ``camera_info`` may ask the detection node to run, in px; a
+#: fixed-size network is built for the band, and a larger one would cost seconds and gigabytes.
+MAX_BAND_PIXELS = 4096 * 2048
+
+
+def camera_info_crop(
+    *, width: int, height: int, roi_x: int, roi_y: int, roi_w: int, roi_h: int, binning_x: int, binning_y: int
+) -> CropSpec:
+    """The crop a ``sensor_msgs/CameraInfo`` describes (:meth:`CropSpec.from_camera_info`), validated
+    as an image is: a :class:`~cone_perception.errors.FrameError` (reason ``bad_camera_info``, the
+    message naming the field) for a zero or too large image (:data:`MAX_IMAGE_SIDE_PX`), a binning
+    other than :data:`ALLOWED_DOWNSCALE`, unequal binning, a roi not inside the image (or not even
+    columns, as YUYV needs), a band not divisible by the binning, or a band over :data:`MAX_BAND_PIXELS`."""
+    from .errors import FrameError
+
+    def bad(field: str, what: str) -> FrameError:
+        return FrameError("bad_camera_info", f"camera_info {field}: {what}")
+
+    if not (0 < width <= MAX_IMAGE_SIDE_PX and 0 < height <= MAX_IMAGE_SIDE_PX):
+        raise bad("width/height", f"{width}x{height} must be 1..{MAX_IMAGE_SIDE_PX} px a side")
+    try:
+        crop = CropSpec.from_camera_info(width=width, height=height, roi_x=roi_x, roi_y=roi_y, roi_w=roi_w,
+                                         roi_h=roi_h, binning_x=binning_x, binning_y=binning_y)
+    except ValueError as e:
+        raise bad("binning_x/y", str(e)) from None
+    try:
+        crop.validate(width, height, "camera_info")
+    except ConfigError as e:
+        field = {"downscale": "binning_x/y", "crop.v0/v1": "roi.y_offset/height",
+                 "crop.u0/u1": "roi.x_offset/width"}.get(e.field, "roi")
+        raise bad(field, e.message) from None
+    if crop.out_width * crop.out_height > MAX_BAND_PIXELS:
+        raise bad("roi", f"band {crop.out_width}x{crop.out_height} is over {MAX_BAND_PIXELS} px")
+    return crop

@@ -81,6 +81,8 @@ def _mut(path: list, value):
         (_mut(["foot_points", "blue"], "top_left"), "foot_points.blue", "unknown rule"),
         (_mut(["foot_points", "purple"], "bottom_left"), "foot_points.purple", "unknown class"),
         (_mut(["image_width"], -1920), "image_width", "> 0"),
+        (_mut(["image_width"], 1_000_000_000), "image_width", "at most"),  # issue 20: was an OOM traceback
+        (_mut(["image_height"], 20_000), "image_height", "at most"),
         (_mut(["max_range_m"], 0), "max_range_m", "> 0"),
         (_mut(["pixel_sigma", "u"], "big"), "pixel_sigma.u", "number"),
         (_mut(["dist_coeffs"], [0.1, 0.2, 0.3]), "dist_coeffs", "4, 5, 8"),

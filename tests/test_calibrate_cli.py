@@ -96,8 +96,13 @@ def test_image_board_and_points_round_trip_through_the_mapper(files, tmp_path, c
     d["foot_points"]["blue"] = "bottom_center"
     d["team_note"] = "mount re-torqued"
     out.write_text(yaml.safe_dump(d, sort_keys=False))
-    rc = main([*board_and_cones, "--out", str(out)])  # K now comes from the file
+    before = out.read_text()
+    assert main([*board_and_cones, "--out", str(out)]) == 2  # issue 20: never overwritten silently
+    assert "--force" in capsys.readouterr().err and out.read_text() == before
+    rc = main([*board_and_cones, "--out", str(out), "--force"])  # K now comes from the file
     assert rc == 0
+    printed = capsys.readouterr().out
+    assert all(f"calibrate: wrote {out.with_suffix('')}{s}" in printed for s in (".report.txt", ".report.json"))
     again = load_calibration(out)
     assert (again.crop.v0, again.crop.v1, again.pixel_sigma_u, again.pixel_sigma_v) == (400, 1000, 2.5, 3.0)
     assert again.foot_points[CLASS_NAMES.index("blue")] == "bottom_center"

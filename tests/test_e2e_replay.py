@@ -94,3 +94,58 @@ def test_shipped_model_finds_and_places_cones(drive, offline) -> None:
 
 
 MIN_RECALL_15M = 0.9
+
+
+def _children_running(name: str) -> list[int]:
+    """Pids of this process's children whose command line contains ``name``."""
+    import os
+
+    out = []
+    for d in Path("/proc").iterdir():
+        if not d.name.isdigit():
+            continue
+        try:
+            ppid = int((d / "stat").read_text().rsplit(")", 1)[1].split()[1])
+            cmd = (d / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+        except (OSError, IndexError, ValueError):
+            continue
+        if ppid == os.getpid() and name in cmd:
+            out.append(int(d.name))
+    return out
+
+
+def test_live_replay_names_a_node_that_died(drive, tmp_path, capsys, monkeypatch) -> None:
+    """Issue 20: a node that died left `replay --live` at exit 0 with '3 /cones received, 9 lost'."""
+    import os
+    import signal
+
+    from cone_perception.commands import replay as replay_cmd
+
+    real = live_replay
+
+    def killing_progress(frames, total):
+        for i, f in enumerate(frames):
+            if i == 3:
+                for pid in _children_running("bin/pipeline"):
+                    os.kill(pid, signal.SIGKILL)
+            yield f
+
+    def live_with_a_kill(*a, **k):
+        k["progress"] = killing_progress
+        return real(*a, **k)
+
+    monkeypatch.setattr("cone_perception.nodes.live_replay.live_replay", live_with_a_kill)
+    rc = replay_cmd.run(replay_cmd_args(drive))
+    err = capsys.readouterr().err
+    assert rc == 1 and "node pipeline died during the replay (exit code -9)" in err
+
+
+def replay_cmd_args(bag):
+    import argparse
+
+    from cone_perception.commands import replay as replay_cmd
+
+    p = argparse.ArgumentParser()
+    replay_cmd.add_arguments(p)
+    return p.parse_args([str(bag), "--live", "fused", "--no-progress",
+                         "--model", str(default_model_path())])

@@ -77,3 +77,21 @@ def test_corrupt_and_missing_bags(bad_bag: Path, tmp_path: Path, capsys) -> None
     assert "broken" in err and "error" in err
     assert main(["replay", str(tmp_path / "missing"), "--no-progress"]) == 2
     assert "does not exist" in capsys.readouterr().err
+
+
+def test_header_bombs_in_a_bag_are_dropped_and_the_rest_processed(tmp_path: Path, capsys) -> None:
+    """Issue 20: one 69-byte PNG declaring 100000x100000 px killed replay and detect."""
+    from cone_perception.hostile import jpeg_bomb, png_bomb
+
+    path = tmp_path / "bombs"
+    with bagio.BagWriter(path, {"/camera/image_raw/compressed": bagio.COMPRESSED_IMAGE}) as w:
+        for i in range(4):
+            stamp = 1_000_000_000 + i * 50_000_000
+            msg = bagio.compressed_msg_from_bgr(_frame(i), stamp, "camera")
+            if i in (1, 2):
+                msg.data = np.frombuffer(png_bomb() if i == 1 else jpeg_bomb(), np.uint8)
+            w.write("/camera/image_raw/compressed", stamp, msg)
+    res = offline_replay(path, Pipeline(load_calibration("example_mainhoop"), Detector.load(default_model_path())))
+    assert res.stats.ok == 2 and dict(res.stats.dropped) == {"too_large": 2}
+    assert main(["detect", str(path), "--out", str(tmp_path / "p.jsonl"), "--no-progress"]) == 0
+    assert "2 images" in capsys.readouterr().out

@@ -44,6 +44,7 @@ from ..classes import CLASS_NAMES
 from ..crop import CropSpec
 from ..errors import ConfigError
 from ..geometry import apply_homography
+from ..outfiles import print_written, refuse_existing
 
 # keys of the YAML's free part that this command owns (rewritten on every run)
 _OWNED_EXTRA = ("mount", "mount_estimate", "calibration")
@@ -162,12 +163,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--out", type=Path, metavar="FILE.yaml", help="calibration YAML to write (default calib/CAMERA.yaml)"
     )
     out.add_argument(
+        "--force", action="store_true",
+        help="update an existing --out (its crop, foot points and other keys are kept) and overwrite its report files",
+    )
+    out.add_argument(
         "--far-m", type=float, metavar="M", default=10.0, help="warn when no point lies this far ahead (default 10 m)"
     )
 
 
 def run(args: argparse.Namespace) -> int:
     camera, out = _names(args)
+    stem = out.with_suffix("")
+    refuse_existing([out, *(Path(f"{stem}{s}") for s in (".report.txt", ".report.json", ".points.png", ".birdseye.png"))],
+                    args.force, "calibrate")
     existing = load_calibration(out) if out.is_file() else None
     size = parse_size(args.size, "--size") if args.size else None
 
@@ -229,7 +237,7 @@ def run(args: argparse.Namespace) -> int:
         cv2.imwrite(f"{stem}.points.png", points_picture(image, res, rep if len(res.pairs) else None))
         cv2.imwrite(f"{stem}.birdseye.png", birdseye_picture(image, res))
         written += [Path(f"{stem}.points.png"), Path(f"{stem}.birdseye.png")]
-    print("wrote: " + ", ".join(str(p) for p in written))
+    print_written(written, "calibrate")
     return 0
 
 
@@ -276,10 +284,13 @@ def _names(args: argparse.Namespace) -> tuple[str, Path]:
 def _read_image(path: Path) -> np.ndarray:
     if not path.is_file():
         raise ConfigError(str(path), None, "image file not found")
-    img = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if img is None:
-        raise ConfigError(str(path), None, "cannot decode the image (not a PNG/JPEG/...?)")
-    return img
+    from ..adapter import decode_compressed
+    from ..errors import FrameError
+
+    try:  # the nodes' decoding: the header's size is checked before the decoder runs
+        return decode_compressed(path.read_bytes())
+    except FrameError as e:
+        raise ConfigError(str(path), None, f"cannot decode the image ({e.reason}): {e}") from None
 
 
 def _read_input_image(args: argparse.Namespace) -> tuple[np.ndarray | None, str]:

@@ -66,14 +66,21 @@ def iter_source(source: Path, topic: str | None = None) -> Iterator[tuple[str, n
     files = [source] if source.is_file() else sorted(p for p in source.rglob("*") if p.suffix.lower() in IMAGE_SUFFIXES)
     if not files:
         raise ConfigError(str(source), None, f"no images ({', '.join(IMAGE_SUFFIXES)}) found")
+    from ..adapter import decode_compressed
+
     for f in files:
-        img = cv2.imread(str(f), cv2.IMREAD_COLOR)
-        yield (str(f.relative_to(source)) if source.is_dir() else f.name), img, (None if img is not None else "unreadable image")
+        name = str(f.relative_to(source)) if source.is_dir() else f.name
+        try:  # the nodes' decoding: the header's size is checked before the decoder runs
+            yield name, decode_compressed(f.read_bytes()), None
+        except FrameError as e:
+            yield name, None, f"{e.reason}: {e}"
+        except OSError as e:
+            yield name, None, f"unreadable: {e.strerror}"
 
 
 def _iter_bag(bag: Path, topic: str | None):
     from .. import bagio
-    from ..adapter import DriverAdapter, decode_compressed
+    from ..adapter import crop_raw_to_bgr, decode_compressed, raw_frame_view
     from ..replay import find_image_topic, iter_frames
 
     topic, _ = find_image_topic(bag, topic)
@@ -86,7 +93,8 @@ def _iter_bag(bag: Path, topic: str | None):
                 img = decode_compressed(m.data)
             else:
                 w, h = int(m.width), int(m.height)
-                img = DriverAdapter(CropSpec.full_image(w - w % 2, h), w - w % 2, h).from_raw(m.encoding, w, h, int(m.step), m.data)
+                name, view = raw_frame_view(m.encoding, w, h, int(m.step), m.data)
+                img = crop_raw_to_bgr(name, view, CropSpec.full_image(w, h))
             yield str(fr.stamp_ns), img, None
         except FrameError as e:
             yield str(fr.stamp_ns), None, str(e)

@@ -28,6 +28,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--format", choices=("torchscript", "onnx"), required=True, help="output format")
     p.add_argument("--imgsz", type=parse_size, default=None, help="input WxH px (default: the checkpoint's)")
     p.add_argument("--out", default=None, help="output file (default: next to the checkpoint, .torchscript / .onnx)")
+    p.add_argument("--force", action="store_true", help="overwrite existing output files (the model and its <stem>.yaml)")
     q = p.add_argument_group("int8 (ONNX only)")
     q.add_argument("--int8", action="store_true", help="also write <stem>.int8.onnx, statically quantised")
     q.add_argument("--calib-images", type=Path, default=None, metavar="DIR",
@@ -60,6 +61,7 @@ def run(args: argparse.Namespace) -> int:
     from ..checkpoint import load_checkpoint
     from ..detector import Detector, write_sidecar
     from ..errors import ConfigError
+    from ..outfiles import refuse_existing
     from ..export import export_model, max_abs_diff
     from ..train.trainer import round_imgsz
 
@@ -85,6 +87,10 @@ def run(args: argparse.Namespace) -> int:
     if out.suffix != suffix:
         raise ConfigError(str(out), None, f"the output of format {args.format} must end in {suffix}")
     model = ck.build_model()
+    outputs = [out, out.with_suffix(".yaml")]
+    if args.int8:
+        outputs += [out.with_suffix(".int8.onnx"), out.with_suffix(".int8.yaml")]
+    refuse_existing(outputs, args.force, "export")
     export_model(model, imgsz, args.format, out)
     side = write_sidecar(out, ck.class_names, imgsz, {"source": str(args.model), "layout": "(1, 4 + nc, N): cx cy w h px, class scores"})
 

@@ -24,6 +24,7 @@ from ..benchmark import format_table, summarize
 from ..calib import DEFAULT_CAMERA, load_calibration, resolve_calibration_path
 from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, RUNTIME_THREADS, Detector, default_model_path
 from ..evaluation import LocalisationReport, format_localisation
+from ..outfiles import print_written, refuse_existing
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -45,6 +46,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--pace", choices=["lockstep", "rate"], default="lockstep",
                    help="live: next frame when the last one's /cones came back, or at the recorded rate")
     p.add_argument("--json", type=Path, default=None, help="also write the summary as JSON to this file")
+    p.add_argument("--force", action="store_true", help="replace an existing --out bag and --json file")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -54,9 +56,12 @@ def _progress(disable: bool):
 
 def run(args: argparse.Namespace) -> int:
     calib = load_calibration(args.calib)
+    refuse_existing([p for p in (args.out, args.json) if p is not None], args.force, "replay")
     if args.out is not None:
         from ..bagio import check_new_output
 
+        if args.force and args.out.exists():
+            _remove_bag(args.out)
         check_new_output(args.out, "replay")
     if args.live:
         summary = _run_live(args, calib)
@@ -64,7 +69,20 @@ def run(args: argparse.Namespace) -> int:
         summary = _run_offline(args, calib)
     if args.json:
         args.json.write_text(json.dumps(summary, indent=1))
-    return 0
+        print_written([args.json], "replay")
+    return 1 if summary.get("died") else 0
+
+
+def _remove_bag(path: Path) -> None:
+    """Remove a rosbag2 directory for ``--force``; anything else is left alone and refused."""
+    import shutil
+
+    from ..errors import ConfigError
+
+    if not (path.is_dir() and (path / "metadata.yaml").is_file()):
+        raise ConfigError(str(path), None, "--force replaces only a rosbag2 directory (with metadata.yaml); "
+                                           "this is something else: remove it yourself")
+    shutil.rmtree(path)
 
 
 def _run_offline(args, calib) -> dict:
@@ -86,7 +104,7 @@ def _run_offline(args, calib) -> dict:
     if res.localisation:
         print(format_localisation(res.localisation))
     if args.out:
-        print(f"wrote {args.out}")
+        print_written([args.out], "replay")
     return {"mode": "offline", "frames": n, "dropped": dict(res.stats.dropped), "wall_s": res.wall_s,
             "stages": stages, "localisation": res.localisation}
 
@@ -106,6 +124,9 @@ def _run_live(args, calib) -> dict:
     got = len(res.cones)
     print(f"replay (live, {args.live} nodes, {args.pace}) {args.bag}: {res.sent} frames sent, {got} /cones received, "
           f"{len(res.lost)} lost")
+    for exe, code in res.died.items():
+        tail = "\n".join(res.node_output.get(exe, "").strip().splitlines()[-15:])
+        print(f"replay: node {exe} died during the replay (exit code {code}); its last output:\n{tail}", file=sys.stderr)
     lat = summarize([v / 1e3 for v in res.latency_ms.values()])
     print(format_table({"frame->/cones": lat}))
     if got:
@@ -121,6 +142,6 @@ def _run_live(args, calib) -> dict:
         print(format_localisation(loc))
     if args.out:
         write_result_bag(res, args.out)
-        print(f"wrote {args.out}")
+        print_written([args.out], "replay")
     return {"mode": f"live-{args.live}", "sent": res.sent, "received": got, "lost": len(res.lost),
-            "latency": lat, "wall_s": res.wall_s, "localisation": loc}
+            "latency": lat, "wall_s": res.wall_s, "localisation": loc, "died": res.died}

@@ -62,6 +62,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     _common(p)
     p = sub.add_parser("preview", help="contact sheet PNG of sample frames with ground-truth boxes")
     p.add_argument("--out", type=Path, required=True, help="PNG file to write")
+    p.add_argument("--force", action="store_true", help="overwrite an existing --out")
     p.add_argument("--n", type=int, default=8, help="number of frames (default 8)")
     _common(p)
     p = sub.add_parser(
@@ -110,7 +111,10 @@ def run(args: argparse.Namespace) -> int:
         calib, gt = outputs.bag_side_paths(Path(args.out))
         print(f"wrote {args.out}: " + ", ".join(f"{t} {k}" for t, k in c.items()) + f"; calibration {calib}; ground truth {gt}")
     elif args.action == "preview":
-        print(f"wrote {outputs.write_preview(cfg, args.out, args.n)}")
+        from ..outfiles import print_written, refuse_existing
+
+        refuse_existing([args.out], args.force, "synth preview")
+        print_written([outputs.write_preview(cfg, args.out, args.n)], "synth preview")
     elif args.action == "mapcheck":
         rows = outputs.mapping_check(cfg, args.frames)
         print(f"exact boxes of fully visible cones -> foot-point rule -> H_F_B ({args.frames} frames, "

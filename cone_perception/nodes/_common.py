@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import sys
+import time
+import traceback
 from typing import Callable
 
 from .. import ros_env
 from ..errors import ConePerceptionError, ConfigError, FrameError
-from ..stats import FrameStats
+from ..stats import ERROR, NodeHealth, StreamMonitor
 
 ros_env.apply()  # before rclpy loads the middleware
 
@@ -17,6 +19,10 @@ from sensor_msgs.msg import CompressedImage, Image, PointCloud2  # noqa: E402
 from visualization_msgs.msg import MarkerArray  # noqa: E402
 
 from . import _msgs  # noqa: E402
+try:  # noqa: E402 - Jazzy; Humble has the same classes in rclpy.qos_event
+    from rclpy.event_handler import SubscriptionEventCallbacks, UnsupportedEventTypeError
+except ImportError:  # pragma: no cover - Humble
+    from rclpy.qos_event import SubscriptionEventCallbacks, UnsupportedEventTypeError
 from rclpy.executors import ExternalShutdownException  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
@@ -32,45 +38,114 @@ WARN_THROTTLE_S = 2.0
 
 
 class PerceptionNode(Node):
-    """A node that counts ok/dropped frames and publishes them on ``/diagnostics`` once a second."""
+    """A node that counts every input message (processed, or dropped by cause), watches its input
+    streams (stamp gaps, stamps backwards or repeated, stale frames, silence, a missing publisher:
+    :class:`~cone_perception.stats.NodeHealth`) and publishes its health on ``/diagnostics`` once
+    a second.
+
+    Parameters (every node): ``input_timeout_s`` (1.0; silence on an input longer than this is an
+    ERROR, 0 = never), ``max_frame_age_s`` (0.0 = off; a frame whose header stamp is older than this
+    on arrival is counted stale: set it on the car, where the camera stamps with the node's clock),
+    ``input_rate_hz`` (0.0 = learnt from the stamps; the publisher's rate, for counting the frames
+    replaced before processing from the gaps in its stamps).
+    """
 
     def __init__(self, name: str, **kwargs):
         super().__init__(name, **kwargs)
-        self.stats = FrameStats()
+        timeout_s = float(self.declare_parameter("input_timeout_s", 1.0).value)
+        max_age_s = float(self.declare_parameter("max_frame_age_s", 0.0).value)
+        rate_hz = float(self.declare_parameter("input_rate_hz", 0.0).value)
+        self.health = NodeHealth(timeout_s, max_age_s, 1.0 / rate_hz if rate_hz > 0 else 0.0)
+        self.stats = self.health.stats
+        self._last_warn: dict[str, float] = {}
         self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._diag_timer = self.create_timer(1.0, self._publish_diagnostics)
 
-    def guarded(self, handler: Callable) -> Callable:
-        """Wrap a subscription callback: a :class:`FrameError` drops that frame, counted and logged.
+    def _now_ns(self) -> int:
+        return self.get_clock().now().nanoseconds
 
-        A handler that returns ``False`` has put the frame aside for later (not counted yet).
+    def guarded(self, handler: Callable, topic: str, frames: bool = True) -> Callable:
+        """Wrap the subscription callback of ``topic`` so that no message can end the process.
+
+        Every message is counted once on the topic's :class:`~cone_perception.stats.StreamMonitor`
+        (which also gets its header stamp), as ok or dropped: a :class:`FrameError` drops the message,
+        counted under its reason and logged (throttled); any other exception drops it too, counted as
+        ``exception_<Type>``, logged at warn level (throttled) and, the first time for each type, with
+        its traceback at debug level. A handler that returns ``False`` has put the message aside for
+        later (:meth:`run_guarded` counts it then). ``frames``: processed messages also count as
+        frames ok (not for ``camera_info``); drops always go into the node's counts by cause.
         """
+        stream = self.health.stream(self.resolve_topic_name(topic), self._now_ns())
 
         def callback(msg):
             try:
-                done = handler(msg)
-            except FrameError as e:
-                n = self.stats.count_drop(e.reason)
-                self.get_logger().warning(
-                    f"dropped frame ({e.reason}, {n} so far): {e}", throttle_duration_sec=WARN_THROTTLE_S
-                )
-            else:
-                if done is not False:
-                    self.stats.count_ok()
+                stream.observe(_stamp_ns(msg), self._now_ns())
+            except Exception:  # noqa: BLE001 - a header that is not one: the handler's guard counts the message
+                pass
+            self.run_guarded(handler, msg, stream, frames)
 
         return callback
+
+    def _may_warn(self, reason: str) -> bool:
+        """At most one warning per cause every :data:`WARN_THROTTLE_S` (checked here: rclpy's own
+        throttle costs 0.2 ms a call, which a flood of bad messages would pay for each)."""
+        now = time.monotonic()
+        if now - self._last_warn.get(reason, -WARN_THROTTLE_S) < WARN_THROTTLE_S:
+            return False
+        self._last_warn[reason] = now
+        return True
+
+    def run_guarded(self, handler: Callable, msg, stream: StreamMonitor, frames: bool = True) -> None:
+        """Call ``handler(msg)``; count the message on ``stream`` as ok or dropped on any exception
+        (:meth:`guarded`)."""
+        try:
+            done = handler(msg)
+        except FrameError as e:
+            stream.dropped += 1
+            n = self.stats.count_drop(e.reason)
+            if self._may_warn(e.reason):
+                self.get_logger().warning(f"dropped message on {stream.topic} ({e.reason}, {n} so far): {e}")
+        except Exception as e:  # noqa: BLE001 - no message may end the node: drop it, count it, say so
+            stream.dropped += 1
+            reason = f"exception_{type(e).__name__}"
+            if reason not in self.stats.dropped:
+                self.get_logger().debug(f"first {reason} on {stream.topic}:\n{traceback.format_exc()}")
+            n = self.stats.count_drop(reason)
+            if self._may_warn(reason):
+                self.get_logger().warning(
+                    f"dropped message on {stream.topic} on unexpected {type(e).__name__} ({n} so far): {e}")
+        else:
+            if done is not False:
+                stream.ok += 1
+                if frames:
+                    self.stats.count_ok()
 
     def subscribe_camera(self, transport: str) -> None:
         """Subscribe ``image_raw`` (``transport`` "raw") or ``image_raw/compressed`` ("compressed")
         to ``self.on_raw`` / ``self.on_compressed``, newest frame only."""
         if transport == "raw":
-            self.create_subscription(Image, "image_raw", self.guarded(self.on_raw), QOS_IMAGE_IN)
+            self.subscribe_frames(Image, "image_raw", self.on_raw)
         elif transport == "compressed":
-            self.create_subscription(
-                CompressedImage, "image_raw/compressed", self.guarded(self.on_compressed), QOS_IMAGE_IN
-            )
+            self.subscribe_frames(CompressedImage, "image_raw/compressed", self.on_compressed)
         else:
             raise ConfigError("parameter", "input_transport", f"must be 'raw' or 'compressed', got {transport!r}")
+
+    def subscribe_frames(
+        self, msgtype, topic: str, handler: Callable, qos: QoSProfile = QOS_IMAGE_IN, frames: bool = True
+    ):
+        """A guarded subscription (:meth:`guarded`) whose middleware-lost messages are counted too
+        (``lost`` on the topic's monitor; where the middleware has no such event, stamp gaps only)."""
+        callback = self.guarded(handler, topic, frames)
+        stream = self.health.streams[self.resolve_topic_name(topic)]
+
+        def on_lost(info) -> None:
+            stream.lost += int(info.total_count_change)
+
+        try:
+            return self.create_subscription(msgtype, topic, callback, qos,
+                                            event_callbacks=SubscriptionEventCallbacks(message_lost=on_lost))
+        except (UnsupportedEventTypeError, TypeError):  # no such event in this middleware / rclpy
+            return self.create_subscription(msgtype, topic, callback, qos)
 
     def advertise_cones(self, frame_id: str, markers: bool) -> None:
         """Publishers of ``/cones`` (and ``/cones/markers`` if ``markers``) in ``frame_id``."""
@@ -86,18 +161,35 @@ class PerceptionNode(Node):
             self.pub_markers.publish(_msgs.cone_markers(cones, h))
 
     def _publish_diagnostics(self) -> None:
+        try:  # a timer callback: nothing in it may end the node either
+            self._publish_health()
+        except Exception as e:  # noqa: BLE001
+            if self._may_warn("diagnostics"):
+                self.get_logger().warning(f"diagnostics not published: {type(e).__name__}: {e}")
+
+    def _publish_health(self) -> None:
+        pubs = {t: self.count_publishers(t) for t in self.health.streams}
+        rep = self.health.assess(self._now_ns(), pubs)
         st = DiagnosticStatus()
         st.name = f"cone_perception/{self.get_name()}"
         st.hardware_id = "camera"
-        st.level = DiagnosticStatus.WARN if self.stats.dropped else DiagnosticStatus.OK
-        st.message = self.stats.summary()
-        st.values = [KeyValue(key="frames_ok", value=str(self.stats.ok))] + [
-            KeyValue(key=f"dropped_{k}", value=str(v)) for k, v in sorted(self.stats.dropped.items())
-        ]
+        st.level = bytes([rep.level])
+        st.message = rep.message
+        st.values = [KeyValue(key=k, value=v) for k, v in rep.values]
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()
         arr.status = [st]
         self._diag_pub.publish(arr)
+        if rep.level:
+            what = "input lost" if rep.level == ERROR else "input degraded"
+            self.get_logger().warning(f"{what}: {rep.message}", throttle_duration_sec=5.0)
+
+
+def _stamp_ns(msg) -> int | None:
+    header = getattr(msg, "header", None)
+    if header is None:
+        return None
+    return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
 
 
 def run_node(factory: Callable[[], Node], args: list[str] | None = None, name: str = "cone_perception") -> int:
@@ -118,7 +210,8 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None, name: s
     finally:
         if node is not None:
             if hasattr(node, "stats"):
-                print(f"[{name}] stopping: {node.stats.summary()}", file=sys.stderr)
+                print(f"[{name}] stopping: {node.health.summary() if hasattr(node, 'health') else node.stats.summary()}",
+                      file=sys.stderr)
             node.destroy_node()
         if rclpy.ok():
             rclpy.shutdown()

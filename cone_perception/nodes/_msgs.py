@@ -8,7 +8,7 @@ from std_msgs.msg import Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ..classes import CLASS_RGBA, LARGE_ORANGE
-from ..crop import CropSpec
+from ..crop import CropSpec, camera_info_crop
 from ..records import BOX_DTYPE, CONE_DTYPE, from_pointcloud2, to_pointcloud2
 
 # FS cone sizes (m): small cones 228 mm base, 325 mm high; large orange 285 mm, 505 mm.
@@ -59,16 +59,12 @@ def camera_info(fields: dict, header: Header, camera_matrix: np.ndarray | None =
 
 
 def crop_from_camera_info(msg: CameraInfo) -> CropSpec:
-    return CropSpec.from_camera_info(
-        width=msg.width,
-        height=msg.height,
-        roi_x=msg.roi.x_offset,
-        roi_y=msg.roi.y_offset,
-        roi_w=msg.roi.width,
-        roi_h=msg.roi.height,
-        binning_x=msg.binning_x,
-        binning_y=msg.binning_y,
-    )
+    """The validated crop of a ``camera_info`` (:func:`cone_perception.crop.camera_info_crop`;
+    raises ``FrameError``)."""
+    r = msg.roi
+    return camera_info_crop(width=int(msg.width), height=int(msg.height), roi_x=int(r.x_offset),
+                            roi_y=int(r.y_offset), roi_w=int(r.width), roi_h=int(r.height),
+                            binning_x=int(msg.binning_x), binning_y=int(msg.binning_y))
 
 
 def boxes_msg(records: np.ndarray, header: Header) -> PointCloud2:

@@ -6,14 +6,17 @@ Parameters
   fp16 (bool, CUDA only), bf16 (bool, CPU autocast, backend torch), conf (0.25), iou (0.45),
   max_det (100), threads (1, see detector.RUNTIME_THREADS; 0 = library default).
 The crop and downscale of each image come from the newest ``image_cropped/camera_info``
-(``roi``, ``binning``), so boxes go out in full-image pixels whatever the band. A fixed-size network
-built from a checkpoint (ONNX Runtime, the CPU default) is rebuilt for the band's size when the
-first ``camera_info`` shows another one (once; frames meanwhile are dropped as any late frame).
+(``roi``, ``binning``), so boxes go out in full-image pixels whatever the band. A ``camera_info`` is
+validated as an image is (sizes, roi inside the image, binning 1/2/4, band size:
+:func:`cone_perception.crop.camera_info_crop`); a bad one is dropped and counted, the node keeps its
+crop. A fixed-size network built from a checkpoint (ONNX Runtime, the CPU default) is built for the
+band's size when a ``camera_info`` shows another one: once per distinct band, at most
+:data:`MAX_NETWORK_BANDS` (kept; frames meanwhile are dropped as any late frame).
 """
 
 from __future__ import annotations
 
-from ._common import QOS_DATA, QOS_IMAGE_IN, PerceptionNode, run_node  # noqa: I001 (sets DDS env first)
+from ._common import QOS_DATA, PerceptionNode, run_node  # noqa: I001 (sets DDS env first)
 
 import time
 
@@ -23,6 +26,10 @@ from ..errors import FrameError
 from . import _msgs
 from ._detector_params import DetectorLoader
 
+#: Distinct band sizes the node builds a fixed-size network for (each 1-3 s, blocking); a camera_info
+#: with yet another band is dropped (``band_limit``) and the node keeps its band.
+MAX_NETWORK_BANDS = 3
+
 
 class DetectionNode(PerceptionNode):
     def __init__(self, **node_kwargs):
@@ -31,24 +38,30 @@ class DetectionNode(PerceptionNode):
         self.detector = self.loader.load()
         self.crop = None
         self.pending = None  # newest image received before any camera_info
+        self.networks = [self.detector]  # the model's own and those built for a band (MAX_NETWORK_BANDS more)
         self.pub_boxes = self.create_publisher(PointCloud2, "cone_boxes", QOS_DATA)
-        self.create_subscription(CameraInfo, "image_cropped/camera_info", self.on_info, QOS_IMAGE_IN)
-        self.create_subscription(Image, "image_cropped", self.guarded(self.on_image), QOS_IMAGE_IN)
+        self.subscribe_frames(CameraInfo, "image_cropped/camera_info", self.on_info, frames=False)  # not a frame
+        self.subscribe_frames(Image, "image_cropped", self.on_image)
+        self.image_stream = self.health.streams[self.resolve_topic_name("image_cropped")]
 
     def on_info(self, msg: CameraInfo) -> None:
-        try:
-            self.crop = _msgs.crop_from_camera_info(msg)
-        except ValueError as e:
-            self.get_logger().warning(f"ignoring camera_info: {e}", throttle_duration_sec=5.0)
-            return
-        band = (self.crop.out_width, self.crop.out_height)
-        if not self.detector.runs_band_as_is(band):  # a fixed-size network would letterbox this band
+        crop = _msgs.crop_from_camera_info(msg)  # validated: a bad camera_info is dropped and counted
+        band = (crop.out_width, crop.out_height)
+        # a fixed-size network would letterbox a band of another size: use (or build, once) one for it
+        det = next((d for d in (self.detector, *self.networks) if d.runs_band_as_is(band)), None)
+        if det is None:
+            if len(self.networks) > MAX_NETWORK_BANDS:
+                raise FrameError("band_limit", f"camera_info band {band[0]}x{band[1]} would need another network; "
+                                               f"{MAX_NETWORK_BANDS} bands built already: keeping the current band")
             self.get_logger().info(f"band {band[0]}x{band[1]} is not the model input "
                                    f"{self.detector.imgsz[0]}x{self.detector.imgsz[1]}: building the network for it")
-            self.detector = self.loader.load(band)
+            det = self.loader.load(band)
+            self.networks.append(det)
+        self.detector = det
+        self.crop = crop
         if self.pending is not None:  # an image that came before the first camera_info
             pending, self.pending = self.pending, None
-            self.guarded(self.on_image)(pending)
+            self.run_guarded(self.on_image, pending, self.image_stream)
 
     def on_image(self, msg: Image) -> bool | None:
         if self.crop is None:

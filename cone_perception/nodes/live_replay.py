@@ -62,6 +62,7 @@ class LiveResult:
     frame_id: str = ""
     node_output: dict[str, str] = field(default_factory=dict)
     wall_s: float = 0.0
+    died: dict[str, int] = field(default_factory=dict)  # node that exited during the replay -> exit code
 
 
 def _stamp_of(raw: bytes) -> tuple[int, PointCloud2]:
@@ -184,7 +185,15 @@ def live_replay(
         items = progress(frames, len(frames)) if progress else frames
         t0_wall = time.monotonic()
         t0_bag = frames[0][0] if frames else 0
+        def dead() -> bool:
+            for exe, p in procs.items():
+                if p.poll() is not None and exe not in res.died:
+                    res.died[exe] = p.returncode
+            return bool(res.died)
+
         for log_ns, stamp, raw in items:
+            if dead():  # the frames left cannot come back: stop, and say which node died
+                break
             if pace == "rate":
                 due = t0_wall + (log_ns - t0_bag) / 1e9
                 while time.monotonic() < due:
@@ -194,7 +203,7 @@ def live_replay(
             res.sent += 1
             if pace == "lockstep":
                 deadline = time.monotonic() + frame_timeout_s
-                while stamp not in res.cones and time.monotonic() < deadline:
+                while stamp not in res.cones and time.monotonic() < deadline and not dead():
                     executor.spin_once(timeout_sec=0.01)
             else:
                 executor.spin_once(timeout_sec=0.0)
@@ -202,6 +211,7 @@ def live_replay(
         while time.monotonic() < grace:
             executor.spin_once(timeout_sec=0.02)
         res.wall_s = time.monotonic() - t0_wall
+        dead()
         res.lost = [s for _, s, _ in frames if s not in res.cones] + corrupt
     finally:
         for exe, p in procs.items():

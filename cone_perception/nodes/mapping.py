@@ -24,7 +24,7 @@ class MappingNode(PerceptionNode):
         calib = load_calibration(calib_name)
         self.mapper = ConeMapper(calib)
         self.advertise_cones(calib.frame_id, markers)
-        self.create_subscription(PointCloud2, "cone_boxes", self.guarded(self.on_boxes), QOS_DATA)
+        self.subscribe_frames(PointCloud2, "cone_boxes", self.on_boxes, QOS_DATA)
         self.get_logger().info(f"calibration {calib.source}, frame {calib.frame_id}, max range {calib.max_range_m} m")
 
     def on_boxes(self, msg: PointCloud2) -> None:
