@@ -12,10 +12,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .adapter import DriverAdapter
+from .attitude import FIXED, Attitude, default_attitude_mode
 from .calib import Calibration
+from .errors import ConfigError
 from .mapping import ConeMapper
 
-STAGES = ("adapter", "preprocess", "forward", "postprocess", "mapping")
+STAGES = ("adapter", "preprocess", "forward", "postprocess", "attitude", "mapping")
 
 
 @dataclass
@@ -25,6 +27,7 @@ class FrameResult:
     boxes: np.ndarray
     cones: np.ndarray
     timing_ms: dict[str, float] = field(default_factory=dict)
+    attitude: Attitude = FIXED  # the body attitude offset the cones were mapped with
 
 
 class Pipeline:
@@ -32,23 +35,38 @@ class Pipeline:
 
     ``detector`` is a :class:`cone_perception.detector.Detector` (anything with
     ``detect(bgr_cropped, crop) -> BOX_DTYPE`` and a ``timing`` dict of ms).
+    ``attitude``: ``fixed`` or ``image`` (see :mod:`cone_perception.attitude`); None picks the
+    default (``image`` when the calibration has a mount pose, else ``fixed``).
     """
 
-    def __init__(self, calib: Calibration, detector):
+    def __init__(self, calib: Calibration, detector, attitude: str | None = None):
         self.calib = calib
         self.adapter = DriverAdapter(calib.crop, calib.image_width, calib.image_height)
         self.detector = detector
         self.mapper = ConeMapper(calib)
+        self.attitude_mode = attitude or default_attitude_mode(calib.mount_pose is not None)
+        self.attitude = None  # ImageAttitude in mode image
+        if self.attitude_mode == "image":
+            if calib.mount_pose is None:
+                raise ConfigError(calib.source, "mount_pose", "attitude 'image' needs the mount pose in the calibration")
+            self.attitude = self.mapper.image_attitude()
+        elif self.attitude_mode != "fixed":
+            raise ConfigError("attitude", None, f"{self.attitude_mode!r} needs an IMU; offline replay has fixed | image")
 
     def _run(self, band: np.ndarray, t_adapter_s: float) -> FrameResult:
         boxes = self.detector.detect(band, self.calib.crop)
-        t0 = time.perf_counter()
-        cones = self.mapper.map_boxes(boxes)
-        t_map = time.perf_counter() - t0
         timing = {"adapter": t_adapter_s * 1e3}
         timing.update({k.removesuffix("_ms"): v for k, v in self.detector.timing.items()})
-        timing["mapping"] = t_map * 1e3
-        return FrameResult(boxes, cones, timing)
+        att = FIXED
+        if self.attitude is not None:
+            t0 = time.perf_counter()
+            b = np.column_stack([boxes["u1"], boxes["v1"], boxes["u2"], boxes["v2"]]).astype(np.float64)
+            att = self.attitude.update(b, boxes["class_id"].astype(np.intp))
+            timing["attitude"] = (time.perf_counter() - t0) * 1e3
+        t0 = time.perf_counter()
+        cones = self.mapper.map_boxes(boxes, att)
+        timing["mapping"] = (time.perf_counter() - t0) * 1e3
+        return FrameResult(boxes, cones, timing, att)
 
     def process_raw(self, encoding: str, width: int, height: int, step: int, data) -> FrameResult:
         """sensor_msgs/Image fields -> :class:`FrameResult`. Raises ``FrameError`` for a bad frame."""

@@ -17,6 +17,7 @@ from typing import Callable, Iterator
 import numpy as np
 
 from . import bagio
+from .attitude import Attitude, attitude_vector
 from .benchmark import StageTimer
 from .errors import ConfigError, FrameError
 from .evaluation import LocalisationReport
@@ -27,6 +28,7 @@ from .stats import FrameStats
 IMAGE_TYPES = (bagio.IMAGE, bagio.COMPRESSED_IMAGE)
 BOXES_TOPIC = "/cone_boxes"
 CONES_TOPIC = "/cones"
+ATTITUDE_TOPIC = "/cones/attitude"
 
 
 def find_image_topic(bag: str | os.PathLike, topic: str | None = None) -> tuple[str, str]:
@@ -98,6 +100,7 @@ class ReplayResult:
     drops: list[tuple[int, str]] = field(default_factory=list)  # (stamp, message)
     wall_s: float = 0.0
     localisation: dict | None = None
+    attitude: dict[int, Attitude] = field(default_factory=dict)  # stamp ns -> attitude used
 
 
 def offline_replay(
@@ -119,7 +122,10 @@ def offline_replay(
     truth = read_ground_truth(bag, gt_topic) if gt_topic else None
     writer = None
     if out is not None:
-        writer = bagio.BagWriter(Path(out), {BOXES_TOPIC: bagio.POINTCLOUD2, CONES_TOPIC: bagio.POINTCLOUD2})
+        topics = {BOXES_TOPIC: bagio.POINTCLOUD2, CONES_TOPIC: bagio.POINTCLOUD2}
+        if pipeline.attitude_mode != "fixed":
+            topics[ATTITUDE_TOPIC] = bagio.VECTOR3_STAMPED
+        writer = bagio.BagWriter(Path(out), topics)
     res = ReplayResult()
     report = LocalisationReport(max_range_m=pipeline.calib.max_range_m) if truth is not None else None
     frames = iter_frames(bag, topic)
@@ -146,6 +152,11 @@ def offline_replay(
                     r.boxes.astype(BOX_DTYPE), bagio.header(fr.stamp_ns, frame_id), bagio.PointCloud2, bagio.PointField))
                 writer.write(CONES_TOPIC, fr.log_stamp_ns, to_pointcloud2(
                     r.cones, bagio.header(fr.stamp_ns, pipeline.calib.frame_id), bagio.PointCloud2, bagio.PointField))
+                if ATTITUDE_TOPIC in topics:
+                    roll, pitch, yaw = attitude_vector(r.attitude)
+                    writer.write(ATTITUDE_TOPIC, fr.log_stamp_ns, bagio.Vector3Stamped(
+                        header=bagio.header(fr.stamp_ns, pipeline.calib.frame_id), vector=bagio.Vector3(x=roll, y=pitch, z=yaw)))
+            res.attitude[fr.stamp_ns] = r.attitude
             if report is not None and fr.stamp_ns in truth:
                 report.add_frame(r.cones, truth[fr.stamp_ns])
     finally:

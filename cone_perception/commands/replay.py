@@ -20,6 +20,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from ..attitude import ATTITUDE_MODES
 from ..benchmark import format_table, summarize
 from ..calib import DEFAULT_CAMERA, load_calibration, resolve_calibration_path
 from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, RUNTIME_THREADS, Detector, default_model_path
@@ -44,6 +45,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="play the bag into live node processes instead of replaying offline")
     p.add_argument("--pace", choices=["lockstep", "rate"], default="lockstep",
                    help="live: next frame when the last one's /cones came back, or at the recorded rate")
+    p.add_argument("--attitude", choices=ATTITUDE_MODES, default=None,
+                   help="camera attitude per frame: fixed (the calibration's H), image (from the cone boxes; needs "
+                        "mount_pose in the calibration), imu, fused (need an IMU: live nodes only). Default: image "
+                        "when the calibration has a mount pose, else fixed")
     p.add_argument("--json", type=Path, default=None, help="also write the summary as JSON to this file")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -75,7 +80,7 @@ def _run_offline(args, calib) -> dict:
     det = Detector.load_for_band(args.model or default_model_path(), (calib.crop.out_width, calib.crop.out_height),
                                  backend=args.backend, conf=args.conf, threads=args.threads or None, bf16=args.bf16)
     det.warmup()
-    res = offline_replay(args.bag, Pipeline(calib, det), args.topic, args.out, args.gt_topic, _progress(args.no_progress))
+    res = offline_replay(args.bag, Pipeline(calib, det, args.attitude), args.topic, args.out, args.gt_topic, _progress(args.no_progress))
     stages = res.timer.summary()
     n = res.stats.ok
     print(f"replay (offline) {args.bag}: {n} frames processed, {res.stats.summary()}")
