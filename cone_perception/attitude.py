@@ -354,6 +354,36 @@ def _weighted_median(x: np.ndarray, w: np.ndarray) -> float:
     return float(x[order][np.searchsorted(cw, 0.5 * cw[-1])])
 
 
+def attitude_estimator(mapper, mode: str | None) -> tuple[str, "ImageAttitude | None"]:
+    """``(mode, estimator)`` for a :class:`~cone_perception.mapping.ConeMapper` and a requested mode
+    (None or "" = the default of :func:`default_attitude_mode`); the estimator is None for ``fixed``.
+
+    Raises :class:`ConfigError` for an unknown mode, ``image`` without a mount pose, or ``imu`` /
+    ``fused`` (not available in this version: no IMU input yet).
+    """
+    from .errors import ConfigError
+
+    calib = mapper.calib
+    mode = mode or default_attitude_mode(calib.mount_pose is not None)
+    if mode not in ATTITUDE_MODES:
+        raise ConfigError("attitude", None, f"unknown attitude mode {mode!r}; known: {', '.join(ATTITUDE_MODES)}")
+    if mode == "fixed":
+        return mode, None
+    if mode == "image":
+        if calib.mount_pose is None:
+            raise ConfigError(calib.source, "mount_pose", "attitude 'image' needs the mount pose in the calibration")
+        return mode, mapper.image_attitude()
+    raise ConfigError("attitude", None, f"{mode!r} needs an IMU input, which this version does not read yet: use fixed or image")
+
+
+def attitude_for_boxes(estimator: "ImageAttitude | None", records: np.ndarray) -> Attitude:
+    """The attitude to map one frame's ``BOX_DTYPE`` records with (:data:`FIXED` without an estimator)."""
+    if estimator is None:
+        return FIXED
+    b = np.column_stack([records["u1"], records["v1"], records["u2"], records["v2"]]).astype(np.float64)
+    return estimator.update(b, records["class_id"].astype(np.intp))
+
+
 def default_attitude_mode(has_mount_pose: bool, has_imu: bool = False) -> str:
     """The issue's default: ``fused`` with an IMU, else ``image`` with a mount pose, else ``fixed``."""
     if has_imu and has_mount_pose:
@@ -361,3 +391,72 @@ def default_attitude_mode(has_mount_pose: bool, has_imu: bool = False) -> str:
     if has_imu:
         return "imu"
     return "image" if has_mount_pose else "fixed"
+
+
+@dataclass
+class AttitudeReport:
+    """How good the attitude of a replay was: per frame the attitude used against the true one (where
+    the bag has it), and per distance group whether the cones' covariance (attitude uncertainty
+    included) matches their actual error."""
+
+    err_pitch: list = None  # per frame with truth, degrees (estimate - truth)
+    err_roll: list = None
+    sources: dict = None
+    pair_range: list = None  # per matched cone: true range (m), error (m), predicted 1-sigma (m)
+    pair_err: list = None
+    pair_sigma: list = None
+
+    def __post_init__(self):
+        for k in ("err_pitch", "err_roll", "pair_range", "pair_err", "pair_sigma"):
+            setattr(self, k, [])
+        self.sources = {}
+
+    def add_frame(self, att: Attitude, truth_deg: tuple[float, float] | None, cones: np.ndarray,
+                  truth: np.ndarray | None = None, pairs: list | None = None) -> None:
+        """``truth_deg`` (pitch, roll) or None; ``pairs`` from :meth:`LocalisationReport.add_frame`."""
+        self.sources[att.source] = self.sources.get(att.source, 0) + 1
+        if truth_deg is not None:
+            self.err_pitch.append(att.pitch_deg - truth_deg[0])
+            self.err_roll.append(att.roll_deg - truth_deg[1])
+        for i, j, d in pairs or ():
+            c = cones[i]
+            cov = np.array([[c["cov_xx"], c["cov_xy"]], [c["cov_xy"], c["cov_yy"]]], dtype=np.float64)
+            self.pair_range.append(float(np.hypot(truth["x"][j], truth["y"][j])))
+            self.pair_err.append(float(d))
+            self.pair_sigma.append(float(np.sqrt(max(np.trace(cov), 0.0))))
+
+    def summary(self) -> dict:
+        from .evaluation import DISTANCE_GROUPS, distance_group
+
+        out: dict = {"frames_by_source": dict(self.sources)}
+        if self.err_pitch:
+            ep, er = np.abs(self.err_pitch), np.abs(self.err_roll)
+            out.update(frames_with_truth=len(ep), median_abs_err_pitch_deg=float(np.median(ep)),
+                       median_abs_err_roll_deg=float(np.median(er)), p90_abs_err_pitch_deg=float(np.percentile(ep, 90)),
+                       p90_abs_err_roll_deg=float(np.percentile(er, 90)))
+        groups = {}
+        if self.pair_range:
+            g = distance_group(np.array(self.pair_range))
+            e, s = np.array(self.pair_err), np.array(self.pair_sigma)
+            for k, (name, _, _) in enumerate(DISTANCE_GROUPS):
+                sel = g == k
+                if sel.any():
+                    groups[name] = {"n": int(sel.sum()), "median_err_m": float(np.median(e[sel])),
+                                    "median_sigma_m": float(np.median(s[sel])),
+                                    "within_2sigma": float(np.mean(e[sel] <= 2 * s[sel]))}
+        out["groups"] = groups
+        return out
+
+
+def format_attitude_report(summary: dict) -> str:
+    """Plain text of :meth:`AttitudeReport.summary`."""
+    lines = ["attitude: frames by source " + ", ".join(f"{k} {v}" for k, v in sorted(summary["frames_by_source"].items()))]
+    if "median_abs_err_pitch_deg" in summary:
+        lines.append(f"attitude error vs truth ({summary['frames_with_truth']} frames): median |pitch| "
+                     f"{summary['median_abs_err_pitch_deg']:.3f} deg (p90 {summary['p90_abs_err_pitch_deg']:.3f}), "
+                     f"median |roll| {summary['median_abs_err_roll_deg']:.3f} deg (p90 {summary['p90_abs_err_roll_deg']:.3f})")
+    if summary["groups"]:
+        lines.append(f"{'group':<16}{'matched':>8}{'med err':>9}{'med 1-sigma':>12}{'err<=2sigma':>12}  (sigma: sqrt trace of the cone covariance, attitude included)")
+        for name, s in summary["groups"].items():
+            lines.append(f"{name:<16}{s['n']:>8}{s['median_err_m']:>9.3f}{s['median_sigma_m']:>12.3f}{s['within_2sigma']:>12.2f}")
+    return "\n".join(lines)

@@ -12,9 +12,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .adapter import DriverAdapter
-from .attitude import FIXED, Attitude, default_attitude_mode
+from .attitude import FIXED, Attitude, attitude_estimator, attitude_for_boxes
 from .calib import Calibration
-from .errors import ConfigError
 from .mapping import ConeMapper
 
 STAGES = ("adapter", "preprocess", "forward", "postprocess", "attitude", "mapping")
@@ -44,14 +43,7 @@ class Pipeline:
         self.adapter = DriverAdapter(calib.crop, calib.image_width, calib.image_height)
         self.detector = detector
         self.mapper = ConeMapper(calib)
-        self.attitude_mode = attitude or default_attitude_mode(calib.mount_pose is not None)
-        self.attitude = None  # ImageAttitude in mode image
-        if self.attitude_mode == "image":
-            if calib.mount_pose is None:
-                raise ConfigError(calib.source, "mount_pose", "attitude 'image' needs the mount pose in the calibration")
-            self.attitude = self.mapper.image_attitude()
-        elif self.attitude_mode != "fixed":
-            raise ConfigError("attitude", None, f"{self.attitude_mode!r} needs an IMU; offline replay has fixed | image")
+        self.attitude_mode, self.attitude = attitude_estimator(self.mapper, attitude)  # ImageAttitude or None
 
     def _run(self, band: np.ndarray, t_adapter_s: float) -> FrameResult:
         boxes = self.detector.detect(band, self.calib.crop)
@@ -60,8 +52,7 @@ class Pipeline:
         att = FIXED
         if self.attitude is not None:
             t0 = time.perf_counter()
-            b = np.column_stack([boxes["u1"], boxes["v1"], boxes["u2"], boxes["v2"]]).astype(np.float64)
-            att = self.attitude.update(b, boxes["class_id"].astype(np.intp))
+            att = attitude_for_boxes(self.attitude, boxes)
             timing["attitude"] = (time.perf_counter() - t0) * 1e3
         t0 = time.perf_counter()
         cones = self.mapper.map_boxes(boxes, att)

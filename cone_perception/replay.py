@@ -17,7 +17,7 @@ from typing import Callable, Iterator
 import numpy as np
 
 from . import bagio
-from .attitude import Attitude, attitude_vector
+from .attitude import Attitude, AttitudeReport, attitude_vector
 from .benchmark import StageTimer
 from .errors import ConfigError, FrameError
 from .evaluation import LocalisationReport
@@ -29,6 +29,7 @@ IMAGE_TYPES = (bagio.IMAGE, bagio.COMPRESSED_IMAGE)
 BOXES_TOPIC = "/cone_boxes"
 CONES_TOPIC = "/cones"
 ATTITUDE_TOPIC = "/cones/attitude"
+ATTITUDE_GT_TOPIC = "/attitude_gt"
 
 
 def find_image_topic(bag: str | os.PathLike, topic: str | None = None) -> tuple[str, str]:
@@ -91,6 +92,17 @@ def read_ground_truth(bag: str | os.PathLike, topic: str) -> dict[int, np.ndarra
     return out
 
 
+def read_attitude_truth(bag: str | os.PathLike, topic: str = ATTITUDE_GT_TOPIC) -> dict[int, tuple[float, float]]:
+    """``header stamp ns -> (pitch, roll)`` degrees of a synthetic bag's ``/attitude_gt`` (empty without it)."""
+    if topic not in bagio.bag_topics(bag):
+        return {}
+    out = {}
+    for m in bagio.read_messages(bag, topic):
+        v = m.msg.vector
+        out[bagio.stamp_ns(m.msg.header)] = (float(np.degrees(v.y)), float(np.degrees(v.x)))
+    return out
+
+
 @dataclass
 class ReplayResult:
     boxes: dict[int, np.ndarray] = field(default_factory=dict)  # stamp ns -> BOX_DTYPE
@@ -101,6 +113,8 @@ class ReplayResult:
     wall_s: float = 0.0
     localisation: dict | None = None
     attitude: dict[int, Attitude] = field(default_factory=dict)  # stamp ns -> attitude used
+    attitude_mode: str = "fixed"
+    pipeline_attitude: dict | None = None  # image fit outcomes: fitted / too few cones / rejected
 
 
 def offline_replay(
@@ -128,6 +142,8 @@ def offline_replay(
         writer = bagio.BagWriter(Path(out), topics)
     res = ReplayResult()
     report = LocalisationReport(max_range_m=pipeline.calib.max_range_m) if truth is not None else None
+    att_truth = read_attitude_truth(bag) if truth is not None else {}
+    att_report = AttitudeReport() if truth is not None else None
     frames = iter_frames(bag, topic)
     if progress is not None:
         frames = progress(frames, total)
@@ -158,11 +174,16 @@ def offline_replay(
                         header=bagio.header(fr.stamp_ns, pipeline.calib.frame_id), vector=bagio.Vector3(x=roll, y=pitch, z=yaw)))
             res.attitude[fr.stamp_ns] = r.attitude
             if report is not None and fr.stamp_ns in truth:
-                report.add_frame(r.cones, truth[fr.stamp_ns])
+                pairs = report.add_frame(r.cones, truth[fr.stamp_ns])
+                att_report.add_frame(r.attitude, att_truth.get(fr.stamp_ns), r.cones, truth[fr.stamp_ns], pairs)
     finally:
         if writer is not None:
             writer.close()
     res.wall_s = time.perf_counter() - t_start
+    res.attitude_mode = pipeline.attitude_mode
+    if pipeline.attitude is not None:
+        res.pipeline_attitude = pipeline.attitude.counts.as_dict()
     if report is not None:
         res.localisation = report.summary()
+        res.localisation["attitude"] = att_report.summary()
     return res

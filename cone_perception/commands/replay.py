@@ -20,7 +20,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from ..attitude import ATTITUDE_MODES
+from ..attitude import ATTITUDE_MODES, format_attitude_report
 from ..benchmark import format_table, summarize
 from ..calib import DEFAULT_CAMERA, load_calibration, resolve_calibration_path
 from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, RUNTIME_THREADS, Detector, default_model_path
@@ -90,6 +90,9 @@ def _run_offline(args, calib) -> dict:
     print(format_table(stages))
     if res.localisation:
         print(format_localisation(res.localisation))
+        print(format_attitude_report(res.localisation["attitude"]))
+    if res.pipeline_attitude is not None:
+        print(f"attitude ({res.attitude_mode}): " + ", ".join(f"{k} {v}" for k, v in res.pipeline_attitude.items()))
     if args.out:
         print(f"wrote {args.out}")
     return {"mode": "offline", "frames": n, "dropped": dict(res.stats.dropped), "wall_s": res.wall_s,

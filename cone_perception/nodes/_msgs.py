@@ -115,3 +115,15 @@ def cone_markers(cones: np.ndarray, header: Header, ns: str = "cones") -> Marker
         m.color.r, m.color.g, m.color.b, m.color.a = r, g, b, a
         arr.markers.append(m)
     return arr
+
+
+def attitude_msg(att, header):
+    """``geometry_msgs/Vector3Stamped`` of the attitude a frame was mapped with (x = roll, y = pitch, radians)."""
+    from geometry_msgs.msg import Vector3Stamped
+
+    from ..attitude import attitude_vector
+
+    m = Vector3Stamped()
+    m.header = header
+    m.vector.x, m.vector.y, m.vector.z = attitude_vector(att)
+    return m
