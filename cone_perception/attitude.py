@@ -354,33 +354,40 @@ def _weighted_median(x: np.ndarray, w: np.ndarray) -> float:
     return float(x[order][np.searchsorted(cw, 0.5 * cw[-1])])
 
 
-def attitude_estimator(mapper, mode: str | None) -> tuple[str, "ImageAttitude | None"]:
-    """``(mode, estimator)`` for a :class:`~cone_perception.mapping.ConeMapper` and a requested mode
-    (None or "" = the default of :func:`default_attitude_mode`); the estimator is None for ``fixed``.
+def attitude_estimator(mapper, mode: str | None, imu: "ImuAttitude | None" = None):
+    """``(mode, estimator)`` for a :class:`~cone_perception.mapping.ConeMapper`, a requested mode
+    (None or "" = the default of :func:`default_attitude_mode`) and an IMU source (or None); the
+    estimator is None for ``fixed``, an :class:`ImageAttitude` for ``image``, a :class:`FusedAttitude`
+    for ``imu`` and ``fused``.
 
-    Raises :class:`ConfigError` for an unknown mode, ``image`` without a mount pose, or ``imu`` /
-    ``fused`` (not available in this version: no IMU input yet).
+    Raises :class:`ConfigError` for an unknown mode, ``image``/``fused`` without a mount pose, or
+    ``imu``/``fused`` without an IMU source.
     """
     from .errors import ConfigError
 
     calib = mapper.calib
-    mode = mode or default_attitude_mode(calib.mount_pose is not None)
+    mode = mode or default_attitude_mode(calib.mount_pose is not None, imu is not None)
     if mode not in ATTITUDE_MODES:
         raise ConfigError("attitude", None, f"unknown attitude mode {mode!r}; known: {', '.join(ATTITUDE_MODES)}")
     if mode == "fixed":
         return mode, None
+    if calib.mount_pose is None:
+        raise ConfigError(calib.source, "mount_pose", f"attitude {mode!r} needs the mount pose in the calibration")
     if mode == "image":
-        if calib.mount_pose is None:
-            raise ConfigError(calib.source, "mount_pose", "attitude 'image' needs the mount pose in the calibration")
         return mode, mapper.image_attitude()
-    raise ConfigError("attitude", None, f"{mode!r} needs an IMU input, which this version does not read yet: use fixed or image")
+    if imu is None:
+        raise ConfigError("attitude", None, f"{mode!r} needs an IMU (none given: no /imu topic in the bag?)")
+    return mode, FusedAttitude(mapper.image_attitude(), imu, use_image=(mode == "fused"))
 
 
-def attitude_for_boxes(estimator: "ImageAttitude | None", records: np.ndarray) -> Attitude:
-    """The attitude to map one frame's ``BOX_DTYPE`` records with (:data:`FIXED` without an estimator)."""
+def attitude_for_boxes(estimator, records: np.ndarray, stamp_ns: int | None = None) -> Attitude:
+    """The attitude to map one frame's ``BOX_DTYPE`` records with (:data:`FIXED` without an estimator);
+    ``stamp_ns``: the frame's capture stamp (for the IMU)."""
     if estimator is None:
         return FIXED
     b = np.column_stack([records["u1"], records["v1"], records["u2"], records["v2"]]).astype(np.float64)
+    if isinstance(estimator, FusedAttitude):
+        return estimator.update(b, records["class_id"].astype(np.intp), stamp_ns)
     return estimator.update(b, records["class_id"].astype(np.intp))
 
 
@@ -460,3 +467,138 @@ def format_attitude_report(summary: dict) -> str:
         for name, s in summary["groups"].items():
             lines.append(f"{name:<16}{s['n']:>8}{s['median_err_m']:>9.3f}{s['median_sigma_m']:>12.3f}{s['within_2sigma']:>12.2f}")
     return "\n".join(lines)
+
+
+
+# -- IMU --------------------------------------------------------------------------------------------
+#: An IMU quaternion whose norm is farther than this from 1 is dropped.
+QUAT_NORM_TOL = 0.01
+#: An IMU sample older than this at a frame's stamp is not used for that frame.
+IMU_MAX_AGE_NS = 100_000_000
+
+
+def rpy_from_quaternion(x: float, y: float, z: float, w: float) -> tuple[float, float, float]:
+    """(roll, pitch, yaw) radians of a unit quaternion, R = Rz(yaw) Ry(pitch) Rx(roll) (REP 103)."""
+    roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x))))
+    yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    return roll, pitch, yaw
+
+
+@dataclass
+class ImuCounts:
+    """IMU messages used and dropped by cause, and frames without a fresh IMU sample."""
+
+    used: int = 0
+    dropped_nan: int = 0
+    dropped_quaternion_norm: int = 0
+    dropped_out_of_order: int = 0
+    stale_at_frame: int = 0
+
+    def as_dict(self) -> dict[str, int]:
+        return dict(self.__dict__)
+
+
+class ImuAttitude:
+    """Body attitude from an IMU's orientation, relative to the rest attitude (the IMU's reading on
+    the level ground of the calibration, ``rest_deg`` = (pitch, roll)), interpolated to frame stamps.
+
+    The IMU frame's axes are the ``rear_axle`` axes (mount it so, or rotate before).
+    """
+
+    def __init__(self, rest_deg: tuple[float, float] = (0.0, 0.0), max_age_ns: int = IMU_MAX_AGE_NS,
+                 sigma_deg: float = 0.1, keep: int = 200):
+        self.rest = np.asarray(rest_deg, dtype=np.float64)
+        self.max_age_ns = int(max_age_ns)
+        self.sigma_deg = float(sigma_deg)
+        self.keep = keep
+        self.stamps: list[int] = []
+        self.values: list[np.ndarray] = []  # (pitch, roll) degrees relative to rest
+        self.counts = ImuCounts()
+
+    def add(self, stamp_ns: int, quat_xyzw) -> bool:
+        """Add one IMU orientation; returns False (and counts why) for a NaN, a quaternion far from unit
+        length, or a stamp older than the last one."""
+        q = np.asarray(quat_xyzw, dtype=np.float64)
+        if q.shape != (4,) or not np.all(np.isfinite(q)):
+            self.counts.dropped_nan += 1
+            return False
+        if abs(float(np.linalg.norm(q)) - 1.0) > QUAT_NORM_TOL:
+            self.counts.dropped_quaternion_norm += 1
+            return False
+        if self.stamps and stamp_ns < self.stamps[-1]:
+            self.counts.dropped_out_of_order += 1
+            return False
+        roll, pitch, _ = rpy_from_quaternion(*(q / np.linalg.norm(q)))
+        self.stamps.append(int(stamp_ns))
+        self.values.append(np.degrees([pitch, roll]) - self.rest)
+        if len(self.stamps) > self.keep:
+            del self.stamps[: -self.keep], self.values[: -self.keep]
+        self.counts.used += 1
+        return True
+
+    def at(self, stamp_ns: int | None) -> np.ndarray | None:
+        """(pitch, roll) degrees at ``stamp_ns``: interpolated between the samples around it, else the
+        newest one before it; None (counted) without a sample within ``max_age_ns``."""
+        if stamp_ns is None or not self.stamps:
+            self.counts.stale_at_frame += 1
+            return None
+        i = int(np.searchsorted(self.stamps, stamp_ns, side="right"))  # first sample after the stamp
+        if i == 0:  # every sample is newer than the frame
+            if self.stamps[0] - stamp_ns <= self.max_age_ns:
+                return self.values[0].copy()
+            self.counts.stale_at_frame += 1
+            return None
+        t0, v0 = self.stamps[i - 1], self.values[i - 1]
+        if i < len(self.stamps):
+            t1, v1 = self.stamps[i], self.values[i]
+            if t1 - t0 <= 2 * self.max_age_ns and t1 > t0:
+                return v0 + (v1 - v0) * ((stamp_ns - t0) / (t1 - t0))
+        if stamp_ns - t0 > self.max_age_ns:
+            self.counts.stale_at_frame += 1
+            return None
+        return v0.copy()
+
+
+class FusedAttitude:
+    """Attitude from the IMU (``imu``), or the IMU plus a slowly varying ground offset estimated from
+    the image fits (``fused``: the IMU feels the body against gravity, not a grade change of the road
+    ahead, which the image sees). Without a fresh IMU sample a frame gets the image estimate (counted
+    in :attr:`ImuAttitude.counts`)."""
+
+    def __init__(self, image: ImageAttitude, imu: ImuAttitude, use_image: bool = True,
+                 offset_process_sigma_deg: float = 0.05):
+        self.image, self.imu, self.use_image = image, imu, use_image
+        self.q = offset_process_sigma_deg**2
+        self.g = np.zeros(2)  # ground offset (total attitude minus IMU), degrees
+        self.Pg = np.eye(2) * image.cfg.prior_sigma_deg**2
+
+    @property
+    def counts(self) -> AttitudeCounts:
+        return self.image.counts
+
+    def update(self, boxes: np.ndarray, class_ids: np.ndarray, stamp_ns: int | None) -> Attitude:
+        body = self.imu.at(stamp_ns)
+        if body is None:
+            return self.image.update(boxes, class_ids)
+        s_imu = self.imu.sigma_deg
+        if not self.use_image:
+            return Attitude(float(body[0]), float(body[1]), s_imu, s_imu, "imu", 0)
+        self.Pg = self.Pg + np.eye(2) * self.q
+        res = self.image.fit(boxes, class_ids, body + self.g)
+        n = 0
+        if res is None:
+            self.image.counts.too_few += 1
+        elif np.any(np.abs(res[0]) > self.image.cfg.max_abs_deg):
+            self.image.counts.rejected += 1
+        else:
+            z, Rz, n = res
+            S = self.Pg + Rz + np.eye(2) * s_imu**2
+            G = self.Pg @ np.linalg.inv(S)
+            self.g = self.g + G @ (z - body - self.g)
+            self.Pg = (np.eye(2) - G) @ self.Pg
+            self.image.counts.fitted += 1
+        att = body + self.g
+        self.image.x = att.copy()  # keeps the image filter warm for frames without IMU
+        sd = np.sqrt(np.diag(self.Pg) + s_imu**2)
+        return Attitude(float(att[0]), float(att[1]), float(sd[0]), float(sd[1]), "fused", n)

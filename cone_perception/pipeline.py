@@ -34,16 +34,20 @@ class Pipeline:
 
     ``detector`` is a :class:`cone_perception.detector.Detector` (anything with
     ``detect(bgr_cropped, crop) -> BOX_DTYPE`` and a ``timing`` dict of ms).
-    ``attitude``: ``fixed`` or ``image`` (see :mod:`cone_perception.attitude`); None picks the
-    default (``image`` when the calibration has a mount pose, else ``fixed``).
+    ``attitude``: ``fixed``, ``image``, ``imu`` or ``fused`` (see :mod:`cone_perception.attitude`);
+    None picks the default (``fused`` with ``imu`` and a mount pose, ``image`` with a mount pose, else
+    ``fixed``). ``imu``: an :class:`~cone_perception.attitude.ImuAttitude` the caller feeds; set
+    :attr:`frame_stamp_ns` before each frame.
     """
 
-    def __init__(self, calib: Calibration, detector, attitude: str | None = None):
+    def __init__(self, calib: Calibration, detector, attitude: str | None = None, imu=None):
         self.calib = calib
         self.adapter = DriverAdapter(calib.crop, calib.image_width, calib.image_height)
         self.detector = detector
         self.mapper = ConeMapper(calib)
-        self.attitude_mode, self.attitude = attitude_estimator(self.mapper, attitude)  # ImageAttitude or None
+        self.imu = imu  # an ImuAttitude the caller feeds (modes imu, fused), or None
+        self.attitude_mode, self.attitude = attitude_estimator(self.mapper, attitude, imu)
+        self.frame_stamp_ns: int | None = None  # the capture stamp of the frame being processed (for the IMU)
 
     def _run(self, band: np.ndarray, t_adapter_s: float) -> FrameResult:
         boxes = self.detector.detect(band, self.calib.crop)
@@ -52,7 +56,7 @@ class Pipeline:
         att = FIXED
         if self.attitude is not None:
             t0 = time.perf_counter()
-            att = attitude_for_boxes(self.attitude, boxes)
+            att = attitude_for_boxes(self.attitude, boxes, self.frame_stamp_ns)
             timing["attitude"] = (time.perf_counter() - t0) * 1e3
         t0 = time.perf_counter()
         cones = self.mapper.map_boxes(boxes, att)

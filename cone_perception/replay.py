@@ -30,6 +30,7 @@ BOXES_TOPIC = "/cone_boxes"
 CONES_TOPIC = "/cones"
 ATTITUDE_TOPIC = "/cones/attitude"
 ATTITUDE_GT_TOPIC = "/attitude_gt"
+IMU_TOPIC = "/imu"
 
 
 def find_image_topic(bag: str | os.PathLike, topic: str | None = None) -> tuple[str, str]:
@@ -76,6 +77,7 @@ def process_frame(pipeline: Pipeline, frame: Frame):
     """Run one bag frame through the pipeline (raises :class:`FrameError`)."""
     if frame.error is not None:
         raise frame.error
+    pipeline.frame_stamp_ns = frame.stamp_ns
     msg = frame.msg
     if frame.msgtype == bagio.COMPRESSED_IMAGE:
         return pipeline.process_compressed(msg.data)
@@ -90,6 +92,17 @@ def read_ground_truth(bag: str | os.PathLike, topic: str) -> dict[int, np.ndarra
             raise ConfigError(str(bag), topic, f"is {m.msgtype}, expected sensor_msgs/msg/PointCloud2")
         out[bagio.stamp_ns(m.msg.header)] = from_pointcloud2(m.msg, CONE_DTYPE)
     return out
+
+
+def read_imu(bag: str | os.PathLike, topic: str = IMU_TOPIC) -> list[tuple[int, tuple[float, float, float, float]]]:
+    """``(header stamp ns, orientation (x, y, z, w))`` of a bag's IMU topic in stamp order (empty without it)."""
+    if topic not in bagio.bag_topics(bag):
+        return []
+    out = []
+    for m in bagio.read_messages(bag, topic):
+        q = m.msg.orientation
+        out.append((bagio.stamp_ns(m.msg.header), (float(q.x), float(q.y), float(q.z), float(q.w))))
+    return sorted(out, key=lambda t: t[0])
 
 
 def read_attitude_truth(bag: str | os.PathLike, topic: str = ATTITUDE_GT_TOPIC) -> dict[int, tuple[float, float]]:
@@ -124,6 +137,7 @@ def offline_replay(
     out: str | os.PathLike | None = None,
     gt_topic: str | None = None,
     progress: Callable[[int], Iterator] | None = None,
+    imu_topic: str = IMU_TOPIC,
 ) -> ReplayResult:
     """Replay ``bag`` through ``pipeline``; write ``/cone_boxes`` and ``/cones`` to ``out`` if given.
 
@@ -145,11 +159,16 @@ def offline_replay(
     att_truth = read_attitude_truth(bag) if truth is not None else {}
     att_report = AttitudeReport() if truth is not None else None
     frames = iter_frames(bag, topic)
+    imu_msgs = read_imu(bag, imu_topic) if pipeline.imu is not None else []
+    k_imu = 0
     if progress is not None:
         frames = progress(frames, total)
     t_start = time.perf_counter()
     try:
         for fr in frames:
+            while k_imu < len(imu_msgs) and imu_msgs[k_imu][0] <= fr.stamp_ns:  # the IMU up to this frame
+                pipeline.imu.add(*imu_msgs[k_imu])
+                k_imu += 1
             t0 = time.perf_counter()
             try:
                 r = process_frame(pipeline, fr)
@@ -183,6 +202,8 @@ def offline_replay(
     res.attitude_mode = pipeline.attitude_mode
     if pipeline.attitude is not None:
         res.pipeline_attitude = pipeline.attitude.counts.as_dict()
+    if pipeline.imu is not None:
+        res.pipeline_attitude = {**(res.pipeline_attitude or {}), **{f"imu_{k}": v for k, v in pipeline.imu.counts.as_dict().items()}}
     if report is not None:
         res.localisation = report.summary()
         res.localisation["attitude"] = att_report.summary()

@@ -244,7 +244,68 @@ def test_pipeline_attitude_modes():
     assert Pipeline(calib, _NoDetector(), "fixed").attitude is None
     with pytest.raises(ConfigError, match="IMU"):
         Pipeline(calib, _NoDetector(), "imu")
+    with pytest.raises(ConfigError, match="unknown attitude"):
+        Pipeline(calib, _NoDetector(), "gyro")
     d = calib.to_dict()
     del d["mount_pose"]
     with pytest.raises(ConfigError, match="mount_pose"):
         Pipeline(calibration_from_dict(d), _NoDetector(), "image")
+
+
+def _q(pitch_deg: float, roll_deg: float, yaw: float = 0.3):
+    from cone_perception.synth.motion import quat_from_rpy
+
+    return quat_from_rpy(np.radians(roll_deg), np.radians(pitch_deg), yaw)
+
+
+def test_imu_orientation_relative_to_rest_interpolated_to_the_frame():
+    from cone_perception.attitude import ImuAttitude
+
+    imu = ImuAttitude(rest_deg=(0.5, -0.2))
+    assert imu.add(1_000_000_000, _q(1.5, 0.8))
+    assert imu.add(1_010_000_000, _q(2.5, 0.8))
+    np.testing.assert_allclose(imu.at(1_005_000_000), [1.5, 1.0], atol=1e-9)  # halfway, minus rest
+    np.testing.assert_allclose(imu.at(1_050_000_000), [2.0, 1.0], atol=1e-9)  # newest, 40 ms old
+    assert imu.at(1_200_000_000) is None  # 190 ms old: not used
+    assert imu.at(850_000_000) is None  # 150 ms before the first sample
+    assert imu.counts.stale_at_frame == 2
+
+
+@pytest.mark.parametrize("quat, cause", [
+    ((np.nan, 0.0, 0.0, 1.0), "dropped_nan"),
+    ((0.0, 0.0, 0.0, 1.1), "dropped_quaternion_norm"),
+    ((0.0, 0.0, 0.0, 0.0), "dropped_quaternion_norm"),
+])
+def test_bad_imu_messages_are_dropped_and_counted(quat, cause):
+    from cone_perception.attitude import ImuAttitude
+
+    imu = ImuAttitude()
+    assert imu.add(5, _q(1.0, 0.0))
+    assert not imu.add(10, quat)
+    assert getattr(imu.counts, cause) == 1 and imu.counts.used == 1
+    np.testing.assert_allclose(imu.at(10), [1.0, 0.0], atol=1e-9)  # the good one still serves
+    assert not imu.add(1, _q(1.0, 0.0)) and imu.counts.dropped_out_of_order == 1
+
+
+def test_fused_adds_the_ground_offset_the_imu_cannot_feel():
+    from cone_perception.attitude import ImuAttitude, attitude_estimator
+
+    mapper = ConeMapper(_calib())
+    imu = ImuAttitude()
+    mode, est = attitude_estimator(mapper, None, imu)
+    assert mode == "fused"
+    body, grade = np.array([0.8, -0.3]), np.array([0.6, 0.2])  # the camera sees body + grade
+    boxes = _cone_boxes(_tilted_camera(*(body + grade)), CONES_XY, CONES_CLS)
+    for k in range(40):
+        imu.add(k * 50_000_000, _q(*body))
+        a = est.update(boxes, CONES_CLS, k * 50_000_000)
+    assert a.source == "fused"
+    assert a.pitch_deg == pytest.approx(1.4, abs=0.1) and a.roll_deg == pytest.approx(-0.1, abs=0.2)
+    # the IMU goes quiet: the image alone serves, counted
+    a = est.update(boxes, CONES_CLS, 40 * 50_000_000 + 200_000_000)
+    assert a.source == "image" and imu.counts.stale_at_frame == 1
+    assert a.pitch_deg == pytest.approx(1.4, abs=0.2)
+    mode, est = attitude_estimator(mapper, "imu", imu)
+    assert est.update(boxes, CONES_CLS, 39 * 50_000_000).pitch_deg == pytest.approx(0.8, abs=1e-6)
+    with pytest.raises(ConfigError, match="IMU"):
+        attitude_estimator(mapper, "fused", None)

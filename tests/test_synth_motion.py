@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from cone_perception import bagio
+from cone_perception.attitude import ImuAttitude
 from cone_perception.calib import load_calibration
 from cone_perception.pipeline import Pipeline
 from cone_perception.records import boxes_from_arrays
@@ -94,8 +95,9 @@ def test_replay_with_the_image_attitude(bags, tmp_path):
     calib = load_calibration(calib_path)
     assert calib.mount_pose is not None
     res = {}
-    for mode in ("fixed", "image"):
-        res[mode] = offline_replay(bags / "car", Pipeline(calib, _TruthDetector(gt_path), mode), out=tmp_path / mode,
+    for mode in ("fixed", "image", "fused"):
+        imu = ImuAttitude() if mode == "fused" else None
+        res[mode] = offline_replay(bags / "car", Pipeline(calib, _TruthDetector(gt_path), mode, imu), out=tmp_path / mode,
                                    gt_topic="/cones_gt")
     far = {m: r.localisation["groups"]["far 7-15 m"]["median_err_m"] for m, r in res.items()}
     assert "/cones/attitude" not in bagio.bag_topics(tmp_path / "fixed")
@@ -108,3 +110,7 @@ def test_replay_with_the_image_attitude(bags, tmp_path):
     assert far["image"] < 0.5 * far["fixed"] and far["image"] < 0.25  # 640x360: 3x coarser pixels than full HD
     # the covariance (attitude included) covers the error of most far cones
     assert att["groups"]["far 7-15 m"]["within_2sigma"] > 0.8
+    fused = res["fused"].localisation["attitude"]
+    assert fused["frames_by_source"] == {"fused": 20} and res["fused"].pipeline_attitude["imu_used"] == 20
+    assert fused["median_abs_err_pitch_deg"] < 0.2
+    assert far["fused"] < 0.5 * far["fixed"]

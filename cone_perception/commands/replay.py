@@ -18,6 +18,8 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from tqdm import tqdm
 
 from ..attitude import ATTITUDE_MODES, format_attitude_report
@@ -46,9 +48,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--pace", choices=["lockstep", "rate"], default="lockstep",
                    help="live: next frame when the last one's /cones came back, or at the recorded rate")
     p.add_argument("--attitude", choices=ATTITUDE_MODES, default=None,
-                   help="camera attitude per frame: fixed (the calibration's H), image (from the cone boxes; needs "
-                        "mount_pose in the calibration), imu, fused (need an IMU: live nodes only). Default: image "
-                        "when the calibration has a mount pose, else fixed")
+                   help="camera attitude per frame: fixed (the calibration's H), image (from the cone boxes), imu (the "
+                        "bag's IMU), fused (IMU + image); all but fixed need mount_pose in the calibration. Default: "
+                        "fused when the bag has the IMU topic, else image, fixed without a mount pose")
+    p.add_argument("--imu-topic", default="/imu", help="offline: the bag's sensor_msgs/Imu topic (default %(default)s)")
+    p.add_argument("--imu-rest", default="0,0", metavar="PITCH,ROLL",
+                   help="the IMU's pitch and roll (degrees) with the car at rest on the level calibration ground "
+                        "(default %(default)s)")
     p.add_argument("--json", type=Path, default=None, help="also write the summary as JSON to this file")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -72,6 +78,26 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _imu_source(args, calib):
+    """An ImuAttitude when the bag has the IMU topic and the mode may use it, else None."""
+    from ..attitude import ImuAttitude
+    from ..bagio import bag_topics
+    from ..errors import ConfigError
+
+    if args.attitude in ("fixed", "image") or calib.mount_pose is None and args.attitude is None:
+        return None
+    if args.imu_topic not in bag_topics(args.bag):
+        if args.attitude in ("imu", "fused"):
+            raise ConfigError(str(args.bag), args.imu_topic, f"--attitude {args.attitude} needs this IMU topic in the bag")
+        return None
+    try:
+        rest = tuple(float(v) for v in args.imu_rest.split(","))
+        assert len(rest) == 2 and all(np.isfinite(rest))
+    except (ValueError, AssertionError):
+        raise ConfigError("--imu-rest", None, f"must be PITCH,ROLL in degrees, got {args.imu_rest!r}") from None
+    return ImuAttitude(rest)
+
+
 def _run_offline(args, calib) -> dict:
     from ..pipeline import Pipeline
     from ..replay import offline_replay
@@ -80,7 +106,9 @@ def _run_offline(args, calib) -> dict:
     det = Detector.load_for_band(args.model or default_model_path(), (calib.crop.out_width, calib.crop.out_height),
                                  backend=args.backend, conf=args.conf, threads=args.threads or None, bf16=args.bf16)
     det.warmup()
-    res = offline_replay(args.bag, Pipeline(calib, det, args.attitude), args.topic, args.out, args.gt_topic, _progress(args.no_progress))
+    imu = _imu_source(args, calib)
+    res = offline_replay(args.bag, Pipeline(calib, det, args.attitude, imu), args.topic, args.out, args.gt_topic,
+                         _progress(args.no_progress), imu_topic=args.imu_topic)
     stages = res.timer.summary()
     n = res.stats.ok
     print(f"replay (offline) {args.bag}: {n} frames processed, {res.stats.summary()}")
