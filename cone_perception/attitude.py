@@ -237,7 +237,7 @@ class ImageAttitude:
         R_att = np.stack([attitude_rotation(t[0], t[1]) for t in thetas_deg])  # (k, 3, 3)
         R_F_C = R_att @ self.R_F_C0
         p = R_att @ self.p0  # (k, 3)
-        d = np.einsum("nj,kij->kni", rays, R_F_C)  # (k, N, 3) in rear_axle
+        d = rays @ R_F_C.transpose(0, 2, 1)  # (k, N, 3) in rear_axle
         dz = d[:, :, 2]
         hits = dz < -1e-9
         t = -p[:, 2:3] / np.where(hits, dz, -1.0)
@@ -246,7 +246,7 @@ class ImageAttitude:
         reach = dist + (self.off[cls] + self._tip_r_m[cls])[None, :, None]
         top = away * (reach / dist)  # tip (xy) minus camera
         P = np.concatenate([top, (self._height_m[cls][None, :] - p[:, 2:3])[:, :, None]], axis=2)
-        Pc = np.einsum("kni,kij->knj", P, R_F_C)  # optical frame
+        Pc = P @ R_F_C  # (k, N, 3) optical frame
         v = self.K[1, 1] * Pc[:, :, 1] / Pc[:, :, 2] + self.K[1, 2]
         return np.where(hits, v - v_top, np.nan)
 
@@ -299,7 +299,22 @@ class ImageAttitude:
             return None
         A = Jo.T @ ((w / so**2)[:, None] * Jo) + lam
         scale = max(1.0, float(np.sum(w[inl] * e[inl] ** 2) / max(n_used - 2, 1)))
-        return theta, np.linalg.inv(A) * scale, n_used
+        return theta, _inv2(A) * scale, n_used
+
+    def single_frame(self, boxes: np.ndarray, class_ids: np.ndarray) -> Attitude:
+        """The attitude of one frame on its own (no history): the fit with its covariance, or zero with
+        the prior's uncertainty when the fit has too few cones or is rejected (both counted)."""
+        res = self.fit(boxes, class_ids)
+        s0 = self.cfg.prior_sigma_deg
+        if res is None:
+            self.counts.too_few += 1
+            return Attitude(0.0, 0.0, s0, s0, "hold", 0)
+        if np.any(np.abs(res[0]) > self.cfg.max_abs_deg):
+            self.counts.rejected += 1
+            return Attitude(0.0, 0.0, s0, s0, "hold", 0)
+        self.counts.fitted += 1
+        sd = np.sqrt(np.diag(res[1]))
+        return Attitude(float(res[0][0]), float(res[0][1]), float(sd[0]), float(sd[1]), "image", res[2])
 
     def update(self, boxes: np.ndarray, class_ids: np.ndarray) -> Attitude:
         """Fit this frame, fold it into the filter, return the attitude to map this frame with."""
@@ -314,8 +329,7 @@ class ImageAttitude:
             self.counts.rejected += 1
         else:
             z, Rz, n = res
-            S = self.P + Rz
-            G = self.P @ np.linalg.inv(S)
+            G = self.P @ _inv2(self.P + Rz)
             self.x = self.x + G @ (z - self.x)
             self.P = (np.eye(2) - G) @ self.P
             self.counts.fitted += 1
@@ -342,10 +356,11 @@ def _irls(r0: np.ndarray, j0: np.ndarray, j1: np.ndarray, inv_s: np.ndarray, del
     return np.array([d0, d1])
 
 
-def _solve2(A: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """2x2 linear solve (A symmetric positive definite here) without LAPACK's call overhead."""
-    det = A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
-    return np.array([A[1, 1] * b[0] - A[0, 1] * b[1], A[0, 0] * b[1] - A[1, 0] * b[0]]) / det
+def _inv2(A: np.ndarray) -> np.ndarray:
+    """Inverse of a 2x2 matrix without LAPACK's call overhead."""
+    a, b, c, d = A.ravel().tolist()
+    det = a * d - b * c
+    return np.array([[d, -b], [-c, a]]) / det
 
 
 def _weighted_median(x: np.ndarray, w: np.ndarray) -> float:
@@ -594,7 +609,7 @@ class FusedAttitude:
         else:
             z, Rz, n = res
             S = self.Pg + Rz + np.eye(2) * s_imu**2
-            G = self.Pg @ np.linalg.inv(S)
+            G = self.Pg @ _inv2(S)
             self.g = self.g + G @ (z - body - self.g)
             self.Pg = (np.eye(2) - G) @ self.Pg
             self.image.counts.fitted += 1

@@ -309,3 +309,26 @@ def test_fused_adds_the_ground_offset_the_imu_cannot_feel():
     assert est.update(boxes, CONES_CLS, 39 * 50_000_000).pitch_deg == pytest.approx(0.8, abs=1e-6)
     with pytest.raises(ConfigError, match="IMU"):
         attitude_estimator(mapper, "fused", None)
+
+
+def test_map_boxes_of_one_frame_with_the_image_attitude(tmp_path, capsys):
+    from cone_perception.cli import main
+
+    calib = _calib()
+    cal_path = save_calibration(calib, tmp_path / "cal.yaml")
+    near = slice(0, 12)  # 4-14 m: the fixed H keeps them all within range
+    boxes = _cone_boxes(_tilted_camera(1.2, -0.4), CONES_XY[near], CONES_CLS[near])
+    csv = tmp_path / "boxes.csv"
+    csv.write_text("u1,v1,u2,v2,score,class_id\n" + "".join(
+        f"{b[0]},{b[1]},{b[2]},{b[3]},0.9,{c}\n" for b, c in zip(boxes, CONES_CLS[near])))
+    errs = {}
+    for mode in ("fixed", "image"):
+        assert main(["map", "--calib", str(cal_path), "--boxes", str(csv), "--attitude", mode]) == 0
+        cap = capsys.readouterr()
+        xy = np.array([[float(v) for v in line.split(",")[:2]] for line in cap.out.splitlines()])
+        assert len(xy) == 12
+        errs[mode] = np.median(np.hypot(*(xy - CONES_XY[near]).T))
+        if mode == "image":
+            assert "attitude (image, image, 12 cones)" in cap.err
+            assert float(cap.err.split("pitch ")[1].split()[0]) == pytest.approx(1.2, abs=0.25)
+    assert errs["image"] < 0.15 and errs["fixed"] > 3 * errs["image"]
