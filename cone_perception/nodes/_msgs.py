@@ -23,6 +23,11 @@ def copy_header(header: Header, frame_id: str | None = None) -> Header:
     return h
 
 
+def stamp_ns(header: Header) -> int:
+    """Integer nanoseconds of a header's stamp."""
+    return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
+
+
 def bgr_image(bgr: np.ndarray, header: Header) -> Image:
     """(h, w, 3) uint8 BGR -> sensor_msgs/Image bgr8 with the given header."""
     msg = Image()

@@ -3,22 +3,22 @@
 Parameters
   calibration (str, "example_mainhoop"): calibration YAML path or shipped camera name.
   publish_markers (bool, true): also publish ``/cones/markers`` for rviz2.
-  attitude (str, ""): camera attitude per frame, ``fixed`` or ``image`` (see cone_perception.attitude);
-    "" = ``image`` when the calibration has a mount pose, else ``fixed``. The attitude used is published
-    on ``cones/attitude`` (geometry_msgs/Vector3Stamped, x = roll, y = pitch, radians).
+  attitude (str, ""), imu_rest_deg (double[2]): camera attitude per frame (nodes/_attitude.py); the
+    attitude used is published on ``cones/attitude`` (geometry_msgs/Vector3Stamped, x = roll,
+    y = pitch, radians); ``imu`` (sensor_msgs/Imu) in for attitude ``imu`` / ``fused``.
 """
 
 from __future__ import annotations
 
 from ._common import QOS_DATA, PerceptionNode, run_node  # noqa: I001 (sets DDS env first)
 
-from geometry_msgs.msg import Vector3Stamped
 from sensor_msgs.msg import PointCloud2
 
 from ..attitude import attitude_estimator, attitude_for_boxes
 from ..calib import DEFAULT_CAMERA, load_calibration
 from ..mapping import ConeMapper, validate_boxes
 from . import _msgs
+from ._attitude import declare_attitude, publish_attitude
 
 
 class MappingNode(PerceptionNode):
@@ -28,9 +28,9 @@ class MappingNode(PerceptionNode):
         markers = bool(self.declare_parameter("publish_markers", True).value)
         calib = load_calibration(calib_name)
         self.mapper = ConeMapper(calib)
-        self.attitude_mode, self.attitude = attitude_estimator(self.mapper, self.declare_parameter("attitude", "").value)
-        self.pub_attitude = self.create_publisher(Vector3Stamped, "cones/attitude", QOS_DATA)
         self.advertise_cones(calib.frame_id, markers)
+        mode, imu = declare_attitude(self)
+        self.attitude_mode, self.attitude = attitude_estimator(self.mapper, mode, imu)
         self.create_subscription(PointCloud2, "cone_boxes", self.guarded(self.on_boxes), QOS_DATA)
         self.get_logger().info(f"calibration {calib.source}, frame {calib.frame_id}, max range {calib.max_range_m} m, "
                                f"attitude {self.attitude_mode}")
@@ -38,9 +38,9 @@ class MappingNode(PerceptionNode):
     def on_boxes(self, msg: PointCloud2) -> None:
         boxes = _msgs.boxes_from_msg(msg)
         validate_boxes(boxes)  # a bad message is dropped before it can move the attitude filter
-        att = attitude_for_boxes(self.attitude, boxes)
+        att = attitude_for_boxes(self.attitude, boxes, _msgs.stamp_ns(msg.header))
         self.publish_cones(self.mapper.map_boxes(boxes, att), msg.header)
-        self.pub_attitude.publish(_msgs.attitude_msg(att, _msgs.copy_header(msg.header, self.cones_frame_id)))
+        publish_attitude(self, att, msg.header)
 
 
 def main(args=None) -> int:
