@@ -140,7 +140,7 @@ class ImageAttitudeConfig:
     aspect_tol: float = 0.45  # |log(w/h / expected)| above this: knocked over, merged or wrong
     sigma_px: float = 1.5  # box edge 1-sigma (foot and top)
     #: a box's top edge lies this far above the cone's projected tip (a box covers every pixel the cone
-    #: touches): measured on exact synthetic boxes, see docs/benchmarks.md
+    #: touches); tests/test_attitude.py::test_box_top_bias_on_rendered_cones checks it
     top_bias_px: float = 1.0
     sigma_rel: float = 0.03  # plus this fraction of the box height (cone build, orientation)
     cauchy_c: float = 2.5  # robust scale in sigmas

@@ -332,3 +332,31 @@ def test_map_boxes_of_one_frame_with_the_image_attitude(tmp_path, capsys):
             assert "attitude (image, image, 12 cones)" in cap.err
             assert float(cap.err.split("pitch ")[1].split()[0]) == pytest.approx(1.2, abs=0.25)
     assert errs["image"] < 0.15 and errs["fixed"] > 3 * errs["image"]
+
+
+def test_box_top_bias_on_rendered_cones():
+    """The renderer's exact boxes cover every pixel a cone touches: their top edge lies about a pixel
+    above the projected tip, which ``top_bias_px`` takes out (residuals at the true attitude ~0)."""
+    from cone_perception.attitude import ImageAttitudeConfig
+    from cone_perception.synth.scene import drive_poses
+    from cone_perception.synth.track import make_track
+
+    cfg = SynthConfig(seed=5, jitter=False, nose_prob=0.0)
+    renderer = cfg.renderer(jpeg_prob=0.0, speed_mps=8.0, fps=20.0, steady_photometric=True)
+    rng = np.random.default_rng(5)
+    track = make_track("autocross", 123)
+    look = renderer.new_look(rng)
+    boxes, cls = [], []
+    for pose in drive_poses(track, 4, 20.0, 8.0, rng, False):
+        _, truths = renderer.render(track, pose, look, rng)
+        full = [t for t in truths if t.visible_fraction >= 0.999 and 5.0 <= t.distance_m <= 25.0 and t.class_id != 3]
+        boxes += [t.box for t in full]
+        cls += [t.class_id for t in full]
+    boxes, cls = np.array(boxes, dtype=np.float64), np.array(cls)
+    med = {}
+    for bias in (0.0, 1.0):
+        est = ConeMapper(cfg.calibration()).image_attitude(ImageAttitudeConfig(top_bias_px=bias))
+        sel = est._select(boxes, cls)
+        assert sel.sum() >= 30
+        med[bias] = float(np.median(est.residuals(np.zeros(2), *est._prepare(boxes[sel], cls[sel]))))
+    assert 0.6 < med[0.0] < 1.4 and abs(med[1.0]) < 0.4, med
