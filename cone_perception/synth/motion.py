@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..camera import _rot_x, _rot_y, _rot_z
 from .track import Track
 
 PITCH_PER_MPS2 = 0.2  # degrees per m/s^2 of longitudinal acceleration (1 g braking: ~2 degrees)
@@ -148,11 +149,7 @@ def imu_samples(drive: Drive, heading_rad: np.ndarray, fps: float, rng: np.rando
 
 def rpy_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
     """Rz(yaw) Ry(pitch) Rx(roll), radians."""
-    cr, sr, cp, sp, cy, sy = np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch), np.cos(yaw), np.sin(yaw)
-    Rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
-    Ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
-    Rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
-    return Rz @ Ry @ Rx
+    return _rot_z(yaw) @ _rot_y(pitch) @ _rot_x(roll)
 
 
 def quat_from_rpy(roll: float, pitch: float, yaw: float) -> np.ndarray:
