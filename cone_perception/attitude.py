@@ -617,3 +617,38 @@ class FusedAttitude:
         self.image.x = att.copy()  # keeps the image filter warm for frames without IMU
         sd = np.sqrt(np.diag(self.Pg) + s_imu**2)
         return Attitude(float(att[0]), float(att[1]), float(sd[0]), float(sd[1]), "fused", n)
+
+
+def attitude_plot(path, stamps_ns: list[int], used: list[Attitude], truth: dict[int, tuple[float, float]] | None = None,
+                  title: str = ""):
+    """PNG of the attitude used per frame (pitch and roll, degrees, with its 1-sigma band) against
+    time, and the true attitude where known (``stamp -> (pitch, roll)``). Returns the path."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t0 = stamps_ns[0] if stamps_ns else 0
+    t = (np.asarray(stamps_ns, dtype=np.float64) - t0) / 1e9
+    fig, axes = plt.subplots(2, 1, figsize=(11, 6), sharex=True)
+    for ax, k, name in ((axes[0], 0, "pitch (+ nose down)"), (axes[1], 1, "roll (+ right side down)")):
+        v = np.array([(a.pitch_deg, a.roll_deg)[k] for a in used])
+        sd = np.array([(a.sigma_pitch_deg, a.sigma_roll_deg)[k] for a in used])
+        ax.fill_between(t, v - sd, v + sd, color="tab:blue", alpha=0.2, lw=0, label="used +- 1 sigma")
+        ax.plot(t, v, color="tab:blue", lw=1.2, label="used")
+        if truth:
+            tt = [(s - t0) / 1e9 for s in stamps_ns if s in truth]
+            ax.plot(tt, [truth[s][k] for s in stamps_ns if s in truth], color="k", lw=1, ls="--", label="true")
+        hold = np.array([a.source == "hold" for a in used])
+        if hold.any():
+            ax.plot(t[hold], v[hold], "x", color="tab:red", ms=4, label="held (no fit)")
+        ax.set_ylabel(f"{name}, deg")
+        ax.grid(alpha=0.3)
+        ax.legend(loc="upper right", fontsize=8)
+    axes[1].set_xlabel("time, s")
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path

@@ -110,6 +110,15 @@ def test_replay_with_the_image_attitude(bags, tmp_path):
     assert far["image"] < 0.5 * far["fixed"] and far["image"] < 0.25  # 640x360: 3x coarser pixels than full HD
     # the covariance (attitude included) covers the error of most far cones
     assert att["groups"]["far 7-15 m"]["within_2sigma"] > 0.8
+    # the picture of it
+    import cv2
+
+    from cone_perception.attitude import attitude_plot
+
+    stamps = sorted(res["image"].attitude)
+    png = attitude_plot(tmp_path / "att.png", stamps, [res["image"].attitude[s] for s in stamps],
+                        read_attitude_truth(bags / "car"), "car")
+    assert cv2.imread(str(png)).shape[1] > 500
     fused = res["fused"].localisation["attitude"]
     assert fused["frames_by_source"] == {"fused": 20} and res["fused"].pipeline_attitude["imu_used"] == 20
     assert fused["median_abs_err_pitch_deg"] < 0.2

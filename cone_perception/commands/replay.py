@@ -55,6 +55,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--imu-rest", default="0,0", metavar="PITCH,ROLL",
                    help="the IMU's pitch and roll (degrees) with the car at rest on the level calibration ground "
                         "(default %(default)s)")
+    p.add_argument("--attitude-png", type=Path, default=None, metavar="PNG",
+                   help="offline: plot the attitude used per frame (and the bag's /attitude_gt where it has one)")
     p.add_argument("--json", type=Path, default=None, help="also write the summary as JSON to this file")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -123,6 +125,14 @@ def _run_offline(args, calib) -> dict:
         print(f"attitude ({res.attitude_mode}): " + ", ".join(f"{k} {v}" for k, v in res.pipeline_attitude.items()))
     if args.out:
         print(f"wrote {args.out}")
+    if args.attitude_png:
+        from ..attitude import attitude_plot
+        from ..replay import read_attitude_truth
+
+        stamps = sorted(res.attitude)
+        attitude_plot(args.attitude_png, stamps, [res.attitude[s] for s in stamps], read_attitude_truth(args.bag),
+                      f"{args.bag.name}: attitude {res.attitude_mode}")
+        print(f"wrote {args.attitude_png}")
     return {"mode": "offline", "frames": n, "dropped": dict(res.stats.dropped), "wall_s": res.wall_s,
             "stages": stages, "localisation": res.localisation}
 
