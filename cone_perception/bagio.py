@@ -35,6 +35,8 @@ TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 IMAGE = "sensor_msgs/msg/Image"
 COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
 POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
+VECTOR3_STAMPED = "geometry_msgs/msg/Vector3Stamped"
+IMU = "sensor_msgs/msg/Imu"
 
 Header = TYPESTORE.types["std_msgs/msg/Header"]
 Time = TYPESTORE.types["builtin_interfaces/msg/Time"]
@@ -42,6 +44,10 @@ Image = TYPESTORE.types[IMAGE]
 CompressedImage = TYPESTORE.types[COMPRESSED_IMAGE]
 PointCloud2 = TYPESTORE.types[POINTCLOUD2]
 PointField = TYPESTORE.types["sensor_msgs/msg/PointField"]
+Vector3Stamped = TYPESTORE.types[VECTOR3_STAMPED]
+Vector3 = TYPESTORE.types["geometry_msgs/msg/Vector3"]
+Quaternion = TYPESTORE.types["geometry_msgs/msg/Quaternion"]
+Imu = TYPESTORE.types[IMU]
 
 
 def header(stamp_ns: int, frame_id: str) -> Any:

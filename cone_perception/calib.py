@@ -4,7 +4,9 @@ Fields (see ``calib/README.md``): ``camera``, ``image_width``, ``image_height``,
 ``H_S_B`` (3x3 rows), ``T_F_S`` (3x3 rows), ``crop`` (``v0``, ``v1``, optional
 ``u0``, ``u1``), ``downscale``, ``foot_points`` (class name -> rule),
 ``max_range_m``, ``pixel_sigma`` (``u``, ``v``); optional ``frame_id``
-(default ``rear_axle``), ``camera_matrix`` (3x3), ``dist_coeffs`` (list).
+(default ``rear_axle``), ``camera_matrix`` (3x3), ``dist_coeffs`` (list), ``mount_pose``
+(``x_m y_m z_m yaw_deg pitch_deg roll_deg``: lets the mapping recompose ``H_F_B`` for a body attitude
+offset, see :mod:`cone_perception.attitude`).
 Other keys are kept as they are (``extra``) and written back on save.
 
 Every problem raises :class:`~cone_perception.errors.ConfigError` naming the
@@ -21,6 +23,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from .camera import MountPose
 from .classes import CLASS_NAMES
 from .crop import MAX_IMAGE_SIDE_PX, CropSpec
 from .errors import ConfigError
@@ -58,7 +61,10 @@ _KNOWN_KEYS = {
     "dist_coeffs",
     "foot_offset_m",
     "camera_xy_m",
+    "mount_pose",
 }
+#: Keys of ``mount_pose`` in the YAML (the static transform of the camera uses the same names).
+MOUNT_POSE_KEYS = ("x_m", "y_m", "z_m", "yaw_deg", "pitch_deg", "roll_deg")
 
 
 @dataclass
@@ -80,6 +86,7 @@ class Calibration:
     dist_coeffs: np.ndarray | None = None
     foot_offset_m: tuple[float, ...] = (0.0,) * len(CLASS_NAMES)  # per project class id
     camera_xy_m: tuple[float, float] | None = None
+    mount_pose: MountPose | None = None  # needs camera_matrix; enables per-frame attitude
     extra: dict[str, Any] = field(default_factory=dict)
     source: str = "<memory>"
 
@@ -98,6 +105,8 @@ class Calibration:
         offset along the viewing ray, a metre off changes the direction by a few degrees only)."""
         if self.camera_xy_m is not None:
             return np.asarray(self.camera_xy_m, dtype=np.float64)
+        if self.mount_pose is not None:
+            return np.array([self.mount_pose.x_m, self.mount_pose.y_m])
         if self.camera_matrix is not None:
             from .calibration import pose_from_homography
 
@@ -131,8 +140,17 @@ class Calibration:
             d["foot_offset_m"] = {CLASS_NAMES[i]: float(v) for i, v in enumerate(self.foot_offset_m)}
         if self.camera_xy_m is not None:
             d["camera_xy_m"] = [float(v) for v in self.camera_xy_m]
+        if self.mount_pose is not None:
+            d["mount_pose"] = mount_pose_to_dict(self.mount_pose)
         d.update(self.extra)
         return d
+
+
+def mount_pose_to_dict(pose: MountPose) -> dict[str, float]:
+    """:class:`MountPose` -> the YAML's ``mount_pose`` mapping (m, degrees)."""
+    m = pose
+    return {"x_m": float(m.x_m), "y_m": float(m.y_m), "z_m": float(m.height_m),
+            "yaw_deg": float(m.yaw_deg), "pitch_deg": float(m.pitch_deg), "roll_deg": float(m.roll_deg)}
 
 
 def _rows(m: np.ndarray) -> list[list[float]]:
@@ -292,6 +310,22 @@ def calibration_from_dict(data: dict, source: str = "<memory>") -> Calibration:
         if K is None:
             raise f.err("dist_coeffs", "needs camera_matrix too")
 
+    mount_pose = None
+    mp = f.get("mount_pose", None)
+    if mp is not None:
+        if not isinstance(mp, dict):
+            raise f.err("mount_pose", f"must be a mapping with {', '.join(MOUNT_POSE_KEYS)}")
+        for k in mp:
+            if k not in MOUNT_POSE_KEYS:
+                raise f.err(f"mount_pose.{k}", f"unknown key; known: {', '.join(MOUNT_POSE_KEYS)}")
+        v = {k: f.number(k, 0.0 if k in ("y_m", "yaw_deg", "roll_deg") else ..., where=mp, prefix="mount_pose.")
+             for k in MOUNT_POSE_KEYS}
+        if v["z_m"] <= 0:
+            raise f.err("mount_pose.z_m", f"camera height must be > 0 m, got {v['z_m']}")
+        if K is None:
+            raise f.err("mount_pose", "needs camera_matrix too")
+        mount_pose = MountPose(v["x_m"], v["y_m"], v["z_m"], v["pitch_deg"], v["roll_deg"], v["yaw_deg"])
+
     calib = Calibration(
         camera=camera,
         image_width=width,
@@ -308,6 +342,7 @@ def calibration_from_dict(data: dict, source: str = "<memory>") -> Calibration:
         dist_coeffs=dist,
         foot_offset_m=tuple(offsets[n] for n in CLASS_NAMES),
         camera_xy_m=cam_xy,
+        mount_pose=mount_pose,
         extra={k: v for k, v in data.items() if k not in _KNOWN_KEYS},
         source=source,
     )
@@ -315,6 +350,14 @@ def calibration_from_dict(data: dict, source: str = "<memory>") -> Calibration:
         calib.H_F_B
     except ValueError as e:
         raise f.err("H_S_B", str(e)) from None
+    if mount_pose is not None:
+        from .attitude import MOUNT_POSE_CHECK_RANGE_M, MOUNT_POSE_TOLERANCE, mount_pose_disagreement
+
+        bad = mount_pose_disagreement(calib.H_F_B, K, mount_pose, width, height)
+        if not bad <= MOUNT_POSE_TOLERANCE:
+            raise f.err("mount_pose", f"disagrees with the file's own H_F_B (H_S_B, T_F_S, camera_matrix) by "
+                        f"{bad * 100:.1f} % of range at {MOUNT_POSE_CHECK_RANGE_M:g} m (at most "
+                        f"{MOUNT_POSE_TOLERANCE * 100:g} %): wrong pose, or H calibrated for another mount")
     return calib
 
 

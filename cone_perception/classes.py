@@ -8,6 +8,15 @@ BLUE, YELLOW, ORANGE, LARGE_ORANGE, UNKNOWN = range(5)
 CLASS_NAMES: tuple[str, ...] = ("blue", "yellow", "orange", "large_orange", "unknown")
 NUM_CLASSES = len(CLASS_NAMES)
 
+#: Cone sizes by class id (FS rules; the synthetic cones are built to them): (height, base plate side,
+#: radius of the flat tip) in metres. No entry for ``unknown`` (its size is not known).
+CONE_SIZE_M: dict[int, tuple[float, float, float]] = {
+    BLUE: (0.325, 0.228, 0.022),
+    YELLOW: (0.325, 0.228, 0.022),
+    ORANGE: (0.325, 0.228, 0.022),
+    LARGE_ORANGE: (0.505, 0.285, 0.028),
+}
+
 #: Drawing colour per class id, BGR (OpenCV order).
 CLASS_BGR: tuple[tuple[int, int, int], ...] = (
     (255, 90, 0),  # blue

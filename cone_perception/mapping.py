@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .attitude import Attitude, AttitudeModel
 from .calib import Calibration
 from .classes import NUM_CLASSES
 from .errors import FrameError
@@ -55,6 +56,30 @@ class ConeMapper:
         self._u_weights = foot_point_weights(calib.foot_points)
         self._offset_m = np.asarray(calib.foot_offset_m, dtype=np.float64)
         self._camera_xy = calib.camera_ground_xy() if np.any(self._offset_m) else np.zeros(2)
+        #: H_F_B for a body attitude offset; None without a mount pose in the calibration (fixed H only)
+        self.attitude_model = None
+        if calib.mount_pose is not None and calib.camera_matrix is not None:
+            self.attitude_model = AttitudeModel(calib.H_F_B, calib.camera_matrix, calib.mount_pose,
+                                                calib.ground_reference_px())
+
+    def image_attitude(self, config=None):
+        """A new :class:`~cone_perception.attitude.ImageAttitude` for this calibration (needs a mount pose)."""
+        from .attitude import ImageAttitude
+
+        c = self.calib
+        if self.attitude_model is None:
+            raise ValueError(f"{c.source}: attitude from the image needs mount_pose and camera_matrix in the calibration")
+        return ImageAttitude(c.camera_matrix, c.mount_pose, self._offset_m, (c.image_width, c.image_height),
+                             (float(c.crop.v0), float(c.crop.v1)), c.dist_coeffs, config)
+
+    def _ground_for(self, attitude: Attitude | None) -> GroundMapper:
+        if attitude is None or attitude.is_zero:
+            return self.ground
+        if self.attitude_model is None:
+            raise ValueError(f"{self.calib.source}: an attitude offset needs mount_pose and camera_matrix in the calibration")
+        g = self.ground
+        return GroundMapper(self.attitude_model.H_F_B(attitude.pitch_deg, attitude.roll_deg), g.max_range_m,
+                            tuple(g.sigma), g.K, g.dist)
 
     def foot_points(self, records: np.ndarray) -> np.ndarray:
         """(N, 2) foot pixels (pixel-centre coordinates) of :data:`BOX_DTYPE` records, by each box's class rule."""
@@ -91,20 +116,26 @@ class ConeMapper:
         """(N, 2) ground points (m) -> (N, 2) full-image px where the camera sees them."""
         return self.ground.ground_to_pixels(xy_m)
 
-    def map_boxes(self, records: np.ndarray) -> np.ndarray:
+    def map_boxes(self, records: np.ndarray, attitude: Attitude | None = None) -> np.ndarray:
         """Validated :data:`BOX_DTYPE` records -> :data:`CONE_DTYPE` records.
 
         Boxes whose foot point is above the horizon or beyond ``max_range_m``
         are dropped (they are never published). Raises :class:`FrameError` for
         a malformed box (the whole message is dropped by the caller).
+        ``attitude``: the body's attitude offset for this frame (needs a mount pose); its
+        uncertainty is added to each cone's covariance.
         """
         validate_boxes(records)
         if records.shape[0] == 0:
             return np.zeros(0, dtype=CONE_DTYPE)
+        ground = self._ground_for(attitude)
         uv = self.foot_points(records)
-        xy, valid = self.ground.map_pixels(uv)
+        xy, valid = ground.map_pixels(uv)
         xy[valid] = self.foot_offsets(xy[valid], records["class_id"][valid])
-        cov = self.ground.covariance(uv[valid])
+        cov = ground.covariance(uv[valid])
+        if (self.attitude_model is not None and attitude is not None and valid.any()
+                and (attitude.sigma_pitch_deg > 0 or attitude.sigma_roll_deg > 0)):
+            cov = cov + self._attitude_covariance(uv[valid], attitude)
         out = np.zeros(int(valid.sum()), dtype=CONE_DTYPE)
         out["x"] = xy[valid, 0]
         out["y"] = xy[valid, 1]
@@ -114,3 +145,15 @@ class ConeMapper:
         out["cov_xy"] = cov[:, 0, 1]
         out["cov_yy"] = cov[:, 1, 1]
         return out
+
+    def _attitude_covariance(self, uv: np.ndarray, att: Attitude) -> np.ndarray:
+        """(N, 2, 2) m^2: J diag(sigma_pitch^2, sigma_roll^2) J^T, J = d(x, y)/d(pitch, roll) (central
+        differences of 0.1 degree about the attitude used)."""
+        eps = 0.1
+        J = np.empty((uv.shape[0], 2, 2))
+        for k, d in enumerate(((eps, 0.0), (0.0, eps))):
+            a = Attitude(att.pitch_deg + d[0], att.roll_deg + d[1])
+            b = Attitude(att.pitch_deg - d[0], att.roll_deg - d[1])
+            xa, xb = self._ground_for(a).map_pixels(uv)[0], self._ground_for(b).map_pixels(uv)[0]
+            J[:, :, k] = np.nan_to_num((xa - xb) / (2 * eps))
+        return J @ att.covariance_deg2() @ np.transpose(J, (0, 2, 1))

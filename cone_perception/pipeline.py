@@ -12,10 +12,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .adapter import DriverAdapter
+from .attitude import FIXED, Attitude, attitude_estimator, attitude_for_boxes
 from .calib import Calibration
 from .mapping import ConeMapper
 
-STAGES = ("adapter", "preprocess", "forward", "postprocess", "mapping")
+STAGES = ("adapter", "preprocess", "forward", "postprocess", "attitude", "mapping")
 
 
 @dataclass
@@ -25,6 +26,7 @@ class FrameResult:
     boxes: np.ndarray
     cones: np.ndarray
     timing_ms: dict[str, float] = field(default_factory=dict)
+    attitude: Attitude = FIXED  # the body attitude offset the cones were mapped with
 
 
 class Pipeline:
@@ -32,23 +34,34 @@ class Pipeline:
 
     ``detector`` is a :class:`cone_perception.detector.Detector` (anything with
     ``detect(bgr_cropped, crop) -> BOX_DTYPE`` and a ``timing`` dict of ms).
+    ``attitude``: ``fixed``, ``image``, ``imu`` or ``fused`` (see :mod:`cone_perception.attitude`);
+    None picks the default (``fused`` with ``imu`` and a mount pose, ``image`` with a mount pose, else
+    ``fixed``). ``imu``: an :class:`~cone_perception.attitude.ImuAttitude` the caller feeds; set
+    :attr:`frame_stamp_ns` before each frame.
     """
 
-    def __init__(self, calib: Calibration, detector):
+    def __init__(self, calib: Calibration, detector, attitude: str | None = None, imu=None):
         self.calib = calib
         self.adapter = DriverAdapter(calib.crop, calib.image_width, calib.image_height)
         self.detector = detector
         self.mapper = ConeMapper(calib)
+        self.imu = imu  # an ImuAttitude the caller feeds (modes imu, fused), or None
+        self.attitude_mode, self.attitude = attitude_estimator(self.mapper, attitude, imu)
+        self.frame_stamp_ns: int | None = None  # the capture stamp of the frame being processed (for the IMU)
 
     def _run(self, band: np.ndarray, t_adapter_s: float) -> FrameResult:
         boxes = self.detector.detect(band, self.calib.crop)
-        t0 = time.perf_counter()
-        cones = self.mapper.map_boxes(boxes)
-        t_map = time.perf_counter() - t0
         timing = {"adapter": t_adapter_s * 1e3}
         timing.update({k.removesuffix("_ms"): v for k, v in self.detector.timing.items()})
-        timing["mapping"] = t_map * 1e3
-        return FrameResult(boxes, cones, timing)
+        att = FIXED
+        if self.attitude is not None:
+            t0 = time.perf_counter()
+            att = attitude_for_boxes(self.attitude, boxes, self.frame_stamp_ns)
+            timing["attitude"] = (time.perf_counter() - t0) * 1e3
+        t0 = time.perf_counter()
+        cones = self.mapper.map_boxes(boxes, att)
+        timing["mapping"] = (time.perf_counter() - t0) * 1e3
+        return FrameResult(boxes, cones, timing, att)
 
     def process_raw(self, encoding: str, width: int, height: int, step: int, data) -> FrameResult:
         """sensor_msgs/Image fields -> :class:`FrameResult`. Raises ``FrameError`` for a bad frame."""

@@ -17,6 +17,7 @@ from typing import Callable, Iterator
 import numpy as np
 
 from . import bagio
+from .attitude import Attitude, AttitudeReport, attitude_vector
 from .benchmark import StageTimer
 from .errors import ConfigError, FrameError
 from .evaluation import LocalisationReport
@@ -27,6 +28,9 @@ from .stats import FrameStats
 IMAGE_TYPES = (bagio.IMAGE, bagio.COMPRESSED_IMAGE)
 BOXES_TOPIC = "/cone_boxes"
 CONES_TOPIC = "/cones"
+ATTITUDE_TOPIC = "/cones/attitude"
+ATTITUDE_GT_TOPIC = "/attitude_gt"
+IMU_TOPIC = "/imu"
 
 
 def find_image_topic(bag: str | os.PathLike, topic: str | None = None) -> tuple[str, str]:
@@ -73,6 +77,7 @@ def process_frame(pipeline: Pipeline, frame: Frame):
     """Run one bag frame through the pipeline (raises :class:`FrameError`)."""
     if frame.error is not None:
         raise frame.error
+    pipeline.frame_stamp_ns = frame.stamp_ns
     msg = frame.msg
     if frame.msgtype == bagio.COMPRESSED_IMAGE:
         return pipeline.process_compressed(msg.data)
@@ -89,6 +94,28 @@ def read_ground_truth(bag: str | os.PathLike, topic: str) -> dict[int, np.ndarra
     return out
 
 
+def read_imu(bag: str | os.PathLike, topic: str = IMU_TOPIC) -> list[tuple[int, tuple[float, float, float, float]]]:
+    """``(header stamp ns, orientation (x, y, z, w))`` of a bag's IMU topic in stamp order (empty without it)."""
+    if topic not in bagio.bag_topics(bag):
+        return []
+    out = []
+    for m in bagio.read_messages(bag, topic):
+        q = m.msg.orientation
+        out.append((bagio.stamp_ns(m.msg.header), (float(q.x), float(q.y), float(q.z), float(q.w))))
+    return sorted(out, key=lambda t: t[0])
+
+
+def read_attitude_truth(bag: str | os.PathLike, topic: str = ATTITUDE_GT_TOPIC) -> dict[int, tuple[float, float]]:
+    """``header stamp ns -> (pitch, roll)`` degrees of a synthetic bag's ``/attitude_gt`` (empty without it)."""
+    if topic not in bagio.bag_topics(bag):
+        return {}
+    out = {}
+    for m in bagio.read_messages(bag, topic):
+        v = m.msg.vector
+        out[bagio.stamp_ns(m.msg.header)] = (float(np.degrees(v.y)), float(np.degrees(v.x)))
+    return out
+
+
 @dataclass
 class ReplayResult:
     boxes: dict[int, np.ndarray] = field(default_factory=dict)  # stamp ns -> BOX_DTYPE
@@ -98,6 +125,9 @@ class ReplayResult:
     drops: list[tuple[int, str]] = field(default_factory=list)  # (stamp, message)
     wall_s: float = 0.0
     localisation: dict | None = None
+    attitude: dict[int, Attitude] = field(default_factory=dict)  # stamp ns -> attitude used
+    attitude_mode: str = "fixed"
+    pipeline_attitude: dict | None = None  # image fit outcomes: fitted / too few cones / rejected
 
 
 def offline_replay(
@@ -107,6 +137,7 @@ def offline_replay(
     out: str | os.PathLike | None = None,
     gt_topic: str | None = None,
     progress: Callable[[int], Iterator] | None = None,
+    imu_topic: str = IMU_TOPIC,
 ) -> ReplayResult:
     """Replay ``bag`` through ``pipeline``; write ``/cone_boxes`` and ``/cones`` to ``out`` if given.
 
@@ -119,15 +150,25 @@ def offline_replay(
     truth = read_ground_truth(bag, gt_topic) if gt_topic else None
     writer = None
     if out is not None:
-        writer = bagio.BagWriter(Path(out), {BOXES_TOPIC: bagio.POINTCLOUD2, CONES_TOPIC: bagio.POINTCLOUD2})
+        topics = {BOXES_TOPIC: bagio.POINTCLOUD2, CONES_TOPIC: bagio.POINTCLOUD2}
+        if pipeline.attitude_mode != "fixed":
+            topics[ATTITUDE_TOPIC] = bagio.VECTOR3_STAMPED
+        writer = bagio.BagWriter(Path(out), topics)
     res = ReplayResult()
     report = LocalisationReport(max_range_m=pipeline.calib.max_range_m) if truth is not None else None
+    att_truth = read_attitude_truth(bag) if truth is not None else {}
+    att_report = AttitudeReport() if truth is not None else None
     frames = iter_frames(bag, topic)
+    imu_msgs = read_imu(bag, imu_topic) if pipeline.imu is not None else []
+    k_imu = 0
     if progress is not None:
         frames = progress(frames, total)
     t_start = time.perf_counter()
     try:
         for fr in frames:
+            while k_imu < len(imu_msgs) and imu_msgs[k_imu][0] <= fr.stamp_ns:  # the IMU up to this frame
+                pipeline.imu.add(*imu_msgs[k_imu])
+                k_imu += 1
             t0 = time.perf_counter()
             try:
                 r = process_frame(pipeline, fr)
@@ -146,12 +187,24 @@ def offline_replay(
                     r.boxes.astype(BOX_DTYPE), bagio.header(fr.stamp_ns, frame_id), bagio.PointCloud2, bagio.PointField))
                 writer.write(CONES_TOPIC, fr.log_stamp_ns, to_pointcloud2(
                     r.cones, bagio.header(fr.stamp_ns, pipeline.calib.frame_id), bagio.PointCloud2, bagio.PointField))
+                if ATTITUDE_TOPIC in topics:
+                    roll, pitch, yaw = attitude_vector(r.attitude)
+                    writer.write(ATTITUDE_TOPIC, fr.log_stamp_ns, bagio.Vector3Stamped(
+                        header=bagio.header(fr.stamp_ns, pipeline.calib.frame_id), vector=bagio.Vector3(x=roll, y=pitch, z=yaw)))
+            res.attitude[fr.stamp_ns] = r.attitude
             if report is not None and fr.stamp_ns in truth:
-                report.add_frame(r.cones, truth[fr.stamp_ns])
+                pairs = report.add_frame(r.cones, truth[fr.stamp_ns])
+                att_report.add_frame(r.attitude, att_truth.get(fr.stamp_ns), r.cones, truth[fr.stamp_ns], pairs)
     finally:
         if writer is not None:
             writer.close()
     res.wall_s = time.perf_counter() - t_start
+    res.attitude_mode = pipeline.attitude_mode
+    if pipeline.attitude is not None:
+        res.pipeline_attitude = pipeline.attitude.counts.as_dict()
+    if pipeline.imu is not None:
+        res.pipeline_attitude = {**(res.pipeline_attitude or {}), **{f"imu_{k}": v for k, v in pipeline.imu.counts.as_dict().items()}}
     if report is not None:
         res.localisation = report.summary()
+        res.localisation["attitude"] = att_report.summary()
     return res

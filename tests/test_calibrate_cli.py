@@ -87,6 +87,9 @@ def test_image_board_and_points_round_trip_through_the_mapper(files, tmp_path, c
     assert cv2.imread(str(tmp_path / "cam.points.png")).shape[1] == W
     calib = load_calibration(out)
     assert calib.camera == "cam" and calib.extra["mount_estimate"]["height_m"] == pytest.approx(1.2, abs=0.01)
+    # the image fit writes the mount pose recovered from H (it agrees with H, so the file loads)
+    mp = calib.mount_pose
+    assert (mp.height_m, mp.pitch_deg, mp.x_m) == (pytest.approx(1.2, abs=0.01), pytest.approx(10.0, abs=0.1), pytest.approx(0.5, abs=0.05))
     assert "--points" in out.read_text().splitlines()[0]  # the command that made it is in the header
 
     # a second run keeps what the team set by hand: crop, foot points, sigmas, other keys
@@ -159,6 +162,7 @@ def test_from_pose_writes_the_synthetic_cameras_homography(tmp_path):
     np.testing.assert_allclose(calib.H_F_B, _camera().H_F_B(), rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(calib.T_F_S[:2, 2], [3.0, 0.0])
     assert calib.extra["mount"]["height_m"] == 1.2
+    assert calib.mount_pose == MountPose(0.5, 0.0, 1.2, 10.0, 0.0, 0.0)  # attitude per frame possible
     assert _mapped_errors(out, _camera()).max() < 1e-5  # float32 records
     # the shipped example is this very command (see calib/README.md)
     np.testing.assert_allclose(load_calibration("example_mainhoop").H_F_B, calib.H_F_B, rtol=1e-9, atol=1e-12)

@@ -39,6 +39,7 @@ from ..calibration import (
     quality_report,
     read_points_csv,
 )
+from ..attitude import MOUNT_POSE_CHECK_RANGE_M, MOUNT_POSE_TOLERANCE, mount_pose_disagreement
 from ..camera import MountPose, default_intrinsics
 from ..classes import CLASS_NAMES
 from ..crop import CropSpec
@@ -225,6 +226,7 @@ def run(args: argparse.Namespace) -> int:
         )
 
     calib = _build_calibration(camera, res, existing, extra, out)
+    calib.mount_pose = _mount_pose(args, rep, calib)
     save_calibration(calib, out, header=f"written by: {command_line(args)}")
 
     text = format_report(rep, title)
@@ -518,6 +520,25 @@ def _default_crop(res: CalibrationResult) -> CropSpec:
     v1 = H - (H - v0) % 2
     ds = 2 if W % 4 == 0 and (v1 - v0) % 2 == 0 else 1
     return CropSpec(v0, v1, 0, W - W % 2, ds)
+
+
+def _mount_pose(args: argparse.Namespace, rep: dict, calib: Calibration) -> MountPose | None:
+    """The ``mount_pose`` to write: the given pose (``--from-pose``), else the pose recovered from H
+    when K is known (then it agrees with H by construction), else none (attitude stays fixed)."""
+    if calib.camera_matrix is None:
+        return None
+    if args.from_pose:
+        return MountPose(args.cam_x, args.cam_y, args.height, args.pitch, args.roll, args.cam_yaw)
+    p = rep.get("pose_from_H")
+    if not p:
+        return None
+    pose = MountPose(*(float(p[k]) for k in ("x_m", "y_m", "height_m", "pitch_deg", "roll_deg", "yaw_deg")))
+    bad = mount_pose_disagreement(calib.H_F_B, calib.camera_matrix, pose, calib.image_width, calib.image_height)
+    if not bad <= MOUNT_POSE_TOLERANCE:
+        print(f"note: no mount_pose written: the pose recovered from H disagrees with H by {bad * 100:.1f} % at "
+              f"{MOUNT_POSE_CHECK_RANGE_M:g} m (H is not a rigid camera pose with this K); attitude stays fixed")
+        return None
+    return pose
 
 
 def _build_calibration(

@@ -5,6 +5,9 @@
   cone-perception map --calib CAL --boxes boxes.csv
       -> one line ``x,y,class_id,score,cov_xx,cov_xy,cov_yy`` per kept cone (columns of boxes.csv:
          ``u1,v1,u2,v2,score,class_id``, full-image px, optional header line)
+  cone-perception map --calib CAL --boxes boxes.csv --attitude image
+      -> the same, the boxes taken as ONE frame whose camera attitude is fitted from them first
+         (default with a mount pose in the calibration; the attitude used goes to stderr)
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..attitude import attitude_estimator
 from ..calib import DEFAULT_CAMERA, load_calibration
 from ..errors import ConfigError, FrameError
 from ..mapping import ConeMapper, validate_boxes
@@ -40,6 +44,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g = p.add_mutually_exclusive_group(required=True)
     g.add_argument("--pixel", type=_pixel, action="append", metavar="U,V", help="a full-image pixel; repeatable")
     g.add_argument("--boxes", type=Path, metavar="FILE.csv", help="CSV of boxes u1,v1,u2,v2,score,class_id")
+    p.add_argument("--attitude", choices=("fixed", "image"), default=None,
+                   help="--boxes: fixed (the calibration's H) or image (the boxes are one frame: fit its pitch/roll "
+                        "first; needs mount_pose). Default: image when the calibration has mount_pose, else fixed")
 
 
 def read_boxes_csv(path: Path) -> np.ndarray:
@@ -81,7 +88,14 @@ def run(args: argparse.Namespace) -> int:
         validate_boxes(boxes)
     except FrameError as e:
         raise ConfigError(str(args.boxes), None, str(e)) from None
-    cones = mapper.map_boxes(boxes)
+    mode, est = attitude_estimator(mapper, args.attitude)
+    att = None
+    if est is not None:
+        b = np.column_stack([boxes["u1"], boxes["v1"], boxes["u2"], boxes["v2"]]).astype(np.float64)
+        att = est.single_frame(b, boxes["class_id"].astype(np.intp))
+        print(f"attitude ({mode}, {att.source}, {att.n_cones} cones): pitch {att.pitch_deg:+.3f} +- "
+              f"{att.sigma_pitch_deg:.3f} deg, roll {att.roll_deg:+.3f} +- {att.sigma_roll_deg:.3f} deg", file=sys.stderr)
+    cones = mapper.map_boxes(boxes, att)
     for c in cones:
         out.write(
             f"{c['x']:.4f},{c['y']:.4f},{int(c['class_id'])},{c['score']:.4f},"

@@ -18,8 +18,11 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from tqdm import tqdm
 
+from ..attitude import ATTITUDE_MODES, format_attitude_report
 from ..benchmark import format_table, summarize
 from ..calib import DEFAULT_CAMERA, load_calibration, resolve_calibration_path
 from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, RUNTIME_THREADS, Detector, default_model_path
@@ -45,6 +48,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="play the bag into live node processes instead of replaying offline")
     p.add_argument("--pace", choices=["lockstep", "rate"], default="lockstep",
                    help="live: next frame when the last one's /cones came back, or at the recorded rate")
+    p.add_argument("--attitude", choices=ATTITUDE_MODES, default=None,
+                   help="camera attitude per frame: fixed (the calibration's H), image (from the cone boxes), imu (the "
+                        "bag's IMU), fused (IMU + image); all but fixed need mount_pose in the calibration. Default: "
+                        "fused when the bag has the IMU topic, else image, fixed without a mount pose")
+    p.add_argument("--imu-topic", default="/imu", help="offline: the bag's sensor_msgs/Imu topic (default %(default)s)")
+    p.add_argument("--imu-rest", default="0,0", metavar="PITCH,ROLL",
+                   help="the IMU's pitch and roll (degrees) with the car at rest on the level calibration ground "
+                        "(default %(default)s)")
+    p.add_argument("--attitude-png", type=Path, default=None, metavar="PNG",
+                   help="offline: plot the attitude used per frame (and the bag's /attitude_gt where it has one)")
     p.add_argument("--json", type=Path, default=None, help="also write the summary as JSON to this file")
     p.add_argument("--force", action="store_true", help="replace an existing --out bag and --json file")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -85,6 +98,26 @@ def _remove_bag(path: Path) -> None:
     shutil.rmtree(path)
 
 
+def _imu_source(args, calib):
+    """An ImuAttitude when the bag has the IMU topic and the mode may use it, else None."""
+    from ..attitude import ImuAttitude
+    from ..bagio import bag_topics
+    from ..errors import ConfigError
+
+    if args.attitude in ("fixed", "image") or calib.mount_pose is None and args.attitude is None:
+        return None
+    if args.imu_topic not in bag_topics(args.bag):
+        if args.attitude in ("imu", "fused"):
+            raise ConfigError(str(args.bag), args.imu_topic, f"--attitude {args.attitude} needs this IMU topic in the bag")
+        return None
+    try:
+        rest = tuple(float(v) for v in args.imu_rest.split(","))
+        assert len(rest) == 2 and all(np.isfinite(rest))
+    except (ValueError, AssertionError):
+        raise ConfigError("--imu-rest", None, f"must be PITCH,ROLL in degrees, got {args.imu_rest!r}") from None
+    return ImuAttitude(rest)
+
+
 def _run_offline(args, calib) -> dict:
     from ..pipeline import Pipeline
     from ..replay import offline_replay
@@ -93,7 +126,9 @@ def _run_offline(args, calib) -> dict:
     det = Detector.load_for_band(args.model or default_model_path(), (calib.crop.out_width, calib.crop.out_height),
                                  backend=args.backend, conf=args.conf, threads=args.threads or None, bf16=args.bf16)
     det.warmup()
-    res = offline_replay(args.bag, Pipeline(calib, det), args.topic, args.out, args.gt_topic, _progress(args.no_progress))
+    imu = _imu_source(args, calib)
+    res = offline_replay(args.bag, Pipeline(calib, det, args.attitude, imu), args.topic, args.out, args.gt_topic,
+                         _progress(args.no_progress), imu_topic=args.imu_topic)
     stages = res.timer.summary()
     n = res.stats.ok
     print(f"replay (offline) {args.bag}: {n} frames processed, {res.stats.summary()}")
@@ -103,8 +138,19 @@ def _run_offline(args, calib) -> dict:
     print(format_table(stages))
     if res.localisation:
         print(format_localisation(res.localisation))
+        print(format_attitude_report(res.localisation["attitude"]))
+    if res.pipeline_attitude is not None:
+        print(f"attitude ({res.attitude_mode}): " + ", ".join(f"{k} {v}" for k, v in res.pipeline_attitude.items()))
     if args.out:
         print_written([args.out], "replay")
+    if args.attitude_png:
+        from ..attitude import attitude_plot
+        from ..replay import read_attitude_truth
+
+        stamps = sorted(res.attitude)
+        attitude_plot(args.attitude_png, stamps, [res.attitude[s] for s in stamps], read_attitude_truth(args.bag),
+                      f"{args.bag.name}: attitude {res.attitude_mode}")
+        print_written([args.attitude_png], "replay")
     return {"mode": "offline", "frames": n, "dropped": dict(res.stats.dropped), "wall_s": res.wall_s,
             "stages": stages, "localisation": res.localisation}
 

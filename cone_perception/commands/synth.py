@@ -27,6 +27,9 @@ def _common(p: argparse.ArgumentParser) -> None:
     g.add_argument("--k1", type=float, default=0.0, help="radial distortion k1 (OpenCV model, default 0 = ideal pinhole)")
     g.add_argument("--k2", type=float, default=0.0, help="radial distortion k2 (default 0)")
     g.add_argument("--no-jitter", action="store_true", help="switch off the +-1 degree body pitch/roll jitter")
+    g.add_argument("--car-motion", action="store_true",
+                   help="bag: the car moves like a car: speed profile with braking / acceleration pitch (up to +-2 deg), "
+                        "cornering roll, bumps, grade changes of the road ahead (up to 2 %%); on top of the jitter")
     g.add_argument("--nose-prob", type=float, default=0.5, help="chance a scene shows the car nose at the bottom (default 0.5)")
     g.add_argument("--no-photometric", action="store_true", help="no exposure / white balance / noise / blur / JPEG randomisation")
     g.add_argument(
@@ -89,6 +92,7 @@ def config_from_args(args: argparse.Namespace):
         k2=args.k2,
         seed=args.seed,
         jitter=not args.no_jitter,
+        car_motion=getattr(args, "car_motion", False),
         nose_prob=args.nose_prob,
         photometric=not args.no_photometric,
         track_kinds=tuple(k.strip() for k in args.tracks.split(",") if k.strip()),

@@ -23,6 +23,11 @@ def copy_header(header: Header, frame_id: str | None = None) -> Header:
     return h
 
 
+def stamp_ns(header: Header) -> int:
+    """Integer nanoseconds of a header's stamp."""
+    return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
+
+
 def bgr_image(bgr: np.ndarray, header: Header) -> Image:
     """(h, w, 3) uint8 BGR -> sensor_msgs/Image bgr8 with the given header."""
     msg = Image()
@@ -111,3 +116,15 @@ def cone_markers(cones: np.ndarray, header: Header, ns: str = "cones") -> Marker
         m.color.r, m.color.g, m.color.b, m.color.a = r, g, b, a
         arr.markers.append(m)
     return arr
+
+
+def attitude_msg(att, header):
+    """``geometry_msgs/Vector3Stamped`` of the attitude a frame was mapped with (x = roll, y = pitch, radians)."""
+    from geometry_msgs.msg import Vector3Stamped
+
+    from ..attitude import attitude_vector
+
+    m = Vector3Stamped()
+    m.header = header
+    m.vector.x, m.vector.y, m.vector.z = attitude_vector(att)
+    return m

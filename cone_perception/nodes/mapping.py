@@ -3,6 +3,9 @@
 Parameters
   calibration (str, "example_mainhoop"): calibration YAML path or shipped camera name.
   publish_markers (bool, true): also publish ``/cones/markers`` for rviz2.
+  attitude (str, ""), imu_rest_deg (double[2]): camera attitude per frame (nodes/_attitude.py); the
+    attitude used is published on ``cones/attitude`` (geometry_msgs/Vector3Stamped, x = roll,
+    y = pitch, radians); ``imu`` (sensor_msgs/Imu) in for attitude ``imu`` / ``fused``.
 """
 
 from __future__ import annotations
@@ -11,9 +14,11 @@ from ._common import QOS_DATA, PerceptionNode, run_node  # noqa: I001 (sets DDS 
 
 from sensor_msgs.msg import PointCloud2
 
+from ..attitude import attitude_estimator, attitude_for_boxes
 from ..calib import DEFAULT_CAMERA, load_calibration
-from ..mapping import ConeMapper
+from ..mapping import ConeMapper, validate_boxes
 from . import _msgs
+from ._attitude import declare_attitude, publish_attitude
 
 
 class MappingNode(PerceptionNode):
@@ -24,11 +29,18 @@ class MappingNode(PerceptionNode):
         calib = load_calibration(calib_name)
         self.mapper = ConeMapper(calib)
         self.advertise_cones(calib.frame_id, markers)
+        mode, imu = declare_attitude(self)
+        self.attitude_mode, self.attitude = attitude_estimator(self.mapper, mode, imu)
         self.subscribe_frames(PointCloud2, "cone_boxes", self.on_boxes, QOS_DATA)
-        self.get_logger().info(f"calibration {calib.source}, frame {calib.frame_id}, max range {calib.max_range_m} m")
+        self.get_logger().info(f"calibration {calib.source}, frame {calib.frame_id}, max range {calib.max_range_m} m, "
+                               f"attitude {self.attitude_mode}")
 
     def on_boxes(self, msg: PointCloud2) -> None:
-        self.publish_cones(self.mapper.map_boxes(_msgs.boxes_from_msg(msg)), msg.header)
+        boxes = _msgs.boxes_from_msg(msg)
+        validate_boxes(boxes)  # a bad message is dropped before it can move the attitude filter
+        att = attitude_for_boxes(self.attitude, boxes, _msgs.stamp_ns(msg.header))
+        self.publish_cones(self.mapper.map_boxes(boxes, att), msg.header)
+        publish_attitude(self, att, msg.header)
 
 
 def main(args=None) -> int:

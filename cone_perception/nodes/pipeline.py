@@ -3,7 +3,7 @@
 ``image_raw`` (or ``image_raw/compressed``) in; ``cone_boxes``, ``/cones`` and ``/cones/markers`` out.
 
 Parameters: those of ``driver_adapter`` (calibration, input_transport), ``mapping``
-(publish_markers) and ``detection`` (model, backend, device, fp16, bf16, conf, iou, max_det, threads).
+(publish_markers, attitude, imu_rest_deg; ``imu`` in for attitude imu / fused) and ``detection`` (model, backend, device, fp16, bf16, conf, iou, max_det, threads).
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ from sensor_msgs.msg import CompressedImage, Image, PointCloud2
 from ..calib import DEFAULT_CAMERA, load_calibration
 from ..pipeline import FrameResult, Pipeline
 from . import _msgs
+from ._attitude import declare_attitude, publish_attitude
 from ._detector_params import load_detector
 
 
@@ -27,23 +28,27 @@ class PipelineNode(PerceptionNode):
         transport = self.declare_parameter("input_transport", "raw").value
         markers = bool(self.declare_parameter("publish_markers", True).value)
         detector = load_detector(self, (calib.crop.out_width, calib.crop.out_height))
-        self.pipeline = Pipeline(calib, detector)
-        self.pub_boxes = self.create_publisher(PointCloud2, "cone_boxes", QOS_DATA)
         self.advertise_cones(calib.frame_id, markers)
+        mode, imu = declare_attitude(self)
+        self.pipeline = Pipeline(calib, detector, mode, imu)
+        self.pub_boxes = self.create_publisher(PointCloud2, "cone_boxes", QOS_DATA)
         self.subscribe_camera(transport)
-        self.get_logger().info(f"calibration {calib.source}, frame {calib.frame_id}")
+        self.get_logger().info(f"calibration {calib.source}, frame {calib.frame_id}, attitude {self.pipeline.attitude_mode}")
 
     def on_raw(self, msg: Image) -> None:
         t0 = time.perf_counter()
+        self.pipeline.frame_stamp_ns = _msgs.stamp_ns(msg.header)
         self._publish(self.pipeline.process_raw(msg.encoding, msg.width, msg.height, msg.step, msg.data), msg.header, t0)
 
     def on_compressed(self, msg: CompressedImage) -> None:
         t0 = time.perf_counter()
+        self.pipeline.frame_stamp_ns = _msgs.stamp_ns(msg.header)
         self._publish(self.pipeline.process_compressed(msg.data), msg.header, t0)
 
     def _publish(self, res: FrameResult, header, t0: float) -> None:
         self.pub_boxes.publish(_msgs.boxes_msg(res.boxes, header))
         self.publish_cones(res.cones, header)
+        publish_attitude(self, res.attitude, header)
         self.get_logger().debug(
             f"{len(res.boxes)} boxes, {len(res.cones)} cones in {(time.perf_counter() - t0) * 1e3:.1f} ms "
             + " ".join(f"{k}={v:.1f}" for k, v in res.timing_ms.items())

@@ -8,7 +8,9 @@
 * Bag: rosbag2 (MCAP) with ``/camera/image_raw`` (``yuv422_yuy2``) or
   ``/camera/image_raw/compressed`` (JPEG), and ``/cones_gt`` (PointCloud2 in the
   ``/cones`` schema, frame ``rear_axle``, same stamps, every cone with a visible
-  pixel, ``score`` = its visible fraction); beside it
+  pixel, ``score`` = its visible fraction), ``/attitude_gt`` (Vector3Stamped: the exact
+  camera attitude against the ground, x = roll, y = pitch in radians, as ``cones/attitude``)
+  and ``/imu`` (sensor_msgs/Imu, see :mod:`.motion`); beside it
   ``<bag>_calib.yaml`` and ``<bag>_gt.jsonl``.
 
 YOLO labels hold only cones whose box is at least :data:`MIN_LABEL_BOX_PX`
@@ -29,7 +31,13 @@ import yaml
 from ..bagio import (
     COMPRESSED_IMAGE,
     IMAGE,
+    IMU,
     POINTCLOUD2,
+    VECTOR3_STAMPED,
+    Imu,
+    Quaternion,
+    Vector3,
+    Vector3Stamped,
     BagWriter,
     PointCloud2,
     PointField,
@@ -46,7 +54,8 @@ from ..crop import CropSpec
 from ..errors import ConfigError
 from ..records import CONE_DTYPE, to_pointcloud2
 from .render import ConeTruth, Renderer, RenderOptions
-from .scene import CarPose, drive_poses, ground_visible, random_pose
+from .motion import IMU_ANGLE_NOISE_DEG, IMU_ACCEL_NOISE, IMU_RATE_NOISE_DPS, constant_speed_drive, drive_motion, imu_samples
+from .scene import CarPose, drive_poses, ground_visible, jitter_series, random_pose
 from .track import TRACK_KINDS, Track, make_track
 
 MIN_LABEL_BOX_PX = 4.0
@@ -55,6 +64,8 @@ START_STAMP_NS = 1_700_000_000 * 1_000_000_000
 IMAGE_TOPIC = "/camera/image_raw"
 COMPRESSED_TOPIC = "/camera/image_raw/compressed"
 GT_TOPIC = "/cones_gt"
+ATTITUDE_GT_TOPIC = "/attitude_gt"
+IMU_TOPIC = "/imu"
 CAMERA_FRAME = "camera"
 
 
@@ -76,6 +87,7 @@ class SynthConfig:
     missing_frac: float = 0.0
     stray: int = 0
     knocked_frac: float = 0.0
+    car_motion: bool = False  # bags: speed profile, braking pitch, cornering roll, bumps, grade changes (synth/motion.py)
     vary_mount: bool = False  # datasets: new hfov / pitch / height per track (calib.yaml is then the nominal only)
 
     def validate(self) -> None:
@@ -133,6 +145,7 @@ class SynthConfig:
             pixel_sigma_v=1.5,
             camera_matrix=cam.K,
             dist_coeffs=cam.dist_coeffs if cam.dist_coeffs.size else None,
+            mount_pose=m,
             extra={
                 "mount": {
                     "x_m": m.x_m, "y_m": m.y_m, "height_m": m.height_m, "pitch_deg": m.pitch_deg,
@@ -341,9 +354,11 @@ def write_scene_bag(
     track = make_track(track_kind, int(rng.integers(0, 2**31)), cfg.missing_frac, cfg.stray, cfg.knocked_frac)
     renderer = cfg.renderer(jpeg_prob=0.0, speed_mps=max(speed_mps, 1e-3), fps=fps, steady_photometric=True)
     look = renderer.new_look(rng)
-    poses = drive_poses(track, n, fps, speed_mps, rng, cfg.jitter)
+    poses, drive = _drive(cfg, track, n, fps, speed_mps, rng)
+    imu = imu_samples(drive, np.array([p.yaw_rad for p in poses]), fps, np.random.default_rng([cfg.seed, 15]))
     img_topic = COMPRESSED_TOPIC if compressed else IMAGE_TOPIC
-    topics = {img_topic: COMPRESSED_IMAGE if compressed else IMAGE, GT_TOPIC: POINTCLOUD2}
+    topics = {img_topic: COMPRESSED_IMAGE if compressed else IMAGE, GT_TOPIC: POINTCLOUD2,
+              ATTITUDE_GT_TOPIC: VECTOR3_STAMPED, IMU_TOPIC: IMU}
     cfg.save_calibration(calib_path)
     with BagWriter(out, topics) as bag, open(gt_path, "w", encoding="utf-8") as gt, _progress(n, "synth bag", progress) as bar:
         for i, pose in enumerate(poses):
@@ -353,12 +368,44 @@ def write_scene_bag(
             bag.write(img_topic, stamp, msg)
             cloud = to_pointcloud2(truths_to_records(truths), header(stamp, "rear_axle"), PointCloud2, PointField)
             bag.write(GT_TOPIC, stamp, cloud)
+            bag.write(ATTITUDE_GT_TOPIC, stamp, Vector3Stamped(header=header(stamp, "rear_axle"), vector=Vector3(
+                x=float(np.radians(pose.roll_deg)), y=float(np.radians(pose.pitch_deg)), z=0.0)))
+            bag.write(IMU_TOPIC, stamp, _imu_msg(imu[i], stamp))
             rec = gt_record(f"{stamp}", cfg, track, pose, truths)
             rec["stamp_ns"] = stamp
             gt.write(json.dumps(rec) + "\n")
             bar.update(1)
         counts = dict(bag.counts)
     return counts
+
+
+def _drive(cfg: SynthConfig, track: Track, n: int, fps: float, speed_mps: float, rng: np.random.Generator):
+    """Poses and motion of a bag's drive. Without ``car_motion`` the poses are exactly those of
+    earlier versions (same seed, same bag); the car motion draws from its own generator."""
+    if not cfg.car_motion:
+        poses = drive_poses(track, n, fps, speed_mps, rng, cfg.jitter)
+        return poses, constant_speed_drive(poses, speed_mps, fps)
+    jit = jitter_series(n, fps, rng) if cfg.jitter else np.zeros((n, 2))
+    drive = drive_motion(track, n, fps, speed_mps, np.random.default_rng([cfg.seed, 16]), jit)
+    poses = []
+    for i in range(n):
+        x, y, yaw = track.pose_at(float(drive.s_m[i]))
+        poses.append(CarPose(x, y, yaw, float(drive.pitch_deg[i]), float(drive.roll_deg[i])))
+    return poses, drive
+
+
+def _imu_msg(s, stamp: int):
+    cov = np.zeros(9)
+    q = Quaternion(x=float(s.quat_xyzw[0]), y=float(s.quat_xyzw[1]), z=float(s.quat_xyzw[2]), w=float(s.quat_xyzw[3]))
+    return Imu(
+        header=header(stamp, "imu"),
+        orientation=q,
+        orientation_covariance=np.diag([np.radians(IMU_ANGLE_NOISE_DEG) ** 2] * 3).ravel(),
+        angular_velocity=Vector3(x=float(s.rate[0]), y=float(s.rate[1]), z=float(s.rate[2])),
+        angular_velocity_covariance=np.diag([np.radians(IMU_RATE_NOISE_DPS) ** 2] * 3).ravel(),
+        linear_acceleration=Vector3(x=float(s.accel[0]), y=float(s.accel[1]), z=float(s.accel[2])),
+        linear_acceleration_covariance=cov + np.diag([IMU_ACCEL_NOISE**2] * 3).ravel(),
+    )
 
 
 def draw_truths(img: np.ndarray, truths: list[ConeTruth], thickness: int = 2) -> np.ndarray:

@@ -1,0 +1,362 @@
+"""Per-frame camera attitude: the mount pose in the calibration, H_F_B recomposed for a body
+pitch / roll, the image fit from cone boxes (outliers, prior, hold and decay, rejection), the
+cones' covariance, and the pipeline / replay wiring."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cone_perception.attitude import (
+    Attitude,
+    ImageAttitude,
+    attitude_rotation,
+    attitude_vector,
+    default_attitude_mode,
+    pose_H_B_F,
+)
+from cone_perception.calib import calibration_from_dict, load_calibration, save_calibration
+from cone_perception.camera import MountPose, PinholeCamera, default_intrinsics
+from cone_perception.classes import BLUE, CONE_SIZE_M, LARGE_ORANGE, YELLOW
+from cone_perception.errors import ConfigError
+from cone_perception.mapping import ConeMapper
+from cone_perception.records import boxes_from_arrays
+from cone_perception.synth.outputs import SynthConfig
+from cone_perception.synth.render import CONE_MODELS
+from cone_perception.synth.scene import CarPose, SceneCamera
+
+W, H = 1920, 1080
+
+
+def _calib(**changes):
+    cfg = SynthConfig(seed=0)
+    return calibration_from_dict({**cfg.calibration().to_dict(), **changes}, "test.yaml")
+
+
+def _tilted_camera(pitch: float, roll: float) -> SceneCamera:
+    """The synthetic renderer's camera on a body tilted by (pitch, roll): the truth to compare with."""
+    return SceneCamera(SynthConfig(seed=0).camera(), CarPose(0.0, 0.0, 0.0, pitch, roll))
+
+
+def _cone_boxes(sc: SceneCamera, xy: np.ndarray, cls: np.ndarray) -> np.ndarray:
+    """Exact boxes (pixel edges) of upright cones at ``xy`` seen by ``sc``: the extreme image points of
+    the base plate corners and the tip's rim, as the renderer's boxes (which cover every touched pixel)."""
+    out = []
+    for (x, y), c in zip(xy, cls):
+        m = CONE_MODELS[int(c)]
+        a = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+        half = m.base_m / 2
+        base = np.array([[x + sx * half, y + sy * half, 0.0] for sx in (-1, 1) for sy in (-1, 1)])
+        tip = np.column_stack([x + m.r_top_m * np.cos(a), y + m.r_top_m * np.sin(a), np.full(a.size, m.height_m)])
+        uv, _ = sc.project(np.vstack([base, tip]))
+        u1, v1 = uv.min(axis=0)
+        u2, v2 = uv.max(axis=0)
+        # pixel-edge box of every pixel the cone touches: centre coordinates +-0.5, rounded outwards
+        out.append([np.floor(u1 + 0.5), np.floor(v1 + 0.5), np.floor(u2 + 0.5) + 1, np.floor(v2 + 0.5) + 1])
+    return np.array(out, dtype=np.float64)
+
+
+CONES_XY = np.array([[x, s * (1.6 + 0.05 * x)] for x in np.arange(4.0, 21.0, 2.0) for s in (-1, 1)])
+CONES_CLS = np.array([BLUE if y > 0 else YELLOW for _, y in CONES_XY])
+
+
+def test_cone_sizes_match_the_synthetic_cones():
+    for c, (h, base, tip) in CONE_SIZE_M.items():
+        m = CONE_MODELS[c]
+        assert (m.height_m, m.base_m, m.r_top_m) == (h, base, tip)
+
+
+def test_mount_pose_round_trips_through_yaml(tmp_path):
+    calib = _calib()
+    assert calib.mount_pose == MountPose(0.5, 0.0, 1.2, 10.0, 0.0, 0.0)
+    path = save_calibration(calib, tmp_path / "c.yaml")
+    text = path.read_text()
+    assert "mount_pose:" in text and "z_m: 1.2" in text
+    assert load_calibration(path).mount_pose == calib.mount_pose
+
+
+def test_calibration_without_mount_pose_keeps_the_fixed_homography():
+    d = SynthConfig(seed=0).calibration().to_dict()
+    del d["mount_pose"]
+    calib = calibration_from_dict(d, "x.yaml")
+    assert calib.mount_pose is None
+    mapper = ConeMapper(calib)
+    assert mapper.attitude_model is None
+    assert default_attitude_mode(calib.mount_pose is not None) == "fixed"
+    rec = boxes_from_arrays(np.array([[950.0, 700.0, 970.0, 730.0]]), np.ones(1), np.zeros(1, int))
+    with pytest.raises(ValueError, match="mount_pose"):
+        mapper.map_boxes(rec, Attitude(1.0, 0.0))
+    np.testing.assert_array_equal(mapper.map_boxes(rec, Attitude()), mapper.map_boxes(rec))
+
+
+@pytest.mark.parametrize(
+    "change, field",
+    [
+        ({"x_m": 0.5, "y_m": 0.0, "z_m": 1.2, "yaw_deg": 0.0, "pitch_deg": 11.0, "roll_deg": 0.0}, "mount_pose"),
+        ({"x_m": 0.5, "y_m": 0.0, "z_m": 1.3, "yaw_deg": 0.0, "pitch_deg": 10.0, "roll_deg": 0.0}, "mount_pose"),
+        ({"x_m": 0.5, "z_m": -1.2, "pitch_deg": 10.0}, "mount_pose.z_m"),
+        ({"x_m": 0.5, "z_m": 1.2}, "mount_pose.pitch_deg"),
+        ({"x_m": 0.5, "z_m": 1.2, "pitch_deg": 10.0, "height_m": 1.2}, "mount_pose.height_m"),
+        ({"x_m": 0.5, "z_m": 1.2, "pitch_deg": "ten"}, "mount_pose.pitch_deg"),
+    ],
+)
+def test_bad_mount_pose_is_refused_naming_the_field(change, field):
+    with pytest.raises(ConfigError) as e:
+        _calib(mount_pose=change)
+    assert field in str(e.value) and "test.yaml" in str(e.value)
+
+
+def test_small_disagreement_is_accepted():
+    # 0.05 degrees of pitch moves a point at 10 m by ~0.8 %: within the 1 % tolerance
+    calib = _calib(mount_pose={"x_m": 0.5, "z_m": 1.2, "pitch_deg": 10.05})
+    assert calib.mount_pose.pitch_deg == 10.05
+
+
+def test_mount_pose_needs_the_camera_matrix():
+    d = SynthConfig(seed=0).calibration().to_dict()
+    del d["camera_matrix"]
+    with pytest.raises(ConfigError, match="mount_pose.*camera_matrix"):
+        calibration_from_dict(d, "x.yaml")
+
+
+def test_attitude_rotation_is_the_synthetic_body_rotation():
+    sc = _tilted_camera(1.3, -0.7)
+    np.testing.assert_allclose(attitude_rotation(1.3, -0.7), sc.R_jit, atol=1e-15)
+    # roll / pitch signs: pitch + = nose down, roll + = right side down
+    assert (attitude_rotation(2.0, 0.0) @ [1, 0, 0])[2] < 0
+    assert (attitude_rotation(0.0, 2.0) @ [0, -1, 0])[2] < 0
+    assert attitude_vector(Attitude(1.0, 2.0)) == pytest.approx((np.radians(2.0), np.radians(1.0), 0.0))
+
+
+@pytest.mark.parametrize("pitch, roll", [(1.5, 0.0), (-2.0, 0.8), (0.5, -1.5)])
+def test_recomposed_homography_maps_a_tilted_cameras_pixels_to_the_true_ground(pitch, roll):
+    calib = _calib()
+    mapper = ConeMapper(calib)
+    sc = _tilted_camera(pitch, roll)
+    g = np.array([[x, y] for x in (4.0, 8.0, 12.0, 18.0) for y in (-3.0, 0.0, 2.5)])
+    uv, _ = sc.project(np.column_stack([g, np.zeros(len(g))]))
+    xy_fixed, _ = mapper.ground.map_pixels(uv)
+    xy, ok = mapper._ground_for(Attitude(pitch, roll)).map_pixels(uv)
+    assert ok.all()
+    np.testing.assert_allclose(xy, g, atol=1e-6)
+    assert np.abs(xy_fixed - g).max() > 0.5  # the fixed H is far off at these attitudes
+    # the homography of the pose itself
+    np.testing.assert_allclose(pose_H_B_F(calib.camera_matrix, calib.mount_pose), PinholeCamera(
+        default_intrinsics(W, H, 90.0), W, H, calib.mount_pose).H_B_F(), atol=1e-9)
+
+
+def _estimator(**cfg) -> ImageAttitude:
+    from cone_perception.attitude import ImageAttitudeConfig
+
+    return ConeMapper(_calib()).image_attitude(ImageAttitudeConfig(**cfg))
+
+
+@pytest.mark.parametrize("pitch, roll", [(0.0, 0.0), (1.2, 0.0), (-1.5, 0.7), (0.8, -1.0), (2.0, 1.0)])
+def test_image_fit_recovers_the_attitude_from_exact_boxes(pitch, roll):
+    boxes = _cone_boxes(_tilted_camera(pitch, roll), CONES_XY, CONES_CLS)
+    theta, cov, n = _estimator().fit(boxes, CONES_CLS)
+    assert n >= 14
+    assert abs(theta[0] - pitch) < 0.15 and abs(theta[1] - roll) < 0.25, theta
+    assert 0 < np.sqrt(cov[0, 0]) < 0.3
+
+
+def test_image_fit_survives_outliers():
+    pitch, roll = 1.0, -0.5
+    sc = _tilted_camera(pitch, roll)
+    boxes = _cone_boxes(sc, CONES_XY, CONES_CLS)
+    cls = CONES_CLS.copy()
+    rng = np.random.default_rng(3)
+    bad = rng.choice(len(boxes), 5, replace=False)
+    boxes[bad[0], 1] += 0.4 * (boxes[bad[0], 3] - boxes[bad[0], 1])  # occluded top: a shorter box
+    boxes[bad[1], 3] -= 6  # foot hidden behind another cone
+    boxes[bad[2], 1] -= 0.3 * (boxes[bad[2], 3] - boxes[bad[2], 1])  # merged with something behind
+    lying = _cone_boxes(sc, CONES_XY[bad[3:4]], cls[bad[3:4]])[0]  # knocked over: wide and low
+    boxes[bad[3]] = [lying[0] - 10, lying[3] - 0.4 * (lying[3] - lying[1]), lying[2] + 10, lying[3]]
+    boxes[bad[4]] = [300, 700, 330, 760]  # a wrong box (no cone there)
+    extra = _cone_boxes(sc, np.array([[9.0, 0.0]]), np.array([LARGE_ORANGE]))
+    extra[0, 3] = H + 5  # cut at the image bottom: left out
+    boxes = np.vstack([boxes, extra])
+    cls = np.append(cls, LARGE_ORANGE)
+    theta, _, n = _estimator().fit(boxes, cls)
+    assert abs(theta[0] - pitch) < 0.2 and abs(theta[1] - roll) < 0.3, theta
+    # the plain least-squares fit (no robust weights) is pulled off by the same outliers
+    theta_ls, _, _ = _estimator(cauchy_c=1e6).fit(boxes, cls)
+    assert abs(theta_ls[0] - pitch) > abs(theta[0] - pitch)
+
+
+def test_too_few_cones_hold_the_last_estimate_decaying_to_zero():
+    est = _estimator()
+    boxes = _cone_boxes(_tilted_camera(1.5, 0.0), CONES_XY, CONES_CLS)
+    for _ in range(5):
+        a = est.update(boxes, CONES_CLS)
+    assert a.source == "image" and a.pitch_deg == pytest.approx(1.5, abs=0.15)
+    held = [est.update(boxes[:2], CONES_CLS[:2]) for _ in range(30)]
+    assert all(h.source == "hold" for h in held)
+    assert held[0].pitch_deg == pytest.approx(a.pitch_deg * est.cfg.decay, rel=1e-9)
+    assert abs(held[-1].pitch_deg) < 0.4
+    assert held[-1].sigma_pitch_deg > a.sigma_pitch_deg  # the uncertainty grows while held
+    assert est.counts.too_few == 30 and est.counts.fitted == 5
+
+
+def test_fits_beyond_five_degrees_are_rejected_and_counted():
+    est = _estimator(prior_sigma_deg=100.0)
+    boxes = _cone_boxes(_tilted_camera(7.0, 0.0), CONES_XY, CONES_CLS)
+    a = est.update(boxes, CONES_CLS)
+    assert a.source == "hold" and a.pitch_deg == 0.0
+    assert est.counts.rejected == 1
+
+
+def test_prior_pulls_a_weak_fit_towards_zero():
+    boxes = _cone_boxes(_tilted_camera(1.0, 0.0), CONES_XY[:4], CONES_CLS[:4])
+    strong = _estimator(prior_sigma_deg=0.05).fit(boxes, CONES_CLS[:4])[0]
+    weak = _estimator(prior_sigma_deg=10.0).fit(boxes, CONES_CLS[:4])[0]
+    assert abs(strong[0]) < 0.2 < abs(weak[0])
+
+
+def test_attitude_uncertainty_grows_the_cone_covariance_with_range():
+    mapper = ConeMapper(_calib())
+    sc = _tilted_camera(0.0, 0.0)
+    boxes = _cone_boxes(sc, CONES_XY, CONES_CLS)
+    rec = boxes_from_arrays(boxes, np.ones(len(boxes)), CONES_CLS)
+    plain = mapper.map_boxes(rec, Attitude(0.0, 0.0))
+    unsure = mapper.map_boxes(rec, Attitude(0.0, 0.0, 0.5, 0.5, "image"))
+    assert np.all(unsure["cov_xx"] > plain["cov_xx"])
+    r = np.hypot(plain["x"], plain["y"])
+    extra = unsure["cov_xx"] - plain["cov_xx"]
+    assert extra[np.argmax(r)] > 20 * extra[np.argmin(r)]  # ~ r^4: attitude dominates far away
+    # 0.5 degree at ~20 m: sigma_x of roughly r^2 / h * 0.5 deg = 2.9 m; within a factor 1.5
+    far = np.argmax(r)
+    expect = r[far] ** 2 / 1.2 * np.radians(0.5)
+    assert 0.6 * expect < np.sqrt(extra[far]) < 1.5 * expect
+
+
+def test_pipeline_attitude_modes():
+    from cone_perception.pipeline import Pipeline
+
+    class _NoDetector:
+        timing: dict = {}
+
+        def detect(self, band, crop):
+            return boxes_from_arrays(np.zeros((0, 4)), np.zeros(0), np.zeros(0, int))
+
+    calib = _calib()
+    assert Pipeline(calib, _NoDetector()).attitude_mode == "image"
+    assert Pipeline(calib, _NoDetector(), "fixed").attitude is None
+    with pytest.raises(ConfigError, match="IMU"):
+        Pipeline(calib, _NoDetector(), "imu")
+    with pytest.raises(ConfigError, match="unknown attitude"):
+        Pipeline(calib, _NoDetector(), "gyro")
+    d = calib.to_dict()
+    del d["mount_pose"]
+    with pytest.raises(ConfigError, match="mount_pose"):
+        Pipeline(calibration_from_dict(d), _NoDetector(), "image")
+
+
+def _q(pitch_deg: float, roll_deg: float, yaw: float = 0.3):
+    from cone_perception.synth.motion import quat_from_rpy
+
+    return quat_from_rpy(np.radians(roll_deg), np.radians(pitch_deg), yaw)
+
+
+def test_imu_orientation_relative_to_rest_interpolated_to_the_frame():
+    from cone_perception.attitude import ImuAttitude
+
+    imu = ImuAttitude(rest_deg=(0.5, -0.2))
+    assert imu.add(1_000_000_000, _q(1.5, 0.8))
+    assert imu.add(1_010_000_000, _q(2.5, 0.8))
+    np.testing.assert_allclose(imu.at(1_005_000_000), [1.5, 1.0], atol=1e-9)  # halfway, minus rest
+    np.testing.assert_allclose(imu.at(1_050_000_000), [2.0, 1.0], atol=1e-9)  # newest, 40 ms old
+    assert imu.at(1_200_000_000) is None  # 190 ms old: not used
+    assert imu.at(850_000_000) is None  # 150 ms before the first sample
+    assert imu.counts.stale_at_frame == 2
+
+
+@pytest.mark.parametrize("quat, cause", [
+    ((np.nan, 0.0, 0.0, 1.0), "dropped_nan"),
+    ((0.0, 0.0, 0.0, 1.1), "dropped_quaternion_norm"),
+    ((0.0, 0.0, 0.0, 0.0), "dropped_quaternion_norm"),
+])
+def test_bad_imu_messages_are_dropped_and_counted(quat, cause):
+    from cone_perception.attitude import ImuAttitude
+
+    imu = ImuAttitude()
+    assert imu.add(5, _q(1.0, 0.0))
+    assert not imu.add(10, quat)
+    assert getattr(imu.counts, cause) == 1 and imu.counts.used == 1
+    np.testing.assert_allclose(imu.at(10), [1.0, 0.0], atol=1e-9)  # the good one still serves
+    assert not imu.add(1, _q(1.0, 0.0)) and imu.counts.dropped_out_of_order == 1
+
+
+def test_fused_adds_the_ground_offset_the_imu_cannot_feel():
+    from cone_perception.attitude import ImuAttitude, attitude_estimator
+
+    mapper = ConeMapper(_calib())
+    imu = ImuAttitude()
+    mode, est = attitude_estimator(mapper, None, imu)
+    assert mode == "fused"
+    body, grade = np.array([0.8, -0.3]), np.array([0.6, 0.2])  # the camera sees body + grade
+    boxes = _cone_boxes(_tilted_camera(*(body + grade)), CONES_XY, CONES_CLS)
+    for k in range(40):
+        imu.add(k * 50_000_000, _q(*body))
+        a = est.update(boxes, CONES_CLS, k * 50_000_000)
+    assert a.source == "fused"
+    assert a.pitch_deg == pytest.approx(1.4, abs=0.1) and a.roll_deg == pytest.approx(-0.1, abs=0.2)
+    # the IMU goes quiet: the image alone serves, counted
+    a = est.update(boxes, CONES_CLS, 40 * 50_000_000 + 200_000_000)
+    assert a.source == "image" and imu.counts.stale_at_frame == 1
+    assert a.pitch_deg == pytest.approx(1.4, abs=0.2)
+    mode, est = attitude_estimator(mapper, "imu", imu)
+    assert est.update(boxes, CONES_CLS, 39 * 50_000_000).pitch_deg == pytest.approx(0.8, abs=1e-6)
+    with pytest.raises(ConfigError, match="IMU"):
+        attitude_estimator(mapper, "fused", None)
+
+
+def test_map_boxes_of_one_frame_with_the_image_attitude(tmp_path, capsys):
+    from cone_perception.cli import main
+
+    calib = _calib()
+    cal_path = save_calibration(calib, tmp_path / "cal.yaml")
+    near = slice(0, 12)  # 4-14 m: the fixed H keeps them all within range
+    boxes = _cone_boxes(_tilted_camera(1.2, -0.4), CONES_XY[near], CONES_CLS[near])
+    csv = tmp_path / "boxes.csv"
+    csv.write_text("u1,v1,u2,v2,score,class_id\n" + "".join(
+        f"{b[0]},{b[1]},{b[2]},{b[3]},0.9,{c}\n" for b, c in zip(boxes, CONES_CLS[near])))
+    errs = {}
+    for mode in ("fixed", "image"):
+        assert main(["map", "--calib", str(cal_path), "--boxes", str(csv), "--attitude", mode]) == 0
+        cap = capsys.readouterr()
+        xy = np.array([[float(v) for v in line.split(",")[:2]] for line in cap.out.splitlines()])
+        assert len(xy) == 12
+        errs[mode] = np.median(np.hypot(*(xy - CONES_XY[near]).T))
+        if mode == "image":
+            assert "attitude (image, image, 12 cones)" in cap.err
+            assert float(cap.err.split("pitch ")[1].split()[0]) == pytest.approx(1.2, abs=0.25)
+    assert errs["image"] < 0.15 and errs["fixed"] > 3 * errs["image"]
+
+
+def test_box_top_bias_on_rendered_cones():
+    """The renderer's exact boxes cover every pixel a cone touches: their top edge lies about a pixel
+    above the projected tip, which ``top_bias_px`` takes out (residuals at the true attitude ~0)."""
+    from cone_perception.attitude import ImageAttitudeConfig
+    from cone_perception.synth.scene import drive_poses
+    from cone_perception.synth.track import make_track
+
+    cfg = SynthConfig(seed=5, jitter=False, nose_prob=0.0)
+    renderer = cfg.renderer(jpeg_prob=0.0, speed_mps=8.0, fps=20.0, steady_photometric=True)
+    rng = np.random.default_rng(5)
+    track = make_track("autocross", 123)
+    look = renderer.new_look(rng)
+    boxes, cls = [], []
+    for pose in drive_poses(track, 4, 20.0, 8.0, rng, False):
+        _, truths = renderer.render(track, pose, look, rng)
+        full = [t for t in truths if t.visible_fraction >= 0.999 and 5.0 <= t.distance_m <= 25.0 and t.class_id != 3]
+        boxes += [t.box for t in full]
+        cls += [t.class_id for t in full]
+    boxes, cls = np.array(boxes, dtype=np.float64), np.array(cls)
+    med = {}
+    for bias in (0.0, 1.0):
+        est = ConeMapper(cfg.calibration()).image_attitude(ImageAttitudeConfig(top_bias_px=bias))
+        sel = est._select(boxes, cls)
+        assert sel.sum() >= 30
+        med[bias] = float(np.median(est.residuals(np.zeros(2), *est._prepare(boxes[sel], cls[sel]))))
+    assert 0.6 < med[0.0] < 1.4 and abs(med[1.0]) < 0.4, med
