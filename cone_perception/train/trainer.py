@@ -13,6 +13,7 @@ import csv
 import logging
 import math
 import random
+import sys
 import time
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
@@ -30,8 +31,9 @@ from ..model import ConeYOLO, MODEL_SIZES, model_config
 from ..model.decode import postprocess
 from ..model.loss import DetectionLoss
 from .augment import AugmentConfig
-from .datasets import load_data_yaml
+from .datasets import load_data_yaml, summary_table
 from .loader import EpochSampler, TrainSet, ValSet, collate
+from .report import plot_results
 
 log = logging.getLogger(__name__)
 
@@ -55,7 +57,7 @@ class TrainConfig:
     ema_tau: float = 200.0  # EMA ramp: decay * (1 - exp(-updates / tau))
     patience: int = 30  # early stop after this many epochs without a better fitness
     workers: int = 2
-    threads: int = 2
+    threads: int = 1
     seed: int = 0
     close_mosaic: int = 5  # last N epochs without mosaic
     max_batches: int = 0  # > 0: cap on batches per epoch (quick runs)
@@ -179,7 +181,9 @@ def _set_rng_state(s: dict) -> None:
 
 def train(cfg: TrainConfig, resume: bool = False, progress: bool = True, stop_after: int | None = None,
           precision: str | None = None) -> dict:
-    """Train; returns the history (one dict per epoch). Writes ``last.pt``, ``best.pt``, ``results.csv`` to ``cfg.out``.
+    """Train; returns the history (one dict per epoch). Writes ``last.pt``, ``best.pt``, ``results.csv`` and
+    ``results.png`` to ``cfg.out``. Epochs are numbered from 1 everywhere (bar, log, results.csv, history,
+    ``best_epoch``). A folder that already holds a run is refused unless ``resume``.
 
     ``stop_after``: leave after this many epochs of this call (a run spread over
     sessions; continue with ``resume=True``). ``precision``: on resume, switch the run's
@@ -187,6 +191,12 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True, stop_af
     out = Path(cfg.out)
     last_path, best_path = out / "last.pt", out / "best.pt"
     state = None
+    def say(msg: str) -> None:  # to stderr, above a running bar; stdout stays free for --json
+        tqdm.write(msg, file=sys.stderr)
+
+    if not resume and (last_path.is_file() or (out / "results.csv").is_file()):
+        raise ConfigError(str(out), None, "already holds a training run (last.pt / results.csv): continue it with "
+                                          "--resume, or leave --out away for a new numbered folder under runs/train")
     if resume:
         if not last_path.is_file():
             raise ConfigError(str(last_path), None, "nothing to resume: no last.pt in the output folder")
@@ -204,9 +214,14 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True, stop_af
     torch.set_num_threads(cfg.threads)
     _seed_all(cfg.seed)
 
-    train_entries, val_entries, _ = load_data_yaml(cfg.data)
+    say(f"reading {cfg.data} (labels of every image) ...")
+    train_entries, val_entries, rest = load_data_yaml(cfg.data)
     data_summary = {"data_yaml": str(cfg.data), "train": [e.summary() for e in train_entries],
                     "val": [e.summary() for e in val_entries]}
+    say(f"dataset ({cfg.data}):\n" + summary_table({"train": train_entries, "val": val_entries,
+                                                     "test (not used)": rest.get("test_entries", [])}))
+    if not val_entries:
+        say("no val split: no mAP per epoch; best.pt is the epoch with the lowest training loss")
 
     if cfg.model in MODEL_SIZES:
         model = ConeYOLO(model_config(cfg.model))
@@ -218,13 +233,14 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True, stop_af
     criterion = DetectionLoss(model.cfg.num_classes, model.cfg.reg_max, model.strides)
     optimizer = build_optimizer(model, cfg)
     ema = ModelEMA(model, cfg.ema_decay, cfg.ema_tau)
-    start_epoch, best_fitness, best_epoch, history = 0, -math.inf, -1, []
+    start_epoch, best_fitness, best_epoch, history = 0, -math.inf, 0, []
     if state is not None:
         model.load_state_dict(state["model"])
         ema.ema.load_state_dict(ck.state_dict)
         ema.updates = int(state["ema_updates"])
         optimizer.load_state_dict(state["optimizer"])
-        start_epoch = int(state["epoch"]) + 1
+        # epochs_done: runs saved before it held the 0-based index of the last epoch in "epoch"
+        start_epoch = int(state["epochs_done"]) if "epochs_done" in state else int(state["epoch"]) + 1
         best_fitness, best_epoch, history = state["best_fitness"], state["best_epoch"], list(state["history"])
         _set_rng_state(state["rng"])
         log.info("resuming from %s at epoch %d", last_path, start_epoch)
@@ -246,7 +262,8 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True, stop_af
         train_set.mosaic_enabled = epoch < cfg.epochs - cfg.close_mosaic
         model.train()
         loss_sum, n_img, n_batches = torch.zeros(3), 0, 0
-        bar = tqdm(loader, total=nb, desc=f"epoch {epoch + 1}/{cfg.epochs}", disable=not progress, leave=False)
+        ep = epoch + 1  # the number people see: bar, log, results.csv, history, best_epoch
+        bar = tqdm(loader, total=nb, desc=f"epoch {ep}/{cfg.epochs}", disable=not progress, leave=False)
         for i, (imgs, targets) in enumerate(bar):
             if i >= nb:
                 break
@@ -277,7 +294,7 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True, stop_af
         steady_s = t_end - t_first if n_batches > 1 else t_end - t0
         steady_n = n_img - n_first if n_batches > 1 else n_img
         mean = (loss_sum / max(n_batches, 1)).tolist()
-        row = {"epoch": epoch, "box_loss": mean[0], "cls_loss": mean[1], "dfl_loss": mean[2],
+        row = {"epoch": ep, "box_loss": mean[0], "cls_loss": mean[1], "dfl_loss": mean[2],
                "images_per_s": steady_n / max(steady_s, 1e-9),
                "epoch_train_s": t_end - t0, "lr": lr}
         if val_loader is not None:
@@ -291,10 +308,10 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True, stop_af
         history.append(row)
         improved = fitness > best_fitness
         if improved:
-            best_fitness, best_epoch = fitness, epoch
-        metrics = {"epoch": epoch, **m, "fitness": fitness}
+            best_fitness, best_epoch = fitness, ep
+        metrics = {"epoch": ep, **m, "fitness": fitness}
         train_state = {
-            "epoch": epoch, "model": {k: v.detach().clone() for k, v in model.state_dict().items()},
+            "epoch": ep, "epochs_done": ep, "model": {k: v.detach().clone() for k, v in model.state_dict().items()},
             "optimizer": optimizer.state_dict(), "ema_updates": ema.updates, "best_fitness": best_fitness,
             "best_epoch": best_epoch, "history": history, "rng": _rng_state(), "config": cfg.to_dict(),
         }
@@ -302,12 +319,14 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True, stop_af
         if improved:
             save_checkpoint(best_path, ema.ema, cfg.imgsz, CLASS_NAMES, data_summary, metrics)
         _append_csv(out / "results.csv", row)
-        msg = " ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items())
-        (tqdm.write if progress else log.info)(msg)
+        plot_results(history, out / "results.png", title=f"{out} ({cfg.data})")
+        msg = f"epoch {ep}/{cfg.epochs} " + " ".join(
+            f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items() if k != "epoch")
+        say(msg)
         if stop_after is not None and epoch + 1 - start_epoch >= stop_after:
             break
-        if epoch - best_epoch >= cfg.patience:
-            (tqdm.write if progress else log.info)(f"early stop: no better fitness for {cfg.patience} epochs (best epoch {best_epoch})")
+        if ep - best_epoch >= cfg.patience:
+            say(f"early stop: no better fitness for {cfg.patience} epochs (best epoch {best_epoch})")
             break
     return {"history": history, "best_epoch": best_epoch, "best_fitness": best_fitness, "out": str(out)}
 
