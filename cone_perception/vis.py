@@ -89,3 +89,27 @@ def birdseye_plot(
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def outlined_text(img: np.ndarray, text: str, org: tuple[int, int], color: tuple[int, int, int],
+                  scale: float = 0.5, thickness: int = 1) -> None:
+    """Draw ``text`` at ``org`` (bottom-left, px) in ``color`` with a black outline: readable on any background."""
+    cv2.putText(img, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, (0, 0, 0), thickness + 2, cv2.LINE_AA)
+    cv2.putText(img, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, color, thickness, cv2.LINE_AA)
+
+
+def draw_band(bgr: np.ndarray, crop: Sequence[int], downscale: int = 1, color: tuple[int, int, int] = (0, 255, 0)
+              ) -> np.ndarray:
+    """The detection band ``V0,V1[,U0,U1]`` (full-image px) on a copy of ``bgr``: its rectangle, the image outside
+    it darkened, and a label with its rows (and the downscale)."""
+    out = bgr.copy()
+    h, w = out.shape[:2]
+    v0, v1, u0, u1 = crop if len(crop) == 4 else (*crop, 0, w)
+    v0, v1, u0, u1 = (int(np.clip(v, 0, m)) for v, m in ((v0, h), (v1, h), (u0, w), (u1, w)))
+    mask = np.ones((h, w), bool)
+    mask[v0:v1, u0:u1] = False
+    out[mask] = (out[mask] * 0.55).astype(out.dtype)
+    cv2.rectangle(out, (u0, v0), (max(u0, u1 - 1), max(v0, v1 - 1)), color, 2, cv2.LINE_AA)
+    text = f"band v {v0}..{v1}" + (f", u {u0}..{u1}" if len(crop) == 4 else "") + (f", /{downscale}" if downscale > 1 else "")
+    outlined_text(out, text, (u0 + 6, v0 + 20 if v0 + 20 < v1 else max(14, v0 - 6)), color)
+    return out
