@@ -114,22 +114,12 @@ def iter_video(path: Path, every: int = 1) -> Iterator[tuple[str, np.ndarray | N
 
 
 def _iter_bag(bag: Path, topic: str | None):
-    from .. import bagio
-    from ..adapter import DriverAdapter, decode_compressed
-    from ..replay import find_image_topic, iter_frames
+    from ..replay import find_image_topic, frame_bgr, iter_frames
 
     topic, _ = find_image_topic(bag, topic)
     for fr in iter_frames(bag, topic):
         try:
-            if fr.error:
-                raise fr.error
-            m = fr.msg
-            if fr.msgtype == bagio.COMPRESSED_IMAGE:
-                img = decode_compressed(m.data)
-            else:
-                w, h = int(m.width), int(m.height)
-                img = DriverAdapter(CropSpec.full_image(w - w % 2, h), w - w % 2, h).from_raw(m.encoding, w, h, int(m.step), m.data)
-            yield str(fr.stamp_ns), img, None
+            yield str(fr.stamp_ns), frame_bgr(fr), None
         except FrameError as e:
             yield str(fr.stamp_ns), None, str(e)
 
