@@ -60,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
     from ..checkpoint import load_checkpoint
     from ..detector import Detector, write_sidecar
     from ..errors import ConfigError
-    from ..export import export_model, max_abs_diff
+    from ..export import export_metadata, export_model, max_abs_diff
     from ..train.trainer import round_imgsz
 
     int8_flags = [f"--{k.replace('_', '-')}" for k in ("calib_images", "calib_clips", "calib_crop") if getattr(args, k) is not None]
@@ -85,8 +85,9 @@ def run(args: argparse.Namespace) -> int:
     if out.suffix != suffix:
         raise ConfigError(str(out), None, f"the output of format {args.format} must end in {suffix}")
     model = ck.build_model()
-    export_model(model, imgsz, args.format, out)
-    side = write_sidecar(out, ck.class_names, imgsz, {"source": str(args.model), "layout": "(1, 4 + nc, N): cx cy w h px, class scores"})
+    meta = export_metadata(ck.class_names, imgsz, max(model.strides), str(args.model))
+    export_model(model, imgsz, args.format, out, meta)
+    side = write_sidecar(out, ck.class_names, imgsz, {k: v for k, v in meta.items() if k not in ("names", "imgsz")})
 
     # verify: the exported file, loaded the way users load it, against eager on random and grey inputs
     exported = Detector.load(out, backend=args.format)
@@ -99,7 +100,8 @@ def run(args: argparse.Namespace) -> int:
     if worst > TOLERANCE:
         out.unlink(missing_ok=True)
         raise ConfigError(str(out), None, f"exported model differs from eager by {worst:.3g} (> {TOLERANCE}); file removed")
-    print(f"wrote {out} and {side} ({w}x{h}); verified against eager: max |diff| {worst:.2e} <= {TOLERANCE}")
+    print(f"wrote {out} ({w}x{h}; class names, input size, stride and source embedded) and {side}; "
+          f"verified against eager: max |diff| {worst:.2e} <= {TOLERANCE}")
     if args.int8:
         _int8(args, ck, out, imgsz, eager, pool, dropped)
     return 0
@@ -120,10 +122,12 @@ def _int8(args, ck, fp32_path: Path, imgsz: tuple[int, int], eager, pool: list[P
           + (f" ({dropped} frames of validation clips left out)" if dropped else "") + f"; {opts.describe()}")
     summary = quantize_onnx(fp32_path, out, calibration_blobs(files, imgsz, args.calib_crop, args.calib_downscale),
                             opts, total=len(files), progress=not args.no_progress)
-    side = write_sidecar(out, ck.class_names, imgsz, {
-        "source": str(args.model), "layout": "(1, 4 + nc, N): cx cy w h px, class scores",
-        "quantisation": opts.describe(), "calibration": f"{len(files)} frames of {args.calib_images}",
-    })
+    from ..export import export_metadata, with_onnx_metadata
+
+    meta = export_metadata(ck.class_names, imgsz, max(ck.cfg.strides), str(args.model), {
+        "quantisation": opts.describe(), "calibration": f"{len(files)} frames of {args.calib_images}"})
+    out.write_bytes(with_onnx_metadata(out.read_bytes(), meta))
+    side = write_sidecar(out, ck.class_names, imgsz, {k: v for k, v in meta.items() if k not in ("names", "imgsz")})
 
     # check: boxes of the int8 file, loaded the way users load it, against eager on real frames
     # (frames not used for calibration if the folder has them)
