@@ -55,9 +55,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--mosaic", type=float, default=d.augment.mosaic, help=f"mosaic probability (default {d.augment.mosaic})")
     p.add_argument("--close-mosaic", type=int, default=d.close_mosaic, help=f"last N epochs without mosaic (default {d.close_mosaic})")
     p.add_argument("--precision", choices=PRECISIONS, default=None,
-                   help="fp32, or bf16 (autocast with channels-last: about 2x the images/s on a CPU with native "
-                        "bfloat16, e.g. AVX512-BF16; weights, optimizer and loss stay fp32); auto = bf16 where the CPU "
-                        "has it (default auto; with --resume: keep the run's own unless given)")
+                   help="fp32, bf16 (autocast with channels-last: about 2x the images/s on a CPU with native "
+                        "bfloat16, e.g. AVX512-BF16; weights, optimizer and loss stay fp32) or fp16 (CUDA only, with "
+                        "loss scaling); auto = on a GPU bf16 where it has it, else fp16; on the CPU bf16 where native, "
+                        "else fp32 (default auto; with --resume: keep the run's own unless given)")
+    p.add_argument("--device", default=d.device,
+                   help="auto (a GPU where CUDA is there, else the CPU), cpu, cuda or cuda:N (default auto). Several "
+                        "GPUs: torchrun --nproc_per_node N -m cone_perception.cli train ... (one process per GPU; "
+                        "--batch is the global batch, divided among them; see docs/training.md)")
     p.add_argument("--no-augment", action="store_true", help="switch every augmentation off")
     p.add_argument("--max-batches", type=int, default=0, help="cap batches per epoch (quick trials; 0 = all)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (one log line per epoch)")
@@ -74,6 +79,9 @@ def run(args: argparse.Namespace) -> int:
 
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     aug = AugmentConfig.off() if args.no_augment else replace(AugmentConfig(), mosaic=args.mosaic)
+    from ..train.distributed import world_from_env
+
+    rank = world_from_env()[0]
     if args.out is None:
         if args.resume:
             raise ConfigError("--resume", None, "needs --out: the folder of the run to continue")
@@ -82,10 +90,13 @@ def run(args: argparse.Namespace) -> int:
         data=args.data, out=args.out, model=args.model, epochs=args.epochs, batch=args.batch, imgsz=args.imgsz,
         optimizer=args.optimizer, lr0=args.lr0, patience=args.patience, workers=args.workers, threads=args.threads,
         seed=args.seed, close_mosaic=args.close_mosaic, max_batches=args.max_batches, augment=aug,
-        precision=args.precision or "auto",
+        precision=args.precision or "auto", device=args.device,
     )
-    print(f"train: run folder {args.out}", file=sys.stderr, flush=True)
+    if rank == 0:
+        print(f"train: run folder {args.out}", file=sys.stderr, flush=True)
     result = train(cfg, resume=args.resume, precision=args.precision, progress=not args.no_progress)
+    if rank != 0:  # under torchrun only rank 0 reports
+        return 0
     last = result["history"][-1] if result["history"] else {}
     summary = {"out": result["out"], "best_epoch": result["best_epoch"], "best_fitness": result["best_fitness"], "last": last}
     if args.json:

@@ -31,6 +31,7 @@ from ..model import ConeYOLO, MODEL_SIZES, model_config
 from ..model.decode import postprocess
 from ..model.loss import DetectionLoss
 from .augment import AugmentConfig
+from . import distributed
 from .datasets import load_data_yaml, summary_table
 from .loader import EpochSampler, TrainSet, ValSet, collate
 from .report import plot_results
@@ -61,7 +62,8 @@ class TrainConfig:
     seed: int = 0
     close_mosaic: int = 5  # last N epochs without mosaic
     max_batches: int = 0  # > 0: cap on batches per epoch (quick runs)
-    precision: str = "auto"  # "fp32", "bf16" (autocast + channels-last) or "auto" (bf16 where the CPU has it natively)
+    precision: str = "auto"  # "fp32", "bf16" (autocast + channels-last), "fp16" (CUDA, with loss scaling) or "auto"
+    device: str = "auto"  # "auto" (CUDA where there, else CPU), "cpu", "cuda", "cuda:N"; with torchrun: one GPU per process
     val_conf: float = 0.001
     val_iou: float = 0.6
     augment: AugmentConfig = field(default_factory=AugmentConfig)
@@ -99,7 +101,7 @@ class ModelEMA:
                 v.copy_(msd[k])
 
 
-PRECISIONS = ("auto", "fp32", "bf16")
+PRECISIONS = ("auto", "fp32", "bf16", "fp16")
 
 
 def native_bf16() -> bool:
@@ -112,11 +114,17 @@ def native_bf16() -> bool:
         return False
 
 
-def resolve_precision(precision: str) -> str:
-    """``auto`` -> ``bf16`` on a CPU with native bfloat16, else ``fp32``; a bad name is a ConfigError."""
+def resolve_precision(precision: str, device: str = "cpu") -> str:
+    """``auto`` -> on a GPU ``bf16`` where it computes bfloat16, else ``fp16``; on the CPU ``bf16`` where it is
+    native, else ``fp32``. ``fp16`` needs a GPU. A bad name is a ConfigError."""
     if precision not in PRECISIONS:
         raise ConfigError("train", "precision", f"unknown precision {precision!r}; choose {', '.join(PRECISIONS)}")
+    cuda = str(device).startswith("cuda")
+    if precision == "fp16" and not cuda:
+        raise ConfigError("train", "precision", "fp16 needs a CUDA device (on the CPU use bf16 or fp32)")
     if precision == "auto":
+        if cuda:
+            return "bf16" if torch.cuda.is_bf16_supported() else "fp16"
         return "bf16" if native_bf16() else "fp32"
     return precision
 
@@ -150,12 +158,13 @@ def lr_at(it: int, iters_per_epoch: int, cfg: TrainConfig) -> float:
 
 
 @torch.no_grad()
-def evaluate(model: ConeYOLO, loader: DataLoader, conf: float, iou: float, max_det: int = 300) -> dict:
+def evaluate(model: ConeYOLO, loader: DataLoader, conf: float, iou: float, max_det: int = 300,
+             device: torch.device | str = "cpu") -> dict:
     """mAP of ``model`` on a validation loader (boxes compared in the letterboxed input px)."""
     model.eval()
     images = []
     for imgs, targets in loader:
-        pred = model(imgs.float().div_(255)).numpy()
+        pred = model(imgs.to(device).float().div_(255)).float().cpu().numpy()
         for i in range(imgs.shape[0]):
             t = targets[targets[:, 0] == i].numpy()
             b, s, c = postprocess(pred[i], conf, iou, max_det)
@@ -188,11 +197,24 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True, stop_af
     ``stop_after``: leave after this many epochs of this call (a run spread over
     sessions; continue with ``resume=True``). ``precision``: on resume, switch the run's
     precision (default: keep it; runs saved before precision existed were fp32)."""
+    info = distributed.setup(cfg.device, cfg.batch)  # torchrun: join the group; a batch that does not divide stops here
+    try:
+        return _train(cfg, info, resume, progress and info.is_main, stop_after, precision)
+    finally:
+        distributed.cleanup(info)
+
+
+def _train(cfg: TrainConfig, info: "distributed.DistInfo", resume: bool, progress: bool, stop_after: int | None,
+           precision: str | None) -> dict:
+    cfg.out = distributed.from_main(cfg.out, info)  # one run folder for all processes: rank 0's
     out = Path(cfg.out)
     last_path, best_path = out / "last.pt", out / "best.pt"
     state = None
-    def say(msg: str) -> None:  # to stderr, above a running bar; stdout stays free for --json
-        tqdm.write(msg, file=sys.stderr)
+    main, device = info.is_main, info.device
+
+    def say(msg: str) -> None:  # to stderr, above a running bar; stdout stays free for --json; rank 0 only
+        if main:
+            tqdm.write(msg, file=sys.stderr)
 
     if not resume and (last_path.is_file() or (out / "results.csv").is_file()):
         raise ConfigError(str(out), None, "already holds a training run (last.pt / results.csv): continue it with "
@@ -208,9 +230,11 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True, stop_af
         cfg = TrainConfig.from_dict({**saved.to_dict(), "epochs": cfg.epochs, "out": cfg.out,
                                      "precision": precision or saved.precision})
     cfg.imgsz = round_imgsz(cfg.imgsz)
-    bf16 = resolve_precision(cfg.precision) == "bf16"
-    log.info("precision: %s%s", "bf16 autocast, channels-last" if bf16 else "fp32",
-             " (auto)" if cfg.precision == "auto" else "")
+    prec = resolve_precision(cfg.precision, device.type)
+    amp_dtype = {"bf16": torch.bfloat16, "fp16": torch.float16}.get(prec)
+    say(f"device {device}" + (f", {info.world} processes (DDP, {cfg.batch // info.world} images each per batch)"
+                              if info.ddp else "") + "; precision " + (f"{prec} autocast, channels-last" if amp_dtype
+                                                                      else "fp32") + (" (auto)" if cfg.precision == "auto" else ""))
     torch.set_num_threads(cfg.threads)
     _seed_all(cfg.seed)
 
@@ -228,7 +252,8 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True, stop_af
     else:
         model = load_checkpoint(cfg.model).build_model()
     model.train()
-    if bf16:  # bf16 convolutions run fastest on channels-last tensors; weights and optimizer stay fp32
+    model = model.to(device)
+    if amp_dtype:  # autocast convolutions run fastest on channels-last tensors; weights and optimizer stay fp32
         model = model.to(memory_format=torch.channels_last)
     criterion = DetectionLoss(model.cfg.num_classes, model.cfg.reg_max, model.strides)
     optimizer = build_optimizer(model, cfg)
@@ -243,18 +268,30 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True, stop_af
         start_epoch = int(state["epochs_done"]) if "epochs_done" in state else int(state["epoch"]) + 1
         best_fitness, best_epoch, history = state["best_fitness"], state["best_epoch"], list(state["history"])
         _set_rng_state(state["rng"])
-        log.info("resuming from %s at epoch %d", last_path, start_epoch)
+        say(f"resuming from {last_path} after epoch {start_epoch}")
+    net = model  # what the batches run through: the model, or its DDP wrapper (gradients averaged over processes)
+    if info.ddp:
+        from torch.nn.parallel import DistributedDataParallel
+
+        net = DistributedDataParallel(model, device_ids=[device.index] if device.type == "cuda" else None)
+    scaler = torch.amp.GradScaler(device.type, enabled=prec == "fp16")
 
     train_set = TrainSet(train_entries, cfg.imgsz, cfg.augment, cfg.seed)
     sampler = EpochSampler(train_entries, cfg.seed)
-    loader = DataLoader(train_set, batch_size=cfg.batch, sampler=sampler, num_workers=cfg.workers,
-                        collate_fn=collate, drop_last=len(sampler) > cfg.batch)
+    if info.ddp:  # this process's slice of every global batch: the same images as one process with the same batch
+        sampler = distributed.ShardedSampler(sampler, info.rank, info.world, cfg.batch)
+        loader = DataLoader(train_set, batch_size=cfg.batch // info.world, sampler=sampler, num_workers=cfg.workers,
+                            collate_fn=collate, pin_memory=device.type == "cuda")
+    else:
+        loader = DataLoader(train_set, batch_size=cfg.batch, sampler=sampler, num_workers=cfg.workers,
+                            collate_fn=collate, drop_last=len(sampler) > cfg.batch, pin_memory=device.type == "cuda")
     val_loader = None
-    if val_entries:
+    if val_entries and main:
         val_loader = DataLoader(ValSet(val_entries, cfg.imgsz), batch_size=cfg.batch, num_workers=cfg.workers,
                                 collate_fn=collate)
     nb = len(loader) if not cfg.max_batches else min(len(loader), cfg.max_batches)
-    out.mkdir(parents=True, exist_ok=True)
+    if main:
+        out.mkdir(parents=True, exist_ok=True)
 
     for epoch in range(start_epoch, cfg.epochs):
         t0 = time.perf_counter()
@@ -270,24 +307,30 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True, stop_af
             lr = lr_at(epoch * nb + i, nb, cfg)
             for g in optimizer.param_groups:
                 g["lr"] = lr
-            x = imgs.float().div_(255)
-            if bf16:
-                with torch.autocast("cpu", dtype=torch.bfloat16):
-                    feats = model(x.contiguous(memory_format=torch.channels_last))
+            x = imgs.to(device, non_blocking=True).float().div_(255)
+            targets = targets.to(device)
+            if amp_dtype:
+                with torch.autocast(device.type, dtype=amp_dtype):
+                    feats = net(x.contiguous(memory_format=torch.channels_last))
                 feats = [f.float() for f in feats]  # the loss (assignment, BCE, IoU, DFL) in fp32
             else:
-                feats = model(x)
+                feats = net(x)
             loss, parts = criterion(feats, targets)
+            if info.ddp:  # DDP averages gradients over processes; the loss is scaled by batch size per process
+                loss = loss * info.world
             optimizer.zero_grad(set_to_none=True)
-            loss.backward()
+            scaler.scale(loss).backward()
+            scaler.unscale_(optimizer)
             torch.nn.utils.clip_grad_norm_(model.parameters(), 10.0)
-            optimizer.step()
+            scaler.step(optimizer)
+            scaler.update()
             ema.update(model)
+            parts = distributed.mean_over_ranks(parts.cpu(), info)
             loss_sum += parts
             n_batches += 1
             if n_batches == 1:  # throughput is counted after the first batch (worker start-up, kernel set-up)
-                t_first, n_first = time.perf_counter(), n_img + imgs.shape[0]
-            n_img += imgs.shape[0]
+                t_first, n_first = time.perf_counter(), n_img + imgs.shape[0] * info.world
+            n_img += imgs.shape[0] * info.world
             bar.set_postfix(box=f"{parts[0]:.3f}", cls=f"{parts[1]:.3f}", dfl=f"{parts[2]:.3f}", lr=f"{lr:.2e}")
         bar.close()
         t_end = time.perf_counter()
@@ -297,8 +340,9 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True, stop_af
         row = {"epoch": ep, "box_loss": mean[0], "cls_loss": mean[1], "dfl_loss": mean[2],
                "images_per_s": steady_n / max(steady_s, 1e-9),
                "epoch_train_s": t_end - t0, "lr": lr}
-        if val_loader is not None:
-            m = evaluate(ema.ema, val_loader, cfg.val_conf, cfg.val_iou)
+        if val_entries:  # rank 0 validates; the others take its fitness (early stop, best epoch)
+            m = evaluate(ema.ema, val_loader, cfg.val_conf, cfg.val_iou, device=device) if main else {}
+            m = distributed.from_main(m, info)
             row.update(map50=m["map50"], map50_95=m["map50_95"])
             fitness = 0.1 * m["map50"] + 0.9 * m["map50_95"]
         else:
@@ -310,8 +354,12 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True, stop_af
         if improved:
             best_fitness, best_epoch = fitness, ep
         metrics = {"epoch": ep, **m, "fitness": fitness}
+        if not main:  # only rank 0 writes
+            if stop_after is not None and epoch + 1 - start_epoch >= stop_after or ep - best_epoch >= cfg.patience:
+                break
+            continue
         train_state = {
-            "epoch": ep, "epochs_done": ep, "model": {k: v.detach().clone() for k, v in model.state_dict().items()},
+            "epoch": ep, "epochs_done": ep, "model": {k: v.detach().cpu().clone() for k, v in model.state_dict().items()},
             "optimizer": optimizer.state_dict(), "ema_updates": ema.updates, "best_fitness": best_fitness,
             "best_epoch": best_epoch, "history": history, "rng": _rng_state(), "config": cfg.to_dict(),
         }
