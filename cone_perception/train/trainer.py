@@ -256,6 +256,9 @@ def _train(cfg: TrainConfig, info: "distributed.DistInfo", resume: bool, progres
     if amp_dtype:  # autocast convolutions run fastest on channels-last tensors; weights and optimizer stay fp32
         model = model.to(memory_format=torch.channels_last)
     criterion = DetectionLoss(model.cfg.num_classes, model.cfg.reg_max, model.strides)
+    # the first optimizer of a process imports a part of torch that takes seconds: say what is going on
+    say(f"model {cfg.model} ({sum(p.numel() for p in model.parameters()) / 1e6:.2f} M parameters), "
+        f"{cfg.optimizer}; setting up ...")
     optimizer = build_optimizer(model, cfg)
     ema = ModelEMA(model, cfg.ema_decay, cfg.ema_tau)
     start_epoch, best_fitness, best_epoch, history = 0, -math.inf, 0, []
@@ -367,10 +370,10 @@ def _train(cfg: TrainConfig, info: "distributed.DistInfo", resume: bool, progres
         if improved:
             save_checkpoint(best_path, ema.ema, cfg.imgsz, CLASS_NAMES, data_summary, metrics)
         _append_csv(out / "results.csv", row)
-        plot_results(history, out / "results.png", title=f"{out} ({cfg.data})")
         msg = f"epoch {ep}/{cfg.epochs} " + " ".join(
             f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items() if k != "epoch")
         say(msg)
+        plot_results(history, out / "results.png", title=f"{out} ({cfg.data})")
         if stop_after is not None and epoch + 1 - start_epoch >= stop_after:
             break
         if ep - best_epoch >= cfg.patience:
