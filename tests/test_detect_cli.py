@@ -81,3 +81,16 @@ def test_save_vis_with_crop_draws_the_band(smoke, tmp_path):
     assert vis[2 * h + 30:, :].mean() < 0.7 * 200
     edge = vis[h - 1 : h + 2, w // 2]
     assert (edge[:, 1].astype(int) - edge[:, 2].astype(int)).max() > 100  # green line at the band's top
+
+
+def test_detect_on_a_bag_every_n_names_frames_by_stamp(smoke, tmp_path):
+    import json
+
+    ckpt, _ = smoke
+    bag = tmp_path / "drive"
+    assert cli_main(["synth", "bag", "--seconds", "0.5", "--fps", "10", "--out", str(bag), "--size", "320x180",
+                     "--no-progress"]) == 0
+    stamps = [json.loads(l)["stamp_ns"] for l in (tmp_path / "drive_gt.jsonl").read_text().splitlines()]
+    out = tmp_path / "p.jsonl"
+    assert cli_main(["detect", str(bag), "--model", str(ckpt), "--every", "2", "--out", str(out), "--no-progress"]) == 0
+    assert [p.image for p in read_predictions(out)] == [str(s) for s in stamps[::2]]

@@ -145,3 +145,10 @@ def test_restore_aspect_writes_a_trainable_data_yaml(tmp_path):
     # without names anywhere: a clear error before any image is written
     assert cli_main(["data", "restore-aspect", str(src), str(tmp_path / "out2"), "--no-progress"]) == 2
     assert not (tmp_path / "out2").exists()
+
+
+def test_resume_needs_out(tmp_path, capsys):
+    src = write_dataset(tmp_path / "d", n_images=2, size=(64, 64))
+    (src / "d.yaml").write_text(yaml.safe_dump({"train": [{"path": "."}]}))
+    assert cli_main(["train", "--data", str(src / "d.yaml"), "--resume"]) == 2
+    assert "--resume: needs --out" in capsys.readouterr().err
