@@ -149,12 +149,13 @@ def points_picture(
                 )
             if not res.pairs.is_board[k]:
                 _text(img, res.pairs.labels[k], (p[0] + 2 * r, p[1] - 2 * r), scale * 0.7, EXTRA_BGR)
-    lines = [("cyan: 1 m grid of rear_axle (x forward, y left), orange: y = 0", GRID_BGR)]
+    lines = [("cyan: 1 m grid of rear_axle (x forward, y left)", GRID_BGR), ("orange: y = 0", AXIS_BGR)]
     if len(res.pairs):
-        lines += [
-            ("green: board corners   magenta: extra points   red x: outliers", (255, 255, 255)),
-            (f"yellow arrows: residual x{arrow_scale:g} (measured -> where H puts the true point)", ARROW_BGR),
-        ]
+        kinds = [("green circles: board corners", BOARD_BGR, res.pairs.is_board),
+                 ("magenta circles: extra points", EXTRA_BGR, ~res.pairs.is_board),
+                 ("red x: outliers", OUTLIER_BGR, ~res.inliers)]
+        lines += [(text, color) for text, color, mask in kinds if np.any(mask)]
+        lines.append((f"yellow arrows: residual x{arrow_scale:g} (measured -> where H puts the true point)", ARROW_BGR))
     if report is not None and "rms_reproj_px" in report:
         lines.append(
             (
@@ -210,10 +211,16 @@ def birdseye_picture(
             color = OUTLIER_BGR if not res.inliers[k] else (BOARD_BGR if res.pairs.is_board[k] else EXTRA_BGR)
             cv2.circle(out, to_out(x, y), 3 if res.pairs.is_board[k] else 5, color, 1, cv2.LINE_AA)
     lines = [
-        (f"bird's-eye view of rear_axle, {x0:g}..{x1:g} m ahead, 1 m grid", (255, 255, 255)),
-        ("x (m) at the left, y (m, + = left) at the bottom", GRID_BGR),
-        ("circles: calibration points at their true positions", BOARD_BGR),
+        (f"bird's-eye view of rear_axle, {x0:g}..{x1:g} m ahead", (255, 255, 255)),
+        ("cyan: 1 m grid, x (m) at the left, y (m, + = left) at the bottom", GRID_BGR),
+        ("orange: y = 0 (straight ahead of the rear axle)", AXIS_BGR),
     ]
+    if len(res.pairs):
+        lines.append(("circles: calibration points at their true positions:", (255, 255, 255)))
+        kinds = [("green = board corners", BOARD_BGR, res.pairs.is_board & res.inliers),
+                 ("magenta = extra points", EXTRA_BGR, ~res.pairs.is_board & res.inliers),
+                 ("red = outliers", OUTLIER_BGR, ~res.inliers)]
+        lines += [(f"  {text}", color) for text, color, mask in kinds if np.any(mask)]
     return _with_header(out, lines, scale)
 
 

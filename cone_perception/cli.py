@@ -13,6 +13,8 @@ import argparse
 import importlib
 import sys
 
+from . import __version__
+
 # name -> (module under cone_perception.commands, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
     "demo": ("demo", "the main job: synthetic drive -> live ROS 2 pipeline -> summary and pictures"),
@@ -36,6 +38,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog="cone-perception",
         description="Camera cone perception for a Formula Student driverless car: tools around the ROS 2 nodes.",
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}",
+                        help="print the package version and exit")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, (_, help_text) in COMMANDS.items():
         sub.add_parser(name, help=help_text, add_help=False)
@@ -46,7 +50,7 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
     if not argv or argv[0] not in COMMANDS:
-        args = parser.parse_args(argv)  # prints help / errors for unknown commands
+        args = parser.parse_args(argv)  # prints help / the version / errors for unknown commands
         parser.print_help()
         return 1
     name = argv[0]

@@ -148,14 +148,34 @@ def fsoco_to_yolo(src: str | Path, out: str | Path, val_fraction: float = 0.2, s
     return rep
 
 
+def _dataset_names(root: Path) -> list[str] | None:
+    """Class names of a YOLO dataset folder from its data.yaml (list or dict) or classes.txt; None if none."""
+    f = root / "data.yaml"
+    if f.is_file():
+        try:
+            names = (yaml.safe_load(f.read_text()) or {}).get("names")
+        except (yaml.YAMLError, AttributeError):
+            names = None
+        if isinstance(names, dict):
+            names = [names[k] for k in sorted(names, key=int)]
+        if isinstance(names, list) and names:
+            return [str(n) for n in names]
+    if (root / "classes.txt").is_file():
+        return [l.strip() for l in (root / "classes.txt").read_text().splitlines() if l.strip()] or None
+    return None
+
+
 def restore_aspect(src: str | Path, out: str | Path, aspect: tuple[float, float] = (16, 9), images: str = "images",
                    labels: str = "labels", progress: bool = True, width: int | None = None,
-                   clips: list[str] | None = None) -> ConvertReport:
+                   clips: list[str] | None = None, names: list[str] | None = None) -> ConvertReport:
     """Copy a YOLO dataset, resizing every image to ``aspect`` (w:h); labels are unchanged (they are
     normalised). The width is kept, or set to ``width``. ``clips`` keeps only frames of these clips
     (file name before '-', as in training data YAMLs). Other files at the top (data.yaml, README)
-    are copied too."""
+    are copied too; then ``out/data.yaml`` is written (Ultralytics form, ``train: images``, the dataset's class
+    names: ``names``, else those of ``src/data.yaml`` or ``src/classes.txt``; none found is an error before
+    any image is written), so ``cone-perception train --data out/data.yaml`` reads it."""
     from .train.datasets import in_clips
+    from .train.yolo_yaml import yolo_names
 
     if width is not None and width < 16:
         raise ConfigError("restore-aspect", "width", f"must be at least 16 px, got {width}")
@@ -165,6 +185,11 @@ def restore_aspect(src: str | Path, out: str | Path, aspect: tuple[float, float]
         raise ConfigError(str(si), None, "image folder not found")
     if out.resolve() == src.resolve():
         raise ConfigError(str(out), None, "output folder must differ from the source")
+    names = names or _dataset_names(src)
+    if not names:
+        raise ConfigError(str(src), "names", "class names unknown (no data.yaml or classes.txt with names): give "
+                                              "them in id order, e.g. --names blue_cone,large_orange_cone,orange_cone,yellow_cone")
+    yolo_names({"names": list(names)}, "--names")
     (out / images).mkdir(parents=True, exist_ok=True)
     (out / labels).mkdir(parents=True, exist_ok=True)
     rep = ConvertReport()
@@ -195,6 +220,13 @@ def restore_aspect(src: str | Path, out: str | Path, aspect: tuple[float, float]
     for f in src.iterdir():
         if f.is_file():
             shutil.copyfile(f, out / f.name)
+    if (out / "data.yaml").is_file():  # the source's own, describing the source's layout
+        (out / "data.yaml").replace(out / "data.source.yaml")
+    doc = {"train": images, "names": [str(n) for n in names]}
+    (out / "data.yaml").write_text(
+        f"# written by cone-perception data restore-aspect from {src} (aspect {aspect[0]:g}:{aspect[1]:g})\n"
+        "# Ultralytics form; labels in labels/; no val: split here (use this folder as val: of another YAML if it "
+        "is held out)\n" + yaml.safe_dump(doc, sort_keys=False))
     for m in rep.problems:
         log.warning("%s", m)
     return rep

@@ -190,11 +190,30 @@ def _ort_session(model_bytes_or_path, device: str, threads: int | None, source: 
         raise ConfigError(source, None, f"ONNX Runtime cannot load the model: {e}") from e
 
 
+def sidecar_path(model_path: str | Path) -> Path:
+    """The YAML sidecar ``export`` writes for one exported file: ``<file name>.yaml`` (``m.onnx`` ->
+    ``m.onnx.yaml``), so a TorchScript and an ONNX export to one stem keep one sidecar each."""
+    model_path = Path(model_path)
+    return model_path.with_name(model_path.name + ".yaml")
+
+
+def find_sidecar(model_path: Path) -> Path | None:
+    """The sidecar of an exported model: ``<file name>.yaml``, else ``<stem>.yaml`` (other YOLO tools, older
+    exports); None when neither exists."""
+    for side in (sidecar_path(model_path), model_path.with_suffix(".yaml")):
+        if side.is_file():
+            return side
+    return None
+
+
 def read_sidecar(model_path: Path) -> tuple[list[str], tuple[int, int] | None]:
-    """Class names and optional input size from ``<stem>.yaml`` next to an exported model."""
-    side = model_path.with_suffix(".yaml")
-    if not side.is_file():
-        raise ConfigError(str(side), None, f"class-name sidecar of {model_path.name} not found (write `names: [blue_cone, ...]`)")
+    """Class names and optional input size from the sidecar of an exported model (:func:`find_sidecar`)."""
+    side = find_sidecar(model_path)
+    if side is None:
+        raise ConfigError(str(sidecar_path(model_path)), None,
+                          f"class names of {model_path.name} not found: neither embedded in the file nor in a sidecar "
+                          f"{sidecar_path(model_path).name} or {model_path.with_suffix('.yaml').name} "
+                          "(write `names: [blue_cone, ...]`, or export again: export embeds them)")
     try:
         doc = yaml.safe_load(side.read_text()) or {}
     except yaml.YAMLError as e:
@@ -217,11 +236,12 @@ def read_sidecar(model_path: Path) -> tuple[list[str], tuple[int, int] | None]:
 
 def _external_names(model_path: Path, embedded: dict) -> tuple[list[str], tuple[int, int] | None, str]:
     """Class names and input size of an exported model: the YAML sidecar if there is one, else the
-    metadata other YOLO tools embed (``names`` as "{0: 'blue_cone', ...}", ``imgsz`` as [h, w])."""
-    side = model_path.with_suffix(".yaml")
-    if side.is_file() or "names" not in embedded:
+    metadata ``export`` and other YOLO tools embed (``names`` as "{0: 'blue_cone', ...}", ``imgsz`` as [h, w])."""
+    side = find_sidecar(model_path)
+    if side is not None or "names" not in embedded:
         names, imgsz = read_sidecar(model_path)
         return names, imgsz, str(side)
+    side = sidecar_path(model_path)
     src = f"{model_path}: embedded metadata"
     try:
         names = embedded["names"]
@@ -239,7 +259,8 @@ def _external_names(model_path: Path, embedded: dict) -> tuple[list[str], tuple[
 
 
 def write_sidecar(model_path: Path, class_names: list[str], imgsz: tuple[int, int], extra: dict | None = None) -> Path:
-    side = Path(model_path).with_suffix(".yaml")
+    """Write ``<file name>.yaml`` (:func:`sidecar_path`) with the class names, ``imgsz: [W, H]`` and ``extra``."""
+    side = sidecar_path(model_path)
     doc = {"names": list(class_names), "imgsz": [int(imgsz[0]), int(imgsz[1])], **(extra or {})}
     side.write_text(yaml.safe_dump(doc, sort_keys=False))
     return side
@@ -333,7 +354,7 @@ class Detector:
         if bf16 and suffix in (".torchscript", ".ts", ".onnx"):
             raise ConfigError(src, "bf16", "bf16 runs a checkpoint (.pt) with backend 'torch', not an exported model")
         if suffix in (".torchscript", ".ts", ".onnx"):
-            side = path.with_suffix(".yaml")
+            side = find_sidecar(path) or sidecar_path(path)
             if suffix == ".onnx":
                 if backend != "onnx":
                     raise ConfigError(src, "backend", f"an ONNX file runs with backend 'onnx', not {backend!r}")

@@ -119,6 +119,24 @@ def _detection_block(dets: list[ImageDetections], conf: float, iou: float) -> tu
     return m, op.confusion
 
 
+#: Predictions whose lowest score is above this were cut at a threshold: mAP then is not the model's.
+FULL_CURVE_SCORE = 0.01
+
+
+def lowest_score_note(images: list[EvalImage]) -> str | None:
+    """A warning when the predictions were cut at a score above :data:`FULL_CURVE_SCORE` (what mAP then means)."""
+    scores = [im.pred_scores for im in images if len(im.pred_scores)]
+    if not scores:
+        return None
+    low = float(min(s.min() for s in scores))
+    if low <= FULL_CURVE_SCORE:
+        return None
+    return (f"the predictions' lowest score is {low:.3f} (> {FULL_CURVE_SCORE:g}): they were cut at a score threshold, so "
+            f"the PR curves end at the recall reached at {low:.3f} and mAP is that of the cut predictions, below the "
+            f"model's own; for the model's mAP run detect with --conf 0.001 (P/R/F1 at the operating point are not affected "
+            f"as long as --conf >= {low:.3f})")
+
+
 def evaluate(images: list[EvalImage], calib: Calibration | None, conf: float = 0.25, iou: float = 0.5,
              has_positions: bool = False, progress: bool = False) -> EvalResult:
     """Every figure of the report for paired images; ``calib`` maps boxes to metres (optional)."""
@@ -170,13 +188,18 @@ def evaluate(images: list[EvalImage], calib: Calibration | None, conf: float = 0
             matches = loc.add_frame(pred_cones, truth)
             pairs.add_frame(pred_cones, truth, matches)
 
+    low = lowest_score_note(images)
+    if low:
+        notes.append(low)
     overall, confusion = _detection_block([_detections(im) for im in images], conf, iou)
     n_gt = int(sum((~im.gt_ignore).sum() for im in images))
     metrics: dict = {
         "inputs": {"images": len(images), "gt_boxes": n_gt, "gt_ignored_boxes": int(sum(im.gt_ignore.sum() for im in images)),
                    "predictions": int(sum(len(im.pred_scores) for im in images)),
                    "predictions_at_conf": int(sum((im.pred_scores >= conf).sum() for im in images)),
-                   "conf": conf, "iou": iou, "calibration": calib.source if calib is not None else None},
+                   "min_score": min((float(im.pred_scores.min()) for im in images if len(im.pred_scores)), default=None),
+                   "conf": conf, "iou": iou, "calibration": calib.source if calib is not None else None,
+                   "max_range_m": (calib.max_range_m if math.isfinite(calib.max_range_m) else None) if calib is not None else None},
         "detection": overall,
     }
     metrics["by_box_height"] = recall_by_box_height(images, conf, iou)
@@ -237,7 +260,7 @@ def plot_confusion(cm: np.ndarray, path: Path, title: str) -> Path:
     ax.set_yticks(range(len(labels)), labels)
     ax.set_xlabel("predicted")
     ax.set_ylabel("true")
-    ax.set_title(title, fontsize=10)
+    ax.set_title(title + "\ncolour: share of the row (row-normalised); numbers: counts", fontsize=10)
     return _save(fig, path)
 
 
@@ -342,6 +365,16 @@ def _json_safe(o):
     return o
 
 
+def _range_cut_text(inp: dict) -> dict[str, str]:
+    """What range cut each table has: ``image`` (scored in the image: none) and ``metres`` (mapped to metres:
+    the calibration's ``max_range_m``)."""
+    r = inp.get("max_range_m")
+    return {"image": "Range cut: none (scored in the image, every distance; the calibration's max_range_m does not apply).",
+            "metres": (f"Range cut: max_range_m = {r:g} m of the calibration (true cones and detections farther away are "
+                       "not counted, as the mapper drops them on the car)." if r is not None
+                       else "Range cut: none (the calibration has no max_range_m).")}
+
+
 def _detection_table(d: dict) -> list[str]:
     rows = ["| class | AP@0.5 | AP@0.5:0.95 | TP | FP | FN | precision | recall | F1 |", "|---|---|---|---|---|---|---|---|---|"]
     pc = d["operating_point"]["per_class"]
@@ -369,71 +402,118 @@ def frame_errors(im: EvalImage, conf: float, iou: float) -> tuple[np.ndarray, np
     return tp, fp, missed
 
 
+def _frame_images(images: list[EvalImage], ks: list[int]) -> dict[int, np.ndarray]:
+    """BGR images of ``images[k]`` for ``k`` in ``ks`` that can be read: image files (only those that exist, so
+    OpenCV prints no warnings) and a bag's frames (read from the bag in one pass per bag)."""
+    import cv2
+
+    out: dict[int, np.ndarray] = {}
+    by_bag: dict[str, dict[int, int]] = {}
+    for k in ks:
+        im = images[k]
+        if im.bag_frame is not None:
+            by_bag.setdefault(im.bag_frame[0], {})[int(im.bag_frame[1])] = k
+        elif im.path and Path(im.path).is_file():
+            img = cv2.imread(im.path, cv2.IMREAD_COLOR)
+            if img is not None:
+                out[k] = img
+    if by_bag:
+        from .errors import ConePerceptionError
+        from .replay import read_bag_images
+
+        for bag, stamp_to_k in by_bag.items():
+            try:
+                got = read_bag_images(bag, set(stamp_to_k))
+            except (ConePerceptionError, OSError):
+                continue
+            out.update({stamp_to_k[st]: img for st, img in got.items()})
+    return out
+
+
+def _fit_text(img: np.ndarray, text: str, org: tuple[int, int], scale: float, color=(255, 255, 255)) -> None:
+    """Outlined text at ``org``, its font made smaller until it fits the image's width."""
+    import cv2
+
+    from .vis import outlined_text
+
+    while scale > 0.3 and org[0] + cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, 1)[0][0] > img.shape[1] - 4:
+        scale *= 0.9
+    outlined_text(img, text, org, color, scale)
+
+
+TILE_WIDTH = 960  # px, the width every tile of worst_frames.jpg is drawn at
+
+
 def plot_worst_frames(images: list[EvalImage], conf: float, iou: float, path: Path, n: int = 6,
                       band_rows: tuple[int, int] | None = None) -> tuple[Path | None, list[dict]]:
     """The ``n`` frames with the most misses + false detections, drawn: detections found (green, thin),
     false detections (red, class and score), missed cones (magenta, class), ignore regions (grey), the
-    band's rows (cyan). Frames whose image file can't be read are skipped. -> (file or None, the frames' counts)."""
+    band's rows (cyan). Images come from their files or, for a bag's frames, from the bag; frames whose
+    image can't be read are skipped. -> (file or None, the frames' counts)."""
     import cv2
 
-    from .vis import frame_strip
+    from .vis import frame_strip, outlined_text
 
     scored = []
     for k, im in enumerate(images):
         tp, fp, missed = frame_errors(im, conf, iou)
         scored.append((int(fp.sum() + missed.sum()), k, tp, fp, missed))
     scored.sort(key=lambda t: (-t[0], t[1]))
+    candidates = [t for t in scored if t[0] > 0][: max(3 * n, n + 10)]
+    pictures = _frame_images(images, [t[1] for t in candidates])
     tiles, listed = [], []
-    for errors, k, tp, fp, missed in scored:
-        if len(tiles) == n or errors == 0:
+    for errors, k, tp, fp, missed in candidates:
+        if len(tiles) == n:
             break
         im = images[k]
-        img = cv2.imread(im.path) if im.path else None
+        img = pictures.get(k)
         if img is None:
             continue
+        img = cv2.resize(img, (TILE_WIDTH, max(1, int(round(img.shape[0] * TILE_WIDTH / img.shape[1])))),
+                         interpolation=cv2.INTER_AREA)
         sx, sy = img.shape[1] / im.width, img.shape[0] / im.height
         s = np.array([sx, sy, sx, sy])
-        t = max(1, round(img.shape[1] / 960))
 
         def rect(b, color, width, text=None):
             x1, y1, x2, y2 = (int(round(v)) for v in b * s)
             cv2.rectangle(img, (x1, y1), (x2, y2), color, width, cv2.LINE_AA)
             if text:
-                cv2.putText(img, text, (x1, max(12, y1 - 4)), cv2.FONT_HERSHEY_SIMPLEX, 0.4 * t, color, t, cv2.LINE_AA)
+                outlined_text(img, text, (x1, max(12, y1 - 4)), color, 0.4)
 
         if band_rows is not None:
             for v in band_rows:
-                cv2.line(img, (0, int(round(v * sy))), (img.shape[1], int(round(v * sy))), (255, 255, 0), t, cv2.LINE_AA)
+                cv2.line(img, (0, int(round(v * sy))), (img.shape[1], int(round(v * sy))), (255, 255, 0), 1, cv2.LINE_AA)
         for b in im.gt_boxes[im.gt_ignore]:
-            rect(b, (128, 128, 128), t)
+            rect(b, (128, 128, 128), 1)
         for b in im.pred_boxes[tp]:
-            rect(b, (0, 200, 0), t)
+            rect(b, (0, 200, 0), 1)
         for b, c, sc in zip(im.pred_boxes[fp], im.pred_classes[fp], im.pred_scores[fp]):
-            rect(b, (0, 0, 255), t, f"{CLASS_NAMES[c]} {sc:.2f}")
+            rect(b, (0, 0, 255), 1, f"{CLASS_NAMES[c]} {sc:.2f}")
         for b, c in zip(im.gt_boxes[missed], im.gt_classes[missed]):
-            rect(b, (255, 0, 255), 2 * t, f"missed {CLASS_NAMES[c]}")
-        head = f"{Path(im.image).name}: {int(missed.sum())} missed, {int(fp.sum())} false, {int(tp.sum())} found"
-        cv2.putText(img, head, (10, 30 * t), cv2.FONT_HERSHEY_SIMPLEX, 0.8 * t, (0, 0, 0), 4 * t, cv2.LINE_AA)
-        cv2.putText(img, head, (10, 30 * t), cv2.FONT_HERSHEY_SIMPLEX, 0.8 * t, (255, 255, 255), t, cv2.LINE_AA)
+            rect(b, (255, 0, 255), 2, f"missed {CLASS_NAMES[c]}")
+        _fit_text(img, f"{Path(im.image).name}", (8, 24), 0.7)
+        _fit_text(img, f"{int(missed.sum())} missed, {int(fp.sum())} false, {int(tp.sum())} found", (8, 50), 0.7)
         tiles.append(img)
         listed.append({"image": im.image, "missed": int(missed.sum()), "false": int(fp.sum()), "found": int(tp.sum())})
     if not tiles:
         return None, listed
     path.parent.mkdir(parents=True, exist_ok=True)
-    cv2.imwrite(str(path), frame_strip(tiles, width=960, cols=2), [cv2.IMWRITE_JPEG_QUALITY, 88])
+    cv2.imwrite(str(path), frame_strip(tiles, width=TILE_WIDTH, cols=2), [cv2.IMWRITE_JPEG_QUALITY, 88])
     return path, listed
 
 
 def write_report(res: EvalResult, out: Path, pred_source: str, gt_source: str, worst: int = 6) -> dict[str, Path]:
     """``metrics.json``, ``report.md`` and the PNGs into ``out`` (with ``worst`` > 0 also a picture of the
     frames with most errors); returns the written files by key."""
+    from .words import plural
+
     out.mkdir(parents=True, exist_ok=True)
     m = res.metrics
     inp = m["inputs"]
     files = {}
     files["confusion"] = plot_confusion(res.confusion, out / FILES["confusion"],
-                                        f"confusion matrix, conf >= {inp['conf']:g}, IoU >= {inp['iou']:g} ({inp['images']} images)")
-    files["pr"] = plot_pr(m["detection"], out / FILES["pr"], f"precision-recall at IoU 0.5 ({inp['images']} images, {inp['gt_boxes']} cones)")
+                                        f"confusion matrix, conf >= {inp['conf']:g}, IoU >= {inp['iou']:g} ({plural(inp['images'], 'image')})")
+    files["pr"] = plot_pr(m["detection"], out / FILES["pr"], f"precision-recall at IoU 0.5 ({plural(inp['images'], 'image')}, {plural(inp['gt_boxes'], 'cone')})")
     md = [
         "# Evaluation report", "",
         f"- predictions: `{pred_source}`", f"- ground truth: `{gt_source}`",
@@ -447,8 +527,9 @@ def write_report(res: EvalResult, out: Path, pred_source: str, gt_source: str, w
     md += [f"- {k.replace('_', ' ')}: {v}" for k, v in m.get("ground_truth", {}).items()]
     md += [f"- note: {n}" for n in res.notes]
     d = m["detection"]
+    cut = _range_cut_text(inp)
     md += ["", "## Detection", "", f"mAP@0.5 **{_f(d['map50'])}**, mAP@0.5:0.95 **{_f(d['map50_95'])}** "
-           "(mean over the classes present in the ground truth).", ""]
+           f"(mean over the classes present in the ground truth). {cut['image']}", ""]
     md += _detection_table(d)
     md += ["", f"![PR curves]({FILES['pr']})", "",
            "Confusion matrix: rows true class, columns predicted class; detections matched to cones by IoU whatever "
@@ -456,7 +537,8 @@ def write_report(res: EvalResult, out: Path, pred_source: str, gt_source: str, w
            f"![confusion matrix]({FILES['confusion']})"]
     bh = m["by_box_height"]
     md += ["", "## Recall by box height", "",
-           f"Ground-truth box height in {bh['unit']}; recall at the operating point (score >= {inp['conf']:g}, IoU >= {inp['iou']:g}).", "",
+           f"Ground-truth box height in {bh['unit']}; recall at the operating point (score >= {inp['conf']:g}, IoU >= {inp['iou']:g}). "
+           f"{cut['image']}", "",
            "| box height | cones | TP | FN | recall |", "|---|---|---|---|---|"]
     for name, s in list(bh["bins"].items()) + [(f"**>= {bh['at_least_min_height']['min_height_px']:g} px**", bh["at_least_min_height"])]:
         md.append(f"| {name} | {s['num_gt']} | {s['tp']} | {s['fn']} | {_f(s['recall'])} |")
@@ -466,7 +548,7 @@ def write_report(res: EvalResult, out: Path, pred_source: str, gt_source: str, w
         md += ["", "## Detection by distance group", "",
                f"Distance from {bd['distance_from']}; cones of other groups are ignore regions in each group's evaluation. "
                f"Cones without a distance: {bd['gt_boxes_without_distance']}; detections (at the operating point) without one: "
-               f"{bd['predictions_without_distance']}.", "",
+               f"{bd['predictions_without_distance']}. {cut['image']}", "",
                "| group | cones | mAP@0.5 | mAP@0.5:0.95 | TP | FP | FN | precision | recall | F1 |", "|---|---|---|---|---|---|---|---|---|---|"]
         for name, g in bd["groups"].items():
             s = g["operating_point"]["per_class"]["all"]
@@ -479,7 +561,7 @@ def write_report(res: EvalResult, out: Path, pred_source: str, gt_source: str, w
         files["pairs"] = plot_pairs(res.pairs, out / FILES["pairs"])
         md += ["", "## Localisation", "",
                f"Detections (score >= {inp['conf']:g}) mapped to metres through the calibration, matched to true cones by "
-               "ground distance (greedy, nearest first, gate 0.5 m + 10 % of the range). Errors in m.", "",
+               f"ground distance (greedy, nearest first, gate 0.5 m + 10 % of the range). Errors in m. {cut['metres']}", "",
                "| group | true cones | recall | matched | median err | p90 err | median abs x | median abs y | same class |",
                "|---|---|---|---|---|---|---|---|---|"]
         for name, s in list(lo["groups"].items()) + [("**all**", lo["all"])]:
@@ -489,7 +571,8 @@ def write_report(res: EvalResult, out: Path, pred_source: str, gt_source: str, w
                f"![localisation box plots]({FILES['localisation']})", "",
                "### Blue-yellow pair distance (thesis metric)", "",
                f"Each true blue cone is paired with the nearest true yellow cone (within {m['pair_distance']['max_pair_m']:g} m); "
-               "a pair is measured when both are matched; error = measured - true distance; group by the pair's midpoint.", "",
+               "a pair is measured when both are matched; error = measured - true distance; group by the pair's midpoint. "
+               f"{cut['metres']}", "",
                "| group | pairs | measured | median err | median abs err | mean abs err | p90 abs err |", "|---|---|---|---|---|---|---|"]
         pdist = m["pair_distance"]
         for name, s in list(pdist["groups"].items()) + [("**all**", pdist["all"])]:
@@ -523,17 +606,21 @@ def format_summary(res: EvalResult) -> str:
     m = res.metrics
     d, inp = m["detection"], m["inputs"]
     a = d["operating_point"]["per_class"]["all"]
-    lines = [f"images {inp['images']}, cones {inp['gt_boxes']}, detections {inp['predictions_at_conf']} (score >= {inp['conf']:g})",
-             f"mAP@0.5 {_f(d['map50'])}  mAP@0.5:0.95 {_f(d['map50_95'])}  precision {_f(a['precision'])}  recall {_f(a['recall'])}  F1 {_f(a['f1'])}"]
+    lines = [f"images {inp['images']}, cones {inp['gt_boxes']}, detections {inp['predictions_at_conf']} (score >= {inp['conf']:g})"
+             ,
+             f"mAP@0.5 {_f(d['map50'])}  mAP@0.5:0.95 {_f(d['map50_95'])}  precision {_f(a['precision'])}  recall {_f(a['recall'])}  F1 {_f(a['f1'])}"
+             "  (no range cut)"]
     big = m["by_box_height"]["at_least_min_height"]
     lines.append(f"recall of boxes >= {big['min_height_px']:g} px tall ({m['by_box_height']['unit']}): {_f(big['recall'])} of {big['num_gt']}")
     if "by_distance" in m:
-        lines.append(f"{'group':<16}{'cones':>7}{'mAP50':>8}{'recall':>8}{'prec':>8}")
+        lines.append(f"{'group':<16}{'cones':>7}{'mAP50':>8}{'recall':>8}{'prec':>8}   (no range cut)")
         for name, g in m["by_distance"]["groups"].items():
             s = g["operating_point"]["per_class"]["all"]
             lines.append(f"{name:<16}{g['num_gt']:>7}{_f(g['map50']):>8}{_f(s['recall']):>8}{_f(s['precision']):>8}")
     if "localisation" in m:
-        lines.append(f"{'localisation':<16}{'true':>7}{'recall':>8}{'med err':>9}{'p90 err':>9}{'pair err':>10}")
+        r = inp.get("max_range_m")
+        lines.append(f"{'localisation':<16}{'true':>7}{'recall':>8}{'med err':>9}{'p90 err':>9}{'pair err':>10}   "
+                     + (f"(within max_range_m {r:g} m)" if r is not None else "(no range cut)"))
         lo, pd = m["localisation"], m["pair_distance"]
         for name in list(lo["groups"]) + ["all"]:
             s = lo["all"] if name == "all" else lo["groups"][name]

@@ -1,13 +1,17 @@
 """Export a detector to TorchScript or ONNX in the common YOLO layout, and verify it.
 
 The exported graph takes (1, 3, H, W) float32 RGB in 0..1 and returns
-(1, 4 + nc, N): cx, cy, w, h in input px, then class scores. A YAML sidecar
-(``<stem>.yaml``) names the classes and the input size.
+(1, 4 + nc, N): cx, cy, w, h in input px, then class scores. The file itself
+carries its description (:func:`export_metadata`: ONNX ``metadata_props``,
+TorchScript ``config.txt``), in the keys other YOLO tools use (``names`` as
+"{0: 'blue', ...}", ``imgsz`` as [h, w]), so :meth:`Detector.load` needs no
+sidecar; the YAML sidecar ``<file name>.yaml`` says the same for people.
 """
 
 from __future__ import annotations
 
 import io
+import json
 import warnings
 from pathlib import Path
 
@@ -53,17 +57,56 @@ def onnx_bytes(model: ConeYOLO, imgsz: tuple[int, int]) -> bytes:
     return buf.getvalue()
 
 
-def export_model(model: ConeYOLO, imgsz: tuple[int, int], fmt: str, out: Path) -> Path:
-    """Write the model as ``fmt`` ("torchscript" | "onnx") to ``out``; returns the path."""
+def export_metadata(class_names: list[str], imgsz: tuple[int, int], stride: int, source: str | None = None,
+                    extra: dict | None = None) -> dict[str, str]:
+    """What an exported file carries about itself, as strings: ``names`` ("{0: 'blue', ...}"), ``imgsz``
+    ("[H, W]", Ultralytics' order), ``stride``, ``model_version`` (checkpoint format and version),
+    ``exporter`` (this package's version), ``source`` (the checkpoint), ``layout``, ``task``."""
+    from . import __version__
+    from .checkpoint import FORMAT, VERSION
+
+    meta = {
+        "names": repr({i: str(n) for i, n in enumerate(class_names)}),
+        "imgsz": f"[{int(imgsz[1])}, {int(imgsz[0])}]",
+        "stride": str(int(stride)),
+        "model_version": f"{FORMAT} v{VERSION}",
+        "exporter": f"cone_perception {__version__}",
+        "task": "detect",
+        "layout": "(1, 4 + nc, N): cx cy w h input px, class scores; input (1, 3, H, W) RGB 0..1",
+    }
+    if source is not None:
+        meta["source"] = str(source)
+    meta.update({k: str(v) for k, v in (extra or {}).items()})
+    return meta
+
+
+def with_onnx_metadata(model_bytes: bytes, meta: dict[str, str]) -> bytes:
+    """The ONNX model with ``meta`` in its ``metadata_props`` (replacing keys of the same name)."""
+    import onnx
+
+    proto = onnx.load_from_string(model_bytes)
+    keep = [(p.key, p.value) for p in proto.metadata_props if p.key not in meta]
+    del proto.metadata_props[:]
+    for k, v in keep + list(meta.items()):
+        prop = proto.metadata_props.add()
+        prop.key, prop.value = k, v
+    return proto.SerializeToString()
+
+
+def export_model(model: ConeYOLO, imgsz: tuple[int, int], fmt: str, out: Path, meta: dict[str, str] | None = None) -> Path:
+    """Write the model as ``fmt`` ("torchscript" | "onnx") to ``out``, with ``meta`` (:func:`export_metadata`)
+    embedded (ONNX ``metadata_props``; TorchScript ``config.txt`` as JSON); returns the path."""
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     model = model.eval()
     if fmt == "onnx":
-        out.write_bytes(onnx_bytes(model, imgsz))
+        data = onnx_bytes(model, imgsz)
+        out.write_bytes(with_onnx_metadata(data, meta) if meta else data)
     elif fmt == "torchscript":
         fused = ConeYOLO(model.cfg)
         fused.load_state_dict(model.state_dict())
-        trace(fused.eval().fuse(), imgsz).save(str(out))
+        ts = trace(fused.eval().fuse(), imgsz)
+        torch.jit.save(ts, str(out), _extra_files={"config.txt": json.dumps(meta)} if meta else None)
     else:
         raise ValueError(f"unknown export format {fmt!r}")
     return out

@@ -49,6 +49,7 @@ class GroundTruthImage:
     xy_m: np.ndarray | None = None  # (M, 2) float64 rear_axle m, None without positions
     where: str = ""  # file (and line) it came from
     path: str | None = None  # the image file, where known (pictures in the report)
+    bag_frame: tuple[str, int] | None = None  # (rosbag folder, header stamp ns): a bag's frame (pictures)
 
 
 @dataclass
@@ -80,6 +81,7 @@ class EvalImage:
     pred_classes: np.ndarray  # (K,) int64
     input_scale: float | None = None  # model input px per image px (from the prediction file)
     path: str | None = None  # the image file, where known
+    bag_frame: tuple[str, int] | None = None  # (rosbag folder, header stamp ns) of a bag's frame, where known
 
 
 def restrict_to_band(images: list[EvalImage], rows: tuple[int, int], min_visible: float = MIN_VISIBLE) -> tuple[list[EvalImage], int]:
@@ -194,6 +196,9 @@ def _load_yolo(root: Path, names: list[str] | None) -> GroundTruth:
 def _load_jsonl(path: Path) -> GroundTruth:
     src = str(path)
     out = []
+    bag_dir = path.parent / path.name[: -len("_gt.jsonl")] if path.name.endswith("_gt.jsonl") else None
+    if bag_dir is not None and not (bag_dir / "metadata.yaml").is_file():
+        bag_dir = None
     for i, d in iter_json_lines(path, {"image", "width", "height", "cones"}):
         where = f"line {i}"
         if not isinstance(d["cones"], list):
@@ -214,8 +219,12 @@ def _load_jsonl(path: Path) -> GroundTruth:
         a = np.asarray(rows, np.float64).reshape(-1, 8)
         wh = a[:, 2:4] - a[:, 0:2]
         ignore = (wh[:, 0] < LABEL_MIN_BOX_PX) | (wh[:, 1] < LABEL_MIN_BOX_PX) | (a[:, 6] < LABEL_MIN_VISIBLE)
+        if "stamp_ns" in d and bag_dir is not None:  # a frame of a bag (synth bag writes <bag>_gt.jsonl)
+            img_path, bag_frame = None, (str(bag_dir), int(d["stamp_ns"]))
+        else:
+            img_path, bag_frame = str(path.parent / str(d["image"])), None
         out.append(GroundTruthImage(str(d["image"]), W, H, a[:, :4], a[:, 7].astype(np.int64), ignore, a[:, 4:6], f"{src}: {where}",
-                                    str(path.parent / str(d["image"]))))
+                                    img_path, bag_frame))
     if not out:
         raise ConfigError(src, None, "no ground-truth lines")
     stem = path.name[: -len("gt.jsonl")] if path.name.endswith("gt.jsonl") else ""
@@ -276,7 +285,7 @@ def pair_with_predictions(gt: GroundTruth, preds: list[ImagePrediction], pred_so
             resized += int((g.width, g.height) != (p.width, p.height))
         b, s, c = boxes_to_arrays(p.boxes)
         out.append(EvalImage(p.image, p.width, p.height, g.boxes * np.array([sx, sy, sx, sy]), g.class_ids, g.ignore,
-                             g.xy_m, b.astype(np.float64), s.astype(np.float64), c, p.input_scale, g.path))
+                             g.xy_m, b.astype(np.float64), s.astype(np.float64), c, p.input_scale, g.path, g.bag_frame))
     missing = [g.image for k, g in enumerate(gt.images) if k not in seen]
     if missing and not only_predicted:
         raise ConfigError(pred_source, None, f"has no line for {len(missing)} of {len(gt.images)} ground-truth images of {gt.source} "

@@ -73,6 +73,35 @@ def iter_frames(bag: str | os.PathLike, topic: str) -> Iterator[Frame]:
                         FrameError("corrupt_message", f"message at {m.log_stamp_ns} ns does not deserialise: {e}"))
 
 
+def frame_bgr(frame: Frame) -> np.ndarray:
+    """The full BGR uint8 image of a bag's camera message (raises :class:`FrameError` for a bad one)."""
+    from .adapter import DriverAdapter, decode_compressed
+    from .crop import CropSpec
+
+    if frame.error is not None:
+        raise frame.error
+    m = frame.msg
+    if frame.msgtype == bagio.COMPRESSED_IMAGE:
+        return decode_compressed(m.data)
+    w, h = int(m.width), int(m.height)
+    return DriverAdapter(CropSpec.full_image(w - w % 2, h), w - w % 2, h).from_raw(m.encoding, w, h, int(m.step), m.data)
+
+
+def read_bag_images(bag: str | os.PathLike, stamps: set[int], topic: str | None = None) -> dict[int, np.ndarray]:
+    """``header stamp ns -> BGR image`` of the camera frames with these stamps (one pass; bad frames left out)."""
+    topic, _ = find_image_topic(bag, topic)
+    out = {}
+    for fr in iter_frames(bag, topic):
+        if fr.stamp_ns in stamps and fr.stamp_ns not in out:
+            try:
+                out[fr.stamp_ns] = frame_bgr(fr)
+            except FrameError:
+                continue
+            if len(out) == len(stamps):
+                break
+    return out
+
+
 def process_frame(pipeline: Pipeline, frame: Frame):
     """Run one bag frame through the pipeline (raises :class:`FrameError`)."""
     if frame.error is not None:

@@ -75,18 +75,20 @@ def test_restore_aspect_command(tmp_path, capsys):
     (src / "labels" / "a-1.txt").write_text("0 0.5 0.5 0.1 0.2\n")
     cv2.imwrite(str(src / "images" / "b-1.jpg"), np.full((64, 64, 3), 100, np.uint8))
     (src / "README.md").write_text("x")
+    (src / "classes.txt").write_text("blue_cone\n")
     rc = cli_main(["data", "restore-aspect", str(src), str(tmp_path / "out"), "--aspect", "16:9"])
     assert rc == 0
     out = capsys.readouterr().out
-    assert "wrote 2 images, 1 boxes" in out and "no_label: 1" in out
+    assert "wrote 2 images, 1 box " in out and "no_label: 1" in out
     assert cv2.imread(str(tmp_path / "out" / "images" / "a-1.jpg")).shape[:2] == (36, 64)
     assert (tmp_path / "out" / "labels" / "a-1.txt").read_text() == "0 0.5 0.5 0.1 0.2\n"
     assert (tmp_path / "out" / "README.md").is_file()
+    assert yaml.safe_load((tmp_path / "out" / "data.yaml").read_text()) == {"train": "images", "names": ["blue_cone"]}
     with pytest.raises(ConfigError):
         restore_aspect(src, src, progress=False)
     # car-size copy of one clip: width set, other clips left out, labels unchanged
     rc = cli_main(["data", "restore-aspect", str(src), str(tmp_path / "big"), "--width", "128", "--clips", "a"])
-    assert rc == 0 and "wrote 1 images, 1 boxes" in capsys.readouterr().out
+    assert rc == 0 and "wrote 1 image, 1 box " in capsys.readouterr().out
     assert cv2.imread(str(tmp_path / "big" / "images" / "a-1.jpg")).shape[:2] == (72, 128)
     assert not (tmp_path / "big" / "images" / "b-1.jpg").exists()
     assert (tmp_path / "big" / "labels" / "a-1.txt").read_text() == "0 0.5 0.5 0.1 0.2\n"

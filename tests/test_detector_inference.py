@@ -205,7 +205,7 @@ def test_external_model_bad_output_shape_and_names(tmp_path):
     write_sidecar(p, ["blue", "yellow", "traffic_light"], (64, 64))
     with pytest.raises(ConfigError, match=r"names\[2\]|class_names\[2\]"):
         Detector.load(p, backend="onnx")
-    (tmp_path / "wrong.yaml").unlink()
+    (tmp_path / "wrong.onnx.yaml").unlink()
     with pytest.raises(ConfigError, match="sidecar"):
         Detector.load(p, backend="onnx")
     with pytest.raises(ConfigError, match="backend 'onnx'"):
@@ -257,7 +257,7 @@ def test_export_command_verifies(tmp_path, trained, capsys, fmt):
     rc = cli_main(["export", "--model", str(ckpt), "--format", fmt, "--out", str(out)])
     assert rc == 0
     assert "verified against eager" in capsys.readouterr().out
-    side = yaml.safe_load(out.with_suffix(".yaml").read_text())
+    side = yaml.safe_load(out.with_name(out.name + ".yaml").read_text())
     assert side["names"] == list(CLASS_NAMES) and side["imgsz"] == list(SMOKE_SIZE)
     det = Detector.load(out, backend=fmt)
     eager = Detector.load(ckpt, backend="torch")

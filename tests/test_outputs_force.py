@@ -22,7 +22,7 @@ def test_refuse_existing_names_the_file(tmp_path: Path) -> None:
     refuse_existing([a, b], True, "export")
 
 
-@pytest.mark.parametrize("existing", ["m.onnx", "m.yaml"])
+@pytest.mark.parametrize("existing", ["m.onnx", "m.onnx.yaml"])
 def test_export_refuses_an_existing_output_or_sidecar(tmp_path: Path, capsys, existing: str) -> None:
     (tmp_path / existing).write_text("keep me")
     rc = main(["export", "--model", str(default_model_path()), "--format", "onnx", "--out", str(tmp_path / "m.onnx")])

@@ -56,7 +56,7 @@ def test_export_int8_quantises_convs_only_and_keeps_boxes(tmp_path, smoke, capsy
     fp32, int8 = _export_int8(tmp_path, ckpt, images)
     said = capsys.readouterr().out
     assert "calibrating on 6 frames" in said and "float boxes matched" in said
-    side = yaml.safe_load(int8.with_suffix(".yaml").read_text())
+    side = yaml.safe_load(int8.with_name(int8.name + ".yaml").read_text())
     assert side["names"] == list(CLASS_NAMES) and side["imgsz"] == list(SMOKE_SIZE)
     assert "per-channel" in side["quantisation"] and "6 frames" in side["calibration"]
 
@@ -162,7 +162,7 @@ def test_int8_check_failure_removes_the_files(tmp_path, smoke, monkeypatch, caps
                    "--calib-images", str(images), "--calib-frames", "3", "--no-progress"])
     assert rc == 2
     assert "int8 model too far from eager" in capsys.readouterr().err
-    assert not (tmp_path / "m.int8.onnx").exists() and not (tmp_path / "m.int8.yaml").exists()
+    assert not (tmp_path / "m.int8.onnx").exists() and not (tmp_path / "m.int8.onnx.yaml").exists()
     assert (tmp_path / "m.onnx").exists()  # the float export passed its own check
 
 

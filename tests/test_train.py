@@ -44,7 +44,7 @@ def test_resume_reproduces_the_loss_curve(tmp_path, precision):
     full = train(_tiny_cfg(root, tmp_path / "full", 4, precision), progress=False)["history"]
     train(_tiny_cfg(root, tmp_path / "part", 4, precision), progress=False, stop_after=2)  # the session is cut
     resumed = train(_tiny_cfg(root, tmp_path / "part", 4, "fp32"), resume=True, progress=False)["history"]  # keeps its own
-    assert [h["epoch"] for h in resumed] == [0, 1, 2, 3]
+    assert [h["epoch"] for h in resumed] == [1, 2, 3, 4]
     for a, b in zip(full, resumed):
         for k in ("box_loss", "cls_loss", "dfl_loss", "map50"):
             assert a[k] == pytest.approx(b[k], rel=1e-5, abs=1e-6), (a["epoch"], k)
@@ -192,11 +192,11 @@ def test_train_command_writes_checkpoints_and_resumes(tmp_path, capsys):
             "--workers", "0", "--out", str(tmp_path / "run"), "--json"]
     assert cli_main(args + ["--epochs", "1"]) == 0
     first = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
-    assert first["last"]["epoch"] == 0 and "map50" in first["last"]
+    assert first["last"]["epoch"] == 1 and "map50" in first["last"]
     assert cli_main(args + ["--epochs", "2", "--resume"]) == 0
     second = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
-    assert second["last"]["epoch"] == 1
+    assert second["last"]["epoch"] == 2
     ck = load_checkpoint(tmp_path / "run" / "last.pt")
     assert ck.imgsz == (128, 64)  # 120 rounded up to a multiple of 32
-    assert ck.data["train"][0]["images"] == 4 and ck.metrics["epoch"] == 1 and ck.train["epoch"] == 1
+    assert ck.data["train"][0]["images"] == 4 and ck.metrics["epoch"] == 2 and ck.train["epoch"] == 2
     assert len((tmp_path / "run" / "results.csv").read_text().splitlines()) == 3

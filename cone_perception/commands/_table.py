@@ -28,6 +28,7 @@ import numpy as np
 
 from ..crop import INPUT_SETTINGS, CropSpec
 from ..errors import ConfigError
+from ..words import plural
 
 SRC = "bench table"
 
@@ -99,7 +100,7 @@ def format_markdown(doc: dict) -> str:
         f"Command: `{head['command']}` ({head['date']}).",
         f"Speed: `bench pipeline --input SETTING` code path, {head['frames']} timed frames (+{head['warmup']} warm-up) of "
         f"rendered {head['bench_image']} YUYV scenes, band rows {head['bench_band']} of `{head['calibration']}`, "
-        f"backend {head['backend']}, {head['threads']} network thread(s), {head['cpu']}. End to end = YUYV frame in -> "
+        f"backend {head['backend']}, {plural(head['threads'], 'network thread')}, {head['cpu']}. End to end = YUYV frame in -> "
         "boxes and cones packed as PointCloud2.",
         f"Accuracy: {head['val_images']} real validation frames ({head['val']}, {head['val_size']}), "
         f"{head['val_boxes']} boxes; crop settings use rows {head['val_band']}, where "
@@ -138,7 +139,7 @@ def run_table(args: argparse.Namespace, calib) -> int:
     val_size = None
     band = None
     runs = [(m, s) for m in models for s in settings]
-    bar = tqdm(runs, desc="bench table", unit="run", file=sys.stderr)
+    bar = tqdm(runs, desc="bench table", unit="run", file=sys.stderr, disable=getattr(args, "no_progress", False))
     for model, setting in bar:
         bar.set_postfix_str(f"{Path(model).stem if model else 'default'} {setting}")
         bench_calib = replace(calib, crop=calib.crop.for_setting(setting, calib.image_width, calib.image_height))

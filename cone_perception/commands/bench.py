@@ -35,6 +35,7 @@ from ..calib import DEFAULT_CAMERA, load_calibration
 from ..crop import INPUT_SETTINGS, CropSpec
 from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, RUNTIME_THREADS
 from ..errors import ConfigError
+from ..words import plural
 from .detect import parse_crop
 
 _BYTES_PER_PX = {"yuv422_yuy2": 2, "bgr8": 3, "rgb8": 3}
@@ -63,6 +64,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "downscale 2; crop = the calibration's band, downscale 1; crop_half = the band, downscale 2 "
                         "(default: the calibration's own crop and downscale)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar (--json implies it for pipeline)")
     p.add_argument("--repeat", type=int, default=1,
                    help="pipeline: run it this many times, each in a fresh process (this machine's speed varies "
                         "between processes), and report the spread: median range, each run's p99 / median, "
@@ -193,7 +195,8 @@ def _repeat_pipeline(args: argparse.Namespace) -> int:
     cmd += (["--model", str(args.model)] if args.model else []) + (["--bf16"] if args.bf16 else [])
     cmd += ["--input", args.input] if args.input else []
     runs = []
-    for i in tqdm(range(args.repeat), unit="run", desc="bench pipeline", file=sys.stderr, disable=args.json):
+    for i in tqdm(range(args.repeat), unit="run", desc="bench pipeline", file=sys.stderr,
+                  disable=args.json or args.no_progress):
         proc = subprocess.run(cmd, capture_output=True, text=True)
         if proc.returncode != 0:
             raise ConfigError("bench", "--repeat", f"run {i + 1} failed (exit {proc.returncode}): "
@@ -206,7 +209,7 @@ def _repeat_pipeline(args: argparse.Namespace) -> int:
         return 0
     r0 = runs[0]
     print(f"bench pipeline ({r0['setting']}) x {args.repeat} processes: {r0['input']} -> {r0['output']}; model "
-          f"{r0['model']} ({r0['backend']}, {r0['threads']} threads), {args.frames} frames each")
+          f"{r0['model']} ({r0['backend']}, {plural(r0['threads'], 'thread')}), {args.frames} frames each")
     print(format_runs(summary))
     return 0
 
@@ -231,7 +234,7 @@ def run(args: argparse.Namespace) -> int:
             return 0
         print(f"bench pipeline ({result['setting']}): {result['input']} -> {result['output']}, model input "
               f"{result['model_input'][0]}x{result['model_input'][1]}; model {result['model']} "
-              f"({result['backend']}, {result['threads']} threads), {args.frames} frames, "
+              f"({result['backend']}, {plural(result['threads'], 'thread')}), {args.frames} frames, "
               f"{result['boxes_per_frame']:.1f} boxes/frame")
         print(format_table(result["stages"]))
         print(f"frames/s (median end to end): {result['fps']:.1f}   everything but the forward: "
@@ -261,7 +264,7 @@ def run(args: argparse.Namespace) -> int:
         json.dump(result, sys.stdout, indent=1)
         print()
         return 0
-    print(f"bench {args.target}: {result['input']} -> {result['output']}, {args.frames} frames, {args.threads} threads")
+    print(f"bench {args.target}: {result['input']} -> {result['output']}, {args.frames} frames, {plural(args.threads, 'thread')}")
     print(format_table(s))
     print(f"frames/s (median): {result['fps']:.1f}   peak RSS: {result['peak_rss_mb']:.0f} MiB")
     return 0

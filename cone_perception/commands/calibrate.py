@@ -130,6 +130,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     lens.add_argument(
         "--views", type=Path, nargs="+", metavar="IMG", help="chessboard views (>= 3, tilted) -> cv2.calibrateCamera"
     )
+    lens.add_argument("--no-progress", action="store_true", help="no progress bar while reading --views")
     lens.add_argument(
         "--views-board", metavar="COLSxROWS", help="board of the --views if not the --board on the ground"
     )
@@ -446,7 +447,7 @@ def _intrinsics_source(
 
         views = [
             (str(v), _read_image(v))
-            for v in tqdm(args.views, desc="reading views", unit="img", disable=len(args.views) < 4)
+            for v in tqdm(args.views, desc="reading views", unit="img", disable=len(args.views) < 4 or args.no_progress)
         ]
         intr, missed = calibrate_intrinsics(views, parse_size(board, "--views-board"), square)
         if missed:

@@ -30,6 +30,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     r.add_argument("--aspect", type=_aspect, default=(16.0, 9.0), help="true aspect W:H (default 16:9); the width is kept")
     r.add_argument("--width", type=int, default=None, help="resize to this width instead of keeping it (e.g. 1920: frames of the car's size)")
     r.add_argument("--clips", default=None, help="keep only these clips, comma-separated (e.g. autox4,autox2,accel)")
+    r.add_argument("--names", default=None,
+                   help="the dataset's class names in id order, comma-separated, for the data.yaml written to OUT "
+                        "(default: from SRC/data.yaml or SRC/classes.txt; bgracing-real: "
+                        "blue_cone,large_orange_cone,orange_cone,yellow_cone)")
+    for q in (f, r):
+        q.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -37,10 +43,16 @@ def run(args: argparse.Namespace) -> int:
 
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(message)s")
     if args.action == "fsoco-to-yolo":
-        rep = convert.fsoco_to_yolo(args.src, args.out, args.val_fraction, args.seed, args.border)
+        rep = convert.fsoco_to_yolo(args.src, args.out, args.val_fraction, args.seed, args.border,
+                                    progress=not args.no_progress)
     else:
         clips = [c.strip() for c in args.clips.split(",") if c.strip()] if args.clips else None
-        rep = convert.restore_aspect(args.src, args.out, args.aspect, width=args.width, clips=clips)
+        names = [n.strip() for n in args.names.split(",") if n.strip()] if args.names else None
+        rep = convert.restore_aspect(args.src, args.out, args.aspect, width=args.width, clips=clips, names=names,
+                                     progress=not args.no_progress)
     skipped = ", ".join(f"{k}: {v}" for k, v in sorted(rep.skipped.items())) or "none"
-    print(f"wrote {rep.images} images, {rep.boxes} boxes to {args.out} {rep.per_split or ''}; skipped: {skipped}")
+    from ..words import plural
+
+    print(f"wrote {plural(rep.images, 'image')}, {plural(rep.boxes, 'box', 'boxes')} to {args.out} "
+          f"{rep.per_split or ''}; skipped: {skipped}")
     return 0

@@ -125,7 +125,7 @@ def run(args: argparse.Namespace) -> int:
     picks = [stamps[int(i)] for i in np.linspace(0, len(stamps) - 1, 4)] if stamps else []
     panels = [(f"t = {(s - stamps[0]) / 1e9:.2f} s", cones[s], truth.get(s)) for s in picks]
     be = birdseye_plot(panels, args.out / "birdseye.png", x_max_m=calib.max_range_m)
-    fr = _frames_png(bag, boxes, picks, calib, args.out / "frames.png")
+    fr = _frames_png(bag, boxes, picks, calib, args.out / "frames.png", truth, stamps[0] if stamps else None)
     summary = {"drive": {"seed": args.seed, "seconds": args.seconds, "fps": args.fps, "jitter": args.jitter},
                "mode": how, "model": str(model), "calibration": calib.source, "frames_sent": sent,
                "frames_with_cones": n, "lost": lost, "fps": n / wall if wall else 0.0, "latency_ms": latency,
@@ -151,24 +151,51 @@ def expected_truth(truth: np.ndarray, calib, mapper=None) -> np.ndarray:
     return truth[keep & inside & (np.hypot(truth["x"], truth["y"]) <= calib.max_range_m)]
 
 
-def _frames_png(bag: Path, boxes: dict, stamps: list[int], calib, path: Path) -> Path:
+def _frames_png(bag: Path, boxes: dict, stamps: list[int], calib, path: Path, truth: dict | None = None,
+                t0_ns: int | None = None) -> Path:
+    """The picked frames in a 2-column grid: detections (class colour, score), the true cones' foot points
+    (class-coloured rings, from ``/cones_gt`` through the calibration), the band, a time stamp per tile and
+    a legend strip below."""
     import cv2
 
-    from ..adapter import DriverAdapter
-    from ..crop import CropSpec
-    from ..replay import find_image_topic, iter_frames
-    from ..vis import draw_boxes, frame_strip
+    from ..classes import CLASS_BGR
+    from ..mapping import ConeMapper
+    from ..replay import find_image_topic, frame_bgr, iter_frames
+    from ..vis import draw_boxes, frame_strip, legend_strip, outlined_text
 
     topic, _ = find_image_topic(bag)
+    mapper = ConeMapper(calib)
     want, imgs = set(stamps), []
+    t0 = stamps[0] if t0_ns is None and stamps else t0_ns
     for f in iter_frames(bag, topic):
         if f.stamp_ns in want and f.msg is not None:
-            m = f.msg
-            full = DriverAdapter(CropSpec.full_image(int(m.width), int(m.height)), int(m.width), int(m.height))
-            bgr = full.from_raw(m.encoding, int(m.width), int(m.height), int(m.step), m.data)
-            img = draw_boxes(bgr, boxes.get(f.stamp_ns, np.zeros(0)), thickness=3)
+            bgr = frame_bgr(f)
+            k = max(1, bgr.shape[1] // 960)  # line and font size for a tile shown at 960 px
+            img = draw_boxes(bgr, boxes.get(f.stamp_ns, np.zeros(0)), thickness=k + 1, font_scale=0.45 * k,
+                             min_label_height=14 * k)
+            t = (truth or {}).get(f.stamp_ns)
+            if t is not None and len(t):
+                t = t[t["score"] >= 0.5]  # at least half visible (score of /cones_gt: the visible fraction)
+                uv = mapper.ground_to_pixels(np.c_[t["x"], t["y"]])
+                for (u, v), c in zip(uv, t["class_id"]):
+                    if np.isfinite(u) and np.isfinite(v) and 0 <= u < img.shape[1] and 0 <= v < img.shape[0]:
+                        cv2.circle(img, (int(round(u)), int(round(v))), 5 * k, (0, 0, 0), 3 * k, cv2.LINE_AA)
+                        cv2.circle(img, (int(round(u)), int(round(v))), 5 * k, CLASS_BGR[int(c)], k, cv2.LINE_AA)
             c = calib.crop
-            cv2.rectangle(img, (c.u0, c.v0), (c.u1 - 1, c.v1 - 1), (255, 255, 255), 2)
+            cv2.rectangle(img, (c.u0, c.v0), (c.u1 - 1, c.v1 - 1), (255, 255, 255), k)
+            n = len(boxes.get(f.stamp_ns, ()))
+            outlined_text(img, f"t = {(f.stamp_ns - t0) / 1e9:.2f} s   {n} detection{'s' if n != 1 else ''}",
+                          (12 * k, 34 * k), (255, 255, 255), 0.9 * k, 2 * k)
             imgs.append(img)
-    cv2.imwrite(str(path), frame_strip(imgs, width=960, cols=2) if imgs else np.zeros((8, 8, 3), np.uint8))
+    if not imgs:
+        cv2.imwrite(str(path), np.zeros((8, 8, 3), np.uint8))
+        return path
+    grid = frame_strip(imgs, width=960, cols=2)
+    legend = legend_strip(grid.shape[1], [
+        ("box + class score: detection (score shown on boxes >= 14 px tall at 960 px)", (230, 230, 230)),
+        ("ring: foot point of a true cone at least half visible (/cones_gt)", (230, 230, 230)),
+        ("white frame: the band fed to the detector", (255, 255, 255)),
+        *[(name.replace("_", " "), CLASS_BGR[i]) for i, name in enumerate(("blue", "yellow", "orange", "large_orange"))],
+    ])
+    cv2.imwrite(str(path), np.vstack([grid, legend]))
     return path

@@ -1,9 +1,11 @@
-"""``cone-perception detect``: run the detector over an image, a folder or a rosbag -> JSON lines.
+"""``cone-perception detect``: run the detector over an image, a folder, a video or a rosbag -> JSON lines.
 
   cone-perception detect SOURCE --out FILE.jsonl [--model M] [--imgsz WxH] [--crop V0,V1[,U0,U1]]
-                                 [--downscale N] [--backend B] [--save-vis DIR]
+                                 [--downscale N] [--backend B] [--save-vis DIR] [--every N]
 
 One line per image (see ``cone_perception/predictions.py``), boxes in the image's own pixels.
+A video's frames are named ``<video stem>_<frame index, 6 digits>`` (index from 0 in the file);
+a bag's by their stamp in ns. No image read at all is an error (exit 2).
 Without ``--crop`` each image is letterboxed to the model input (``--imgsz``, default the
 model's); with ``--crop`` the band is cut (and downscaled by ``--downscale``) as the car does.
 """
@@ -25,6 +27,8 @@ from ..errors import ConfigError, FrameError
 from .train import parse_size
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp")
+#: Files read with OpenCV's VideoCapture.
+VIDEO_SUFFIXES = (".mp4", ".avi", ".mkv", ".mov", ".m4v", ".webm")
 
 
 def parse_crop(text: str) -> tuple[int, ...]:
@@ -38,8 +42,9 @@ def parse_crop(text: str) -> tuple[int, ...]:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.description = "Run the detector over an image, a folder of images or a rosbag's camera topic; write JSON lines."
-    p.add_argument("source", type=Path, help="image file, folder of images, or rosbag2 directory")
+    p.description = ("Run the detector over an image, a folder of images, a video file (mp4, avi, mkv, ...) or a "
+                     "rosbag's camera topic; write JSON lines.")
+    p.add_argument("source", type=Path, help="image file, folder of images, video file, or rosbag2 directory")
     p.add_argument("--out", type=Path, required=True, help="JSON-lines output file")
     p.add_argument("--model", default=None, help="model file (default: the shipped default model)")
     p.add_argument("--backend", default=DEFAULT_BACKEND, choices=BACKEND_CHOICES,
@@ -52,16 +57,28 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--conf", type=float, default=0.25, help="confidence threshold (default %(default)s)")
     p.add_argument("--iou", type=float, default=0.45, help="NMS IoU threshold (default %(default)s)")
     p.add_argument("--topic", default=None, help="rosbag: camera topic (default: the only image topic)")
-    p.add_argument("--save-vis", type=Path, default=None, metavar="DIR", help="write annotated images here")
+    p.add_argument("--save-vis", type=Path, default=None, metavar="DIR",
+                   help="write annotated images here (with --crop the band is drawn too)")
+    p.add_argument("--every", type=int, default=1, metavar="N",
+                   help="video or bag: every N-th frame only (default 1: all); frame indices stay those of the source")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
-def iter_source(source: Path, topic: str | None = None) -> Iterator[tuple[str, np.ndarray | None, str | None]]:
-    """``(name, bgr full image or None, error or None)`` for an image, a folder or a bag."""
+def iter_source(source: Path, topic: str | None = None, every: int = 1
+                ) -> Iterator[tuple[str, np.ndarray | None, str | None]]:
+    """``(name, bgr full image or None, error or None)`` for an image, a folder, a video or a bag;
+    of a video or a bag every ``every``-th frame only."""
+    if every < 1:
+        raise ConfigError("--every", None, f"must be >= 1, got {every}")
     if not source.exists():
         raise ConfigError(str(source), None, "source does not exist")
     if source.is_dir() and (source / "metadata.yaml").is_file():
-        yield from _iter_bag(source, topic)
+        for k, item in enumerate(_iter_bag(source, topic)):
+            if k % every == 0:
+                yield item
+        return
+    if source.is_file() and source.suffix.lower() in VIDEO_SUFFIXES:
+        yield from iter_video(source, every)
         return
     files = [source] if source.is_file() else sorted(p for p in source.rglob("*") if p.suffix.lower() in IMAGE_SUFFIXES)
     if not files:
@@ -78,24 +95,38 @@ def iter_source(source: Path, topic: str | None = None) -> Iterator[tuple[str, n
             yield name, None, f"unreadable: {e.strerror}"
 
 
+def iter_video(path: Path, every: int = 1) -> Iterator[tuple[str, np.ndarray | None, str | None]]:
+    """``(<stem>_<frame index 000000>, bgr frame, None)`` of every ``every``-th frame of a video file.
+    A file OpenCV cannot open, or one that yields no frame, is a :class:`ConfigError` naming it."""
+    cap = cv2.VideoCapture(str(path))
+    try:
+        if not cap.isOpened():
+            raise ConfigError(str(path), None, "cannot open the video (OpenCV VideoCapture; is it a video file "
+                                               "of a codec this OpenCV build reads?)")
+        k, read = 0, 0
+        while True:
+            if k % every == 0:
+                ok, frame = cap.read()
+                if not ok:
+                    break
+                read += 1
+                yield f"{path.stem}_{k:06d}", frame, None
+            elif not cap.grab():
+                break
+            k += 1
+        if read == 0:
+            raise ConfigError(str(path), None, "the video holds no readable frame")
+    finally:
+        cap.release()
+
+
 def _iter_bag(bag: Path, topic: str | None):
-    from .. import bagio
-    from ..adapter import crop_raw_to_bgr, decode_compressed, raw_frame_view
-    from ..replay import find_image_topic, iter_frames
+    from ..replay import find_image_topic, frame_bgr, iter_frames
 
     topic, _ = find_image_topic(bag, topic)
     for fr in iter_frames(bag, topic):
         try:
-            if fr.error:
-                raise fr.error
-            m = fr.msg
-            if fr.msgtype == bagio.COMPRESSED_IMAGE:
-                img = decode_compressed(m.data)
-            else:
-                w, h = int(m.width), int(m.height)
-                name, view = raw_frame_view(m.encoding, w, h, int(m.step), m.data)
-                img = crop_raw_to_bgr(name, view, CropSpec.full_image(w, h))
-            yield str(fr.stamp_ns), img, None
+            yield str(fr.stamp_ns), frame_bgr(fr), None
         except FrameError as e:
             yield str(fr.stamp_ns), None, str(e)
 
@@ -124,7 +155,7 @@ def detect_one(det, img: np.ndarray, name: str, crop: tuple[int, ...] | None = N
 
 def run(args: argparse.Namespace) -> int:
     from ..predictions import write_prediction
-    from ..vis import draw_boxes
+    from ..vis import draw_band, draw_boxes
 
     model = args.model or default_model_path()
     backend = resolve_backend(args.backend, model, bf16=args.bf16)
@@ -152,7 +183,8 @@ def run(args: argparse.Namespace) -> int:
         args.save_vis.mkdir(parents=True, exist_ok=True)
     n, skipped = 0, []
     with fh:
-        for name, img, err in tqdm(iter_source(args.source, args.topic), unit="img", disable=args.no_progress, file=sys.stderr):
+        for name, img, err in tqdm(iter_source(args.source, args.topic, args.every), unit="img",
+                                   disable=args.no_progress, file=sys.stderr):
             if err:
                 skipped.append(f"{name}: {err}")
                 continue
@@ -162,8 +194,18 @@ def run(args: argparse.Namespace) -> int:
             n += 1
             if args.save_vis:
                 out = args.save_vis / (Path(name).stem + ".jpg")
-                cv2.imwrite(str(out), draw_boxes(img, boxes))
-    print(f"detect: {n} images -> {args.out}" + (f", {len(skipped)} skipped" if skipped else ""))
+                vis = draw_boxes(img, boxes)
+                if args.crop:
+                    vis = draw_band(vis, args.crop, args.downscale)
+                cv2.imwrite(str(out), vis)
+    from ..words import plural
+
+    print(f"detect: {plural(n, 'image')} -> {args.out}" + (f", {len(skipped)} skipped" if skipped else ""))
     for s in skipped[:20]:
         print(f"  skipped {s}", file=sys.stderr)
+    if len(skipped) > 20:
+        print(f"  ... {len(skipped) - 20} more skipped", file=sys.stderr)
+    if n == 0:
+        raise ConfigError(str(args.source), None, f"no image could be read ({plural(len(skipped), 'input')} skipped"
+                                                  + (f", first: {skipped[0]}" if skipped else "") + ")")
     return 0

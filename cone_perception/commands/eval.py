@@ -10,6 +10,7 @@ positions: localisation and the thesis's pair metric too). See ``cone_perception
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 
@@ -114,6 +115,11 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(str(args.out), None, "output exists and is not a directory")
     res = evaluate_predictions(args.pred, args.gt, args.gt_names, args.calib, args.conf, args.iou, args.only_predicted,
                                progress=not args.no_progress, band=args.band, min_height=args.min_height)
+    from ..eval_report import lowest_score_note
+
+    low = lowest_score_note(res.images)
+    if low:
+        print(f"warning: {low}", file=sys.stderr)
     try:
         files = write_report(res, args.out, str(args.pred), str(args.gt), worst=max(0, args.worst))
     except OSError as e:

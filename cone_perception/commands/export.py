@@ -28,7 +28,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--format", choices=("torchscript", "onnx"), required=True, help="output format")
     p.add_argument("--imgsz", type=parse_size, default=None, help="input WxH px (default: the checkpoint's)")
     p.add_argument("--out", default=None, help="output file (default: next to the checkpoint, .torchscript / .onnx)")
-    p.add_argument("--force", action="store_true", help="overwrite existing output files (the model and its <stem>.yaml)")
+    p.add_argument("--force", action="store_true", help="overwrite existing output files (the model and its sidecar <file>.yaml; with --int8 those of the int8 file too)")
     q = p.add_argument_group("int8 (ONNX only)")
     q.add_argument("--int8", action="store_true", help="also write <stem>.int8.onnx, statically quantised")
     q.add_argument("--calib-images", type=Path, default=None, metavar="DIR",
@@ -59,10 +59,10 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from ..checkpoint import load_checkpoint
-    from ..detector import Detector, write_sidecar
+    from ..detector import Detector, sidecar_path, write_sidecar
     from ..errors import ConfigError
     from ..outfiles import refuse_existing
-    from ..export import export_model, max_abs_diff
+    from ..export import export_metadata, export_model, max_abs_diff
     from ..train.trainer import round_imgsz
 
     int8_flags = [f"--{k.replace('_', '-')}" for k in ("calib_images", "calib_clips", "calib_crop") if getattr(args, k) is not None]
@@ -87,12 +87,12 @@ def run(args: argparse.Namespace) -> int:
     if out.suffix != suffix:
         raise ConfigError(str(out), None, f"the output of format {args.format} must end in {suffix}")
     model = ck.build_model()
-    outputs = [out, out.with_suffix(".yaml")]
-    if args.int8:
-        outputs += [out.with_suffix(".int8.onnx"), out.with_suffix(".int8.yaml")]
+    int8_out = out.with_suffix(".int8.onnx")
+    outputs = [out, sidecar_path(out)] + ([int8_out, sidecar_path(int8_out)] if args.int8 else [])
     refuse_existing(outputs, args.force, "export")
-    export_model(model, imgsz, args.format, out)
-    side = write_sidecar(out, ck.class_names, imgsz, {"source": str(args.model), "layout": "(1, 4 + nc, N): cx cy w h px, class scores"})
+    meta = export_metadata(ck.class_names, imgsz, max(model.strides), str(args.model))
+    export_model(model, imgsz, args.format, out, meta)
+    side = write_sidecar(out, ck.class_names, imgsz, {k: v for k, v in meta.items() if k not in ("names", "imgsz")})
 
     # verify: the exported file, loaded the way users load it, against eager on random and grey inputs
     exported = Detector.load(out, backend=args.format)
@@ -105,7 +105,8 @@ def run(args: argparse.Namespace) -> int:
     if worst > TOLERANCE:
         out.unlink(missing_ok=True)
         raise ConfigError(str(out), None, f"exported model differs from eager by {worst:.3g} (> {TOLERANCE}); file removed")
-    print(f"wrote {out} and {side} ({w}x{h}); verified against eager: max |diff| {worst:.2e} <= {TOLERANCE}")
+    print(f"wrote {out} ({w}x{h}; class names, input size, stride and source embedded) and {side}; "
+          f"verified against eager: max |diff| {worst:.2e} <= {TOLERANCE}")
     if args.int8:
         _int8(args, ck, out, imgsz, eager, pool, dropped)
     return 0
@@ -126,10 +127,12 @@ def _int8(args, ck, fp32_path: Path, imgsz: tuple[int, int], eager, pool: list[P
           + (f" ({dropped} frames of validation clips left out)" if dropped else "") + f"; {opts.describe()}")
     summary = quantize_onnx(fp32_path, out, calibration_blobs(files, imgsz, args.calib_crop, args.calib_downscale),
                             opts, total=len(files), progress=not args.no_progress)
-    side = write_sidecar(out, ck.class_names, imgsz, {
-        "source": str(args.model), "layout": "(1, 4 + nc, N): cx cy w h px, class scores",
-        "quantisation": opts.describe(), "calibration": f"{len(files)} frames of {args.calib_images}",
-    })
+    from ..export import export_metadata, with_onnx_metadata
+
+    meta = export_metadata(ck.class_names, imgsz, max(ck.cfg.strides), str(args.model), {
+        "quantisation": opts.describe(), "calibration": f"{len(files)} frames of {args.calib_images}"})
+    out.write_bytes(with_onnx_metadata(out.read_bytes(), meta))
+    side = write_sidecar(out, ck.class_names, imgsz, {k: v for k, v in meta.items() if k not in ("names", "imgsz")})
 
     # check: boxes of the int8 file, loaded the way users load it, against eager on real frames
     # (frames not used for calibration if the folder has them)

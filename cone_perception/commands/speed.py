@@ -15,7 +15,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--backends", nargs="+", default=["torch", "onnx"], choices=("torch", "torchscript", "onnx"), help="backends (default torch onnx)")
     p.add_argument("--bf16", action="store_true", help="also time backend torch with bfloat16 autocast (row 'torch-bf16')")
     p.add_argument("--imgsz", type=parse_size, default=(960, 288), help="input WxH px (default 960x288)")
-    p.add_argument("--threads", type=int, default=2, help="intra-op threads (default 2)")
+    p.add_argument("--threads", type=int, default=1,
+                   help="intra-op threads of the network (default 1, as the nodes and every other command)")
     p.add_argument("--frames", type=int, default=50, help="timed forwards per case (default 50)")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
 
@@ -48,7 +49,10 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(rows))
         return 0
-    print(f"forward only, input {args.imgsz[0]}x{args.imgsz[1]}, {args.threads} threads, {args.frames} frames")
+    from ..words import plural
+
+    print(f"forward only, input {args.imgsz[0]}x{args.imgsz[1]}, {plural(args.threads, 'thread')}, "
+          f"{plural(args.frames, 'frame')}")
     wm = max([12] + [len(str(r["model"])) + 2 for r in rows])  # a model path is longer than a size name
     print(f"{'model':<{wm}}{'backend':<13}{'params':>10}{'GFLOPs':>8}{'median ms':>11}{'p90 ms':>9}{'min-max ms':>16}{'fps':>8}")
     for r in rows:

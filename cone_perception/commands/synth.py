@@ -38,7 +38,8 @@ def _common(p: argparse.ArgumentParser) -> None:
     g.add_argument("--missing", type=float, default=0.0, help="fraction of cones removed from each track (default 0)")
     g.add_argument("--stray", type=int, default=0, help="stray cones placed off the track per track (default 0)")
     g.add_argument("--knocked", type=float, default=0.0, help="fraction of cones knocked over, lying on their side (default 0)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--no-progress", "--quiet", dest="no_progress", action="store_true",
+                   help="no progress bar (--quiet: the same, kept for old scripts)")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -108,10 +109,10 @@ def run(args: argparse.Namespace) -> int:
 
     cfg = config_from_args(args)
     if args.action == "dataset":
-        c = outputs.write_dataset(cfg, args.n, args.out, args.frames_per_track, args.val_frac, progress=not args.quiet)
+        c = outputs.write_dataset(cfg, args.n, args.out, args.frames_per_track, args.val_frac, progress=not args.no_progress)
         print(f"wrote {c['train']} train + {c['val']} val frames, {c['labels']} YOLO labels, {c['cones']} cones in gt.jsonl -> {args.out}")
     elif args.action == "bag":
-        c = outputs.write_scene_bag(cfg, args.seconds, args.fps, args.out, args.compressed, args.speed, args.track, not args.quiet)
+        c = outputs.write_scene_bag(cfg, args.seconds, args.fps, args.out, args.compressed, args.speed, args.track, not args.no_progress)
         calib, gt = outputs.bag_side_paths(Path(args.out))
         print(f"wrote {args.out}: " + ", ".join(f"{t} {k}" for t, k in c.items()) + f"; calibration {calib}; ground truth {gt}")
     elif args.action == "preview":

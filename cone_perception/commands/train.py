@@ -1,10 +1,17 @@
-"""``cone-perception train``: train the cone detector on YOLO txt datasets."""
+"""``cone-perception train``: train the cone detector on YOLO txt datasets.
+
+``--data`` takes an Ultralytics data.yaml (``path``, ``train``, ``val``, ``test``, ``names``),
+the one ``synth dataset`` / ``data fsoco-to-yolo`` / ``data restore-aspect`` write, or this
+package's own mixing form (see :mod:`cone_perception.train.datasets`). Without ``--out`` a run goes
+to ``runs/train/<name>`` numbered (``exp``, ``exp2``, ...), never into an existing run.
+"""
 
 from __future__ import annotations
 
 import argparse
 import json
 import logging
+import sys
 
 from ..model import MODEL_SIZES
 
@@ -26,13 +33,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     from ..train.trainer import PRECISIONS, TrainConfig
 
     d = TrainConfig(data="", out="")
-    p.add_argument("--data", required=True, help="data YAML listing train / val datasets (see docs/training.md)")
+    p.add_argument("--data", required=True,
+                   help="data YAML: Ultralytics form (path, train, val, test, names as list or dict; what 'synth "
+                        "dataset' writes) or our own mixing form (see docs/training.md)")
     p.add_argument("--model", default=d.model,
                    help=f"model size ({', '.join(MODEL_SIZES)}) or a checkpoint to fine-tune (default {d.model})")
     p.add_argument("--epochs", type=int, default=d.epochs, help=f"epochs (default {d.epochs}; with --resume: new total)")
     p.add_argument("--imgsz", type=parse_size, default=d.imgsz, help="input WxH px, multiples of 32 (default 960x288)")
     p.add_argument("--batch", type=int, default=d.batch, help=f"images per batch (default {d.batch})")
-    p.add_argument("--out", required=True, help="output folder: last.pt, best.pt, results.csv")
+    p.add_argument("--out", default=None,
+                   help="output folder: last.pt, best.pt, results.csv, results.png (default runs/train/NAME, "
+                        "numbered NAME2, NAME3, ... so no run is overwritten; required with --resume)")
+    p.add_argument("--name", default="exp", help="run name under runs/train when --out is not given (default exp)")
     p.add_argument("--resume", action="store_true", help="continue exactly from OUT/last.pt (its settings, new --epochs)")
     p.add_argument("--optimizer", choices=("adamw", "sgd"), default=d.optimizer, help="optimizer (default adamw)")
     p.add_argument("--lr0", type=float, default=d.lr0, help=f"peak learning rate (default {d.lr0})")
@@ -43,33 +55,53 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--mosaic", type=float, default=d.augment.mosaic, help=f"mosaic probability (default {d.augment.mosaic})")
     p.add_argument("--close-mosaic", type=int, default=d.close_mosaic, help=f"last N epochs without mosaic (default {d.close_mosaic})")
     p.add_argument("--precision", choices=PRECISIONS, default=None,
-                   help="fp32, or bf16 (autocast with channels-last: about 2x the images/s on a CPU with native "
-                        "bfloat16, e.g. AVX512-BF16; weights, optimizer and loss stay fp32); auto = bf16 where the CPU "
-                        "has it (default auto; with --resume: keep the run's own unless given)")
+                   help="fp32, bf16 (autocast with channels-last: about 2x the images/s on a CPU with native "
+                        "bfloat16, e.g. AVX512-BF16; weights, optimizer and loss stay fp32) or fp16 (CUDA only, with "
+                        "loss scaling); auto = on a GPU bf16 where it has it, else fp16; on the CPU bf16 where native, "
+                        "else fp32 (default auto; with --resume: keep the run's own unless given)")
+    p.add_argument("--device", default=d.device,
+                   help="auto (a GPU where CUDA is there, else the CPU), cpu, cuda or cuda:N (default auto). Several "
+                        "GPUs: torchrun --nproc_per_node N -m cone_perception.cli train ... (one process per GPU; "
+                        "--batch is the global batch, divided among them; see docs/training.md)")
     p.add_argument("--no-augment", action="store_true", help="switch every augmentation off")
     p.add_argument("--max-batches", type=int, default=0, help="cap batches per epoch (quick trials; 0 = all)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar (one log line per epoch)")
     p.add_argument("--json", action="store_true", help="print the final summary as JSON")
 
 
 def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
+    from ..errors import ConfigError
     from ..train.augment import AugmentConfig
+    from ..train.report import RUNS_DIR, next_run_dir
     from ..train.trainer import TrainConfig, train
 
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     aug = AugmentConfig.off() if args.no_augment else replace(AugmentConfig(), mosaic=args.mosaic)
+    from ..train.distributed import world_from_env
+
+    rank = world_from_env()[0]
+    if args.out is None:
+        if args.resume:
+            raise ConfigError("--resume", None, "needs --out: the folder of the run to continue")
+        args.out = str(next_run_dir(RUNS_DIR, args.name))
     cfg = TrainConfig(
         data=args.data, out=args.out, model=args.model, epochs=args.epochs, batch=args.batch, imgsz=args.imgsz,
         optimizer=args.optimizer, lr0=args.lr0, patience=args.patience, workers=args.workers, threads=args.threads,
         seed=args.seed, close_mosaic=args.close_mosaic, max_batches=args.max_batches, augment=aug,
-        precision=args.precision or "auto",
+        precision=args.precision or "auto", device=args.device,
     )
-    result = train(cfg, resume=args.resume, precision=args.precision)
+    if rank == 0:
+        print(f"train: run folder {args.out}", file=sys.stderr, flush=True)
+    result = train(cfg, resume=args.resume, precision=args.precision, progress=not args.no_progress)
+    if rank != 0:  # under torchrun only rank 0 reports
+        return 0
     last = result["history"][-1] if result["history"] else {}
     summary = {"out": result["out"], "best_epoch": result["best_epoch"], "best_fitness": result["best_fitness"], "last": last}
     if args.json:
         print(json.dumps(summary))
     else:
-        print(f"done: best epoch {result['best_epoch']} (fitness {result['best_fitness']:.4f}); checkpoints in {result['out']}")
+        print(f"done: best epoch {result['best_epoch']} of {len(result['history'])} (fitness "
+              f"{result['best_fitness']:.4f}); best.pt, last.pt, results.csv, results.png in {result['out']}")
     return 0

@@ -410,12 +410,14 @@ def _imu_msg(s, stamp: int):
 
 def draw_truths(img: np.ndarray, truths: list[ConeTruth], thickness: int = 2) -> np.ndarray:
     """Boxes in class colours; labelled cones solid, unlabelled (too small / hidden) thin."""
+    from ..vis import outlined_text
+
     for t in truths:
         u1, v1, u2, v2 = (int(round(x)) for x in t.box)
         labelled = (u2 - u1 >= MIN_LABEL_BOX_PX and v2 - v1 >= MIN_LABEL_BOX_PX and t.visible_fraction >= MIN_LABEL_VISIBLE)
         cv2.rectangle(img, (u1, v1), (u2, v2), CLASS_BGR[t.class_id], thickness if labelled else 1)
         if labelled and v2 - v1 >= 14:
-            cv2.putText(img, f"{t.distance_m:.1f}m", (u1, max(v1 - 4, 10)), cv2.FONT_HERSHEY_SIMPLEX, 0.5, CLASS_BGR[t.class_id], 1, cv2.LINE_AA)
+            outlined_text(img, f"{t.distance_m:.1f}m", (u1, max(v1 - 4, 10)), CLASS_BGR[t.class_id], 0.5)
     return img
 
 
@@ -436,9 +438,11 @@ def write_preview(cfg: SynthConfig, out: Path, n: int = 8, cols: int = 2, thumb_
         look = renderer.new_look(rng)
         img, truths = renderer.render(track, random_pose(track, rng, cfg.jitter), look, rng)
         img = draw_truths(img, truths, thickness=max(cfg.width // 640, 1))
+        from ..vis import outlined_text
+
         th = int(round(thumb_w * cfg.height / cfg.width))
         thumb = cv2.resize(img, (thumb_w, th), interpolation=cv2.INTER_AREA)
-        cv2.putText(thumb, f"{track.kind} seed {track.seed}", (8, 22), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (255, 255, 255), 2, cv2.LINE_AA)
+        outlined_text(thumb, f"{track.kind} seed {track.seed}", (8, 24), (255, 255, 255), 0.7, 2)
         thumbs.append(thumb)
     from ..vis import frame_strip
 

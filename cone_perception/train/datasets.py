@@ -1,6 +1,8 @@
 """Datasets in YOLO txt layout, described by a data YAML, mixed with weights.
 
-A data YAML (paths relative to the YAML file)::
+Two forms of data YAML are read: an Ultralytics one (``path``, ``train: images/train``,
+``val``, ``test``, ``names``; see :mod:`.yolo_yaml`; ``synth dataset`` writes one) and
+this package's own, which mixes several datasets. Our own form (paths relative to the YAML file)::
 
     train:
       - path: /work/shared/datasets/bgracing-real
@@ -34,6 +36,7 @@ import yaml
 
 from ..checkpoint import class_map_from_names
 from ..errors import ConfigError
+from .yolo_yaml import is_yolo_style, yolo_entries
 
 log = logging.getLogger(__name__)
 
@@ -197,7 +200,15 @@ def load_data_yaml(path: str | Path) -> tuple[list[DatasetEntry], list[DatasetEn
     except yaml.YAMLError as e:
         raise ConfigError(src, None, f"not valid YAML: {e}") from e
     if not isinstance(doc, dict) or not doc.get("train"):
-        raise ConfigError(src, "train", "needs a list of datasets under 'train:'")
+        raise ConfigError(src, "train", "needs a list of datasets under 'train:' (or an Ultralytics 'train: images/train')")
+    if is_yolo_style(doc):
+        splits = yolo_entries(doc, path)
+        loaded = {k: [load_entry({a: b for a, b in e.items() if a != "_key"}, path.parent, src, e["_key"]) for e in v]
+                  for k, v in splits.items()}
+        rest = {k: v for k, v in doc.items() if k not in ("train", "val")}
+        if loaded.get("test"):
+            rest["test_entries"] = loaded["test"]
+        return loaded["train"], loaded.get("val", []), rest
     out = []
     for key in ("train", "val"):
         items = doc.get(key) or []
@@ -229,3 +240,34 @@ def labels_to_xyxy(labels: np.ndarray, w: int, h: int) -> tuple[np.ndarray, np.n
     boxes[:, 0::2] = boxes[:, 0::2].clip(0, w)
     boxes[:, 1::2] = boxes[:, 1::2].clip(0, h)
     return boxes.reshape(-1, 4), c
+
+
+def split_counts(entries: list[DatasetEntry]) -> dict:
+    """Images, background images (no box) and boxes per project class of a split's entries."""
+    from ..classes import CLASS_NAMES
+
+    per_class = np.zeros(len(CLASS_NAMES), np.int64)
+    background = 0
+    for e in entries:
+        for lab in e.labels:
+            if len(lab) == 0:
+                background += 1
+            per_class += np.bincount(lab[:, 0].astype(np.int64), minlength=len(CLASS_NAMES))[: len(CLASS_NAMES)]
+    return {"images": sum(len(e.image_paths) for e in entries), "background": background,
+            "boxes": int(per_class.sum()), "per_class": {n: int(v) for n, v in zip(CLASS_NAMES, per_class)}}
+
+
+def summary_table(splits: dict[str, list[DatasetEntry]]) -> str:
+    """A plain-text table: per split, images, background images, boxes, and boxes per project class."""
+    from ..classes import CLASS_NAMES
+
+    head = ["split", "images", "no box", "boxes", *CLASS_NAMES]
+    rows = []
+    for split, entries in splits.items():
+        if not entries:
+            continue
+        c = split_counts(entries)
+        rows.append([split, c["images"], c["background"], c["boxes"], *(c["per_class"][n] for n in CLASS_NAMES)])
+    widths = [max(len(str(r[i])) for r in [head, *rows]) for i in range(len(head))]
+    fmt = lambda r: "  ".join(str(v).ljust(w) if i == 0 else str(v).rjust(w) for i, (v, w) in enumerate(zip(r, widths)))
+    return "\n".join([fmt(head), *(fmt(r) for r in rows)])

@@ -13,6 +13,7 @@ import csv
 import logging
 import math
 import random
+import sys
 import time
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
@@ -30,8 +31,10 @@ from ..model import ConeYOLO, MODEL_SIZES, model_config
 from ..model.decode import postprocess
 from ..model.loss import DetectionLoss
 from .augment import AugmentConfig
-from .datasets import load_data_yaml
+from . import distributed
+from .datasets import load_data_yaml, summary_table
 from .loader import EpochSampler, TrainSet, ValSet, collate
+from .report import plot_results
 
 log = logging.getLogger(__name__)
 
@@ -55,11 +58,12 @@ class TrainConfig:
     ema_tau: float = 200.0  # EMA ramp: decay * (1 - exp(-updates / tau))
     patience: int = 30  # early stop after this many epochs without a better fitness
     workers: int = 2
-    threads: int = 2
+    threads: int = 1
     seed: int = 0
     close_mosaic: int = 5  # last N epochs without mosaic
     max_batches: int = 0  # > 0: cap on batches per epoch (quick runs)
-    precision: str = "auto"  # "fp32", "bf16" (autocast + channels-last) or "auto" (bf16 where the CPU has it natively)
+    precision: str = "auto"  # "fp32", "bf16" (autocast + channels-last), "fp16" (CUDA, with loss scaling) or "auto"
+    device: str = "auto"  # "auto" (CUDA where there, else CPU), "cpu", "cuda", "cuda:N"; with torchrun: one GPU per process
     val_conf: float = 0.001
     val_iou: float = 0.6
     augment: AugmentConfig = field(default_factory=AugmentConfig)
@@ -97,7 +101,7 @@ class ModelEMA:
                 v.copy_(msd[k])
 
 
-PRECISIONS = ("auto", "fp32", "bf16")
+PRECISIONS = ("auto", "fp32", "bf16", "fp16")
 
 
 def native_bf16() -> bool:
@@ -110,11 +114,17 @@ def native_bf16() -> bool:
         return False
 
 
-def resolve_precision(precision: str) -> str:
-    """``auto`` -> ``bf16`` on a CPU with native bfloat16, else ``fp32``; a bad name is a ConfigError."""
+def resolve_precision(precision: str, device: str = "cpu") -> str:
+    """``auto`` -> on a GPU ``bf16`` where it computes bfloat16, else ``fp16``; on the CPU ``bf16`` where it is
+    native, else ``fp32``. ``fp16`` needs a GPU. A bad name is a ConfigError."""
     if precision not in PRECISIONS:
         raise ConfigError("train", "precision", f"unknown precision {precision!r}; choose {', '.join(PRECISIONS)}")
+    cuda = str(device).startswith("cuda")
+    if precision == "fp16" and not cuda:
+        raise ConfigError("train", "precision", "fp16 needs a CUDA device (on the CPU use bf16 or fp32)")
     if precision == "auto":
+        if cuda:
+            return "bf16" if torch.cuda.is_bf16_supported() else "fp16"
         return "bf16" if native_bf16() else "fp32"
     return precision
 
@@ -148,12 +158,13 @@ def lr_at(it: int, iters_per_epoch: int, cfg: TrainConfig) -> float:
 
 
 @torch.no_grad()
-def evaluate(model: ConeYOLO, loader: DataLoader, conf: float, iou: float, max_det: int = 300) -> dict:
+def evaluate(model: ConeYOLO, loader: DataLoader, conf: float, iou: float, max_det: int = 300,
+             device: torch.device | str = "cpu") -> dict:
     """mAP of ``model`` on a validation loader (boxes compared in the letterboxed input px)."""
     model.eval()
     images = []
     for imgs, targets in loader:
-        pred = model(imgs.float().div_(255)).numpy()
+        pred = model(imgs.to(device).float().div_(255)).float().cpu().numpy()
         for i in range(imgs.shape[0]):
             t = targets[targets[:, 0] == i].numpy()
             b, s, c = postprocess(pred[i], conf, iou, max_det)
@@ -179,14 +190,35 @@ def _set_rng_state(s: dict) -> None:
 
 def train(cfg: TrainConfig, resume: bool = False, progress: bool = True, stop_after: int | None = None,
           precision: str | None = None) -> dict:
-    """Train; returns the history (one dict per epoch). Writes ``last.pt``, ``best.pt``, ``results.csv`` to ``cfg.out``.
+    """Train; returns the history (one dict per epoch). Writes ``last.pt``, ``best.pt``, ``results.csv`` and
+    ``results.png`` to ``cfg.out``. Epochs are numbered from 1 everywhere (bar, log, results.csv, history,
+    ``best_epoch``). A folder that already holds a run is refused unless ``resume``.
 
     ``stop_after``: leave after this many epochs of this call (a run spread over
     sessions; continue with ``resume=True``). ``precision``: on resume, switch the run's
     precision (default: keep it; runs saved before precision existed were fp32)."""
+    info = distributed.setup(cfg.device, cfg.batch)  # torchrun: join the group; a batch that does not divide stops here
+    try:
+        return _train(cfg, info, resume, progress and info.is_main, stop_after, precision)
+    finally:
+        distributed.cleanup(info)
+
+
+def _train(cfg: TrainConfig, info: "distributed.DistInfo", resume: bool, progress: bool, stop_after: int | None,
+           precision: str | None) -> dict:
+    cfg.out = distributed.from_main(cfg.out, info)  # one run folder for all processes: rank 0's
     out = Path(cfg.out)
     last_path, best_path = out / "last.pt", out / "best.pt"
     state = None
+    main, device = info.is_main, info.device
+
+    def say(msg: str) -> None:  # to stderr, above a running bar; stdout stays free for --json; rank 0 only
+        if main:
+            tqdm.write(msg, file=sys.stderr)
+
+    if not resume and (last_path.is_file() or (out / "results.csv").is_file()):
+        raise ConfigError(str(out), None, "already holds a training run (last.pt / results.csv): continue it with "
+                                          "--resume, or leave --out away for a new numbered folder under runs/train")
     if resume:
         if not last_path.is_file():
             raise ConfigError(str(last_path), None, "nothing to resume: no last.pt in the output folder")
@@ -198,47 +230,71 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True, stop_af
         cfg = TrainConfig.from_dict({**saved.to_dict(), "epochs": cfg.epochs, "out": cfg.out,
                                      "precision": precision or saved.precision})
     cfg.imgsz = round_imgsz(cfg.imgsz)
-    bf16 = resolve_precision(cfg.precision) == "bf16"
-    log.info("precision: %s%s", "bf16 autocast, channels-last" if bf16 else "fp32",
-             " (auto)" if cfg.precision == "auto" else "")
+    prec = resolve_precision(cfg.precision, device.type)
+    amp_dtype = {"bf16": torch.bfloat16, "fp16": torch.float16}.get(prec)
+    say(f"device {device}" + (f", {info.world} processes (DDP, {cfg.batch // info.world} images each per batch)"
+                              if info.ddp else "") + "; precision " + (f"{prec} autocast, channels-last" if amp_dtype
+                                                                      else "fp32") + (" (auto)" if cfg.precision == "auto" else ""))
     torch.set_num_threads(cfg.threads)
     _seed_all(cfg.seed)
 
-    train_entries, val_entries, _ = load_data_yaml(cfg.data)
+    say(f"reading {cfg.data} (labels of every image) ...")
+    train_entries, val_entries, rest = load_data_yaml(cfg.data)
     data_summary = {"data_yaml": str(cfg.data), "train": [e.summary() for e in train_entries],
                     "val": [e.summary() for e in val_entries]}
+    say(f"dataset ({cfg.data}):\n" + summary_table({"train": train_entries, "val": val_entries,
+                                                     "test (not used)": rest.get("test_entries", [])}))
+    if not val_entries:
+        say("no val split: no mAP per epoch; best.pt is the epoch with the lowest training loss")
 
     if cfg.model in MODEL_SIZES:
         model = ConeYOLO(model_config(cfg.model))
     else:
         model = load_checkpoint(cfg.model).build_model()
     model.train()
-    if bf16:  # bf16 convolutions run fastest on channels-last tensors; weights and optimizer stay fp32
+    model = model.to(device)
+    if amp_dtype:  # autocast convolutions run fastest on channels-last tensors; weights and optimizer stay fp32
         model = model.to(memory_format=torch.channels_last)
     criterion = DetectionLoss(model.cfg.num_classes, model.cfg.reg_max, model.strides)
+    # the first optimizer of a process imports a part of torch that takes seconds: say what is going on
+    say(f"model {cfg.model} ({sum(p.numel() for p in model.parameters()) / 1e6:.2f} M parameters), "
+        f"{cfg.optimizer}; setting up ...")
     optimizer = build_optimizer(model, cfg)
     ema = ModelEMA(model, cfg.ema_decay, cfg.ema_tau)
-    start_epoch, best_fitness, best_epoch, history = 0, -math.inf, -1, []
+    start_epoch, best_fitness, best_epoch, history = 0, -math.inf, 0, []
     if state is not None:
         model.load_state_dict(state["model"])
         ema.ema.load_state_dict(ck.state_dict)
         ema.updates = int(state["ema_updates"])
         optimizer.load_state_dict(state["optimizer"])
-        start_epoch = int(state["epoch"]) + 1
+        # epochs_done: runs saved before it held the 0-based index of the last epoch in "epoch"
+        start_epoch = int(state["epochs_done"]) if "epochs_done" in state else int(state["epoch"]) + 1
         best_fitness, best_epoch, history = state["best_fitness"], state["best_epoch"], list(state["history"])
         _set_rng_state(state["rng"])
-        log.info("resuming from %s at epoch %d", last_path, start_epoch)
+        say(f"resuming from {last_path} after epoch {start_epoch}")
+    net = model  # what the batches run through: the model, or its DDP wrapper (gradients averaged over processes)
+    if info.ddp:
+        from torch.nn.parallel import DistributedDataParallel
+
+        net = DistributedDataParallel(model, device_ids=[device.index] if device.type == "cuda" else None)
+    scaler = torch.amp.GradScaler(device.type, enabled=prec == "fp16")
 
     train_set = TrainSet(train_entries, cfg.imgsz, cfg.augment, cfg.seed)
     sampler = EpochSampler(train_entries, cfg.seed)
-    loader = DataLoader(train_set, batch_size=cfg.batch, sampler=sampler, num_workers=cfg.workers,
-                        collate_fn=collate, drop_last=len(sampler) > cfg.batch)
+    if info.ddp:  # this process's slice of every global batch: the same images as one process with the same batch
+        sampler = distributed.ShardedSampler(sampler, info.rank, info.world, cfg.batch)
+        loader = DataLoader(train_set, batch_size=cfg.batch // info.world, sampler=sampler, num_workers=cfg.workers,
+                            collate_fn=collate, pin_memory=device.type == "cuda")
+    else:
+        loader = DataLoader(train_set, batch_size=cfg.batch, sampler=sampler, num_workers=cfg.workers,
+                            collate_fn=collate, drop_last=len(sampler) > cfg.batch, pin_memory=device.type == "cuda")
     val_loader = None
-    if val_entries:
+    if val_entries and main:
         val_loader = DataLoader(ValSet(val_entries, cfg.imgsz), batch_size=cfg.batch, num_workers=cfg.workers,
                                 collate_fn=collate)
     nb = len(loader) if not cfg.max_batches else min(len(loader), cfg.max_batches)
-    out.mkdir(parents=True, exist_ok=True)
+    if main:
+        out.mkdir(parents=True, exist_ok=True)
 
     for epoch in range(start_epoch, cfg.epochs):
         t0 = time.perf_counter()
@@ -246,42 +302,50 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True, stop_af
         train_set.mosaic_enabled = epoch < cfg.epochs - cfg.close_mosaic
         model.train()
         loss_sum, n_img, n_batches = torch.zeros(3), 0, 0
-        bar = tqdm(loader, total=nb, desc=f"epoch {epoch + 1}/{cfg.epochs}", disable=not progress, leave=False)
+        ep = epoch + 1  # the number people see: bar, log, results.csv, history, best_epoch
+        bar = tqdm(loader, total=nb, desc=f"epoch {ep}/{cfg.epochs}", disable=not progress, leave=False)
         for i, (imgs, targets) in enumerate(bar):
             if i >= nb:
                 break
             lr = lr_at(epoch * nb + i, nb, cfg)
             for g in optimizer.param_groups:
                 g["lr"] = lr
-            x = imgs.float().div_(255)
-            if bf16:
-                with torch.autocast("cpu", dtype=torch.bfloat16):
-                    feats = model(x.contiguous(memory_format=torch.channels_last))
+            x = imgs.to(device, non_blocking=True).float().div_(255)
+            targets = targets.to(device)
+            if amp_dtype:
+                with torch.autocast(device.type, dtype=amp_dtype):
+                    feats = net(x.contiguous(memory_format=torch.channels_last))
                 feats = [f.float() for f in feats]  # the loss (assignment, BCE, IoU, DFL) in fp32
             else:
-                feats = model(x)
+                feats = net(x)
             loss, parts = criterion(feats, targets)
+            if info.ddp:  # DDP averages gradients over processes; the loss is scaled by batch size per process
+                loss = loss * info.world
             optimizer.zero_grad(set_to_none=True)
-            loss.backward()
+            scaler.scale(loss).backward()
+            scaler.unscale_(optimizer)
             torch.nn.utils.clip_grad_norm_(model.parameters(), 10.0)
-            optimizer.step()
+            scaler.step(optimizer)
+            scaler.update()
             ema.update(model)
+            parts = distributed.mean_over_ranks(parts.cpu(), info)
             loss_sum += parts
             n_batches += 1
             if n_batches == 1:  # throughput is counted after the first batch (worker start-up, kernel set-up)
-                t_first, n_first = time.perf_counter(), n_img + imgs.shape[0]
-            n_img += imgs.shape[0]
+                t_first, n_first = time.perf_counter(), n_img + imgs.shape[0] * info.world
+            n_img += imgs.shape[0] * info.world
             bar.set_postfix(box=f"{parts[0]:.3f}", cls=f"{parts[1]:.3f}", dfl=f"{parts[2]:.3f}", lr=f"{lr:.2e}")
         bar.close()
         t_end = time.perf_counter()
         steady_s = t_end - t_first if n_batches > 1 else t_end - t0
         steady_n = n_img - n_first if n_batches > 1 else n_img
         mean = (loss_sum / max(n_batches, 1)).tolist()
-        row = {"epoch": epoch, "box_loss": mean[0], "cls_loss": mean[1], "dfl_loss": mean[2],
+        row = {"epoch": ep, "box_loss": mean[0], "cls_loss": mean[1], "dfl_loss": mean[2],
                "images_per_s": steady_n / max(steady_s, 1e-9),
                "epoch_train_s": t_end - t0, "lr": lr}
-        if val_loader is not None:
-            m = evaluate(ema.ema, val_loader, cfg.val_conf, cfg.val_iou)
+        if val_entries:  # rank 0 validates; the others take its fitness (early stop, best epoch)
+            m = evaluate(ema.ema, val_loader, cfg.val_conf, cfg.val_iou, device=device) if main else {}
+            m = distributed.from_main(m, info)
             row.update(map50=m["map50"], map50_95=m["map50_95"])
             fitness = 0.1 * m["map50"] + 0.9 * m["map50_95"]
         else:
@@ -291,10 +355,14 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True, stop_af
         history.append(row)
         improved = fitness > best_fitness
         if improved:
-            best_fitness, best_epoch = fitness, epoch
-        metrics = {"epoch": epoch, **m, "fitness": fitness}
+            best_fitness, best_epoch = fitness, ep
+        metrics = {"epoch": ep, **m, "fitness": fitness}
+        if not main:  # only rank 0 writes
+            if stop_after is not None and epoch + 1 - start_epoch >= stop_after or ep - best_epoch >= cfg.patience:
+                break
+            continue
         train_state = {
-            "epoch": epoch, "model": {k: v.detach().clone() for k, v in model.state_dict().items()},
+            "epoch": ep, "epochs_done": ep, "model": {k: v.detach().cpu().clone() for k, v in model.state_dict().items()},
             "optimizer": optimizer.state_dict(), "ema_updates": ema.updates, "best_fitness": best_fitness,
             "best_epoch": best_epoch, "history": history, "rng": _rng_state(), "config": cfg.to_dict(),
         }
@@ -302,12 +370,14 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True, stop_af
         if improved:
             save_checkpoint(best_path, ema.ema, cfg.imgsz, CLASS_NAMES, data_summary, metrics)
         _append_csv(out / "results.csv", row)
-        msg = " ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items())
-        (tqdm.write if progress else log.info)(msg)
+        msg = f"epoch {ep}/{cfg.epochs} " + " ".join(
+            f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items() if k != "epoch")
+        say(msg)
+        plot_results(history, out / "results.png", title=f"{out} ({cfg.data})")
         if stop_after is not None and epoch + 1 - start_epoch >= stop_after:
             break
-        if epoch - best_epoch >= cfg.patience:
-            (tqdm.write if progress else log.info)(f"early stop: no better fitness for {cfg.patience} epochs (best epoch {best_epoch})")
+        if ep - best_epoch >= cfg.patience:
+            say(f"early stop: no better fitness for {cfg.patience} epochs (best epoch {best_epoch})")
             break
     return {"history": history, "best_epoch": best_epoch, "best_fitness": best_fitness, "out": str(out)}
 
