@@ -1,0 +1,240 @@
+"""The car's planar motion between camera frames: from odometry twists, or from the cones themselves.
+
+A :class:`Motion2D` is the pose of the current ``rear_axle`` frame in the previous one
+(``p_prev = R(dyaw) @ p_cur + (dx, dy)``): driving 0.4 m straight ahead is ``Motion2D(0.4, 0, 0)``
+and moves every static cone by -0.4 m in x. ROS-free.
+
+* :class:`TwistBuffer`: body twists (``nav_msgs/Odometry`` ``twist.twist`` or
+  ``geometry_msgs/TwistStamped``, assumed in axes parallel to ``rear_axle``) integrated over the
+  interval between two frames. A twist with a NaN is refused (counted by the caller); odometry
+  older than :attr:`TwistBuffer.max_age_s` at a frame is not used for it.
+* :func:`register_cones`: a robust 2D rigid registration of a frame's cones against the tracks
+  predicted by a prior motion (constant velocity): RANSAC over pairs of class-compatible
+  correspondences, then weighted least squares on the inliers, re-associated twice.
+"""
+
+from __future__ import annotations
+
+from bisect import bisect_right
+from dataclasses import dataclass
+
+import numpy as np
+
+from .classes import UNKNOWN
+
+
+@dataclass(frozen=True)
+class Motion2D:
+    """Pose of the current frame in the previous one: (m, m, rad)."""
+
+    dx: float = 0.0
+    dy: float = 0.0
+    dyaw: float = 0.0
+
+    @property
+    def translation_m(self) -> float:
+        return float(np.hypot(self.dx, self.dy))
+
+    def rotation(self) -> np.ndarray:
+        c, s = np.cos(self.dyaw), np.sin(self.dyaw)
+        return np.array([[c, -s], [s, c]])
+
+    def to_current(self, xy_prev: np.ndarray) -> np.ndarray:
+        """(N, 2) points in the previous frame (m) -> (N, 2) in the current frame (m)."""
+        p = np.asarray(xy_prev, dtype=np.float64).reshape(-1, 2)
+        return (p - (self.dx, self.dy)) @ self.rotation()
+
+    def to_previous(self, xy_cur: np.ndarray) -> np.ndarray:
+        """(N, 2) points in the current frame (m) -> (N, 2) in the previous frame (m)."""
+        p = np.asarray(xy_cur, dtype=np.float64).reshape(-1, 2)
+        return p @ self.rotation().T + (self.dx, self.dy)
+
+    def scaled(self, k: float) -> "Motion2D":
+        """The same twist held ``k`` times as long (constant velocity)."""
+        return from_twist(self.dx, self.dy, self.dyaw, k)
+
+    def compose(self, other: "Motion2D") -> "Motion2D":
+        """This motion followed by ``other`` (both relative, result prev -> after other)."""
+        t = self.rotation() @ (other.dx, other.dy) + (self.dx, self.dy)
+        return Motion2D(float(t[0]), float(t[1]), float(_wrap(self.dyaw + other.dyaw)))
+
+
+def _wrap(a: float) -> float:
+    return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+def from_twist(vx: float, vy: float, wz: float, dt: float) -> Motion2D:
+    """Constant body twist (m/s, m/s, rad/s) held for ``dt`` s -> :class:`Motion2D` (exact arc)."""
+    th = wz * dt
+    if abs(th) < 1e-9:
+        return Motion2D(vx * dt, vy * dt, th)
+    a, b = np.sin(th) / th, (1.0 - np.cos(th)) / th
+    return Motion2D(float((a * vx - b * vy) * dt), float((b * vx + a * vy) * dt), float(th))
+
+
+class TwistBuffer:
+    """Recent body twists by stamp; :meth:`motion` integrates them between two frame stamps.
+
+    Each twist holds from its stamp to the next one (zero-order hold). :meth:`add` refuses a
+    twist with a non-finite value (returns ``"twist_nan"``) or a stamp not after the last one
+    (``"twist_stamp"``); the caller counts the cause.
+    """
+
+    def __init__(self, max_age_s: float = 0.1, keep_s: float = 2.0):
+        self.max_age_s = float(max_age_s)
+        self.keep_s = float(keep_s)
+        self.stamps: list[int] = []  # ns
+        self.twists: list[tuple[float, float, float]] = []
+
+    def add(self, stamp_ns: int, vx: float, vy: float, wz: float) -> str | None:
+        """Store one twist (m/s, m/s, rad/s, body axes). Returns the cause when refused, else None."""
+        if not all(np.isfinite((vx, vy, wz))):
+            return "twist_nan"
+        if self.stamps and stamp_ns <= self.stamps[-1]:
+            return "twist_stamp"
+        self.stamps.append(int(stamp_ns))
+        self.twists.append((float(vx), float(vy), float(wz)))
+        cut = bisect_right(self.stamps, stamp_ns - int(self.keep_s * 1e9))
+        if cut > 1:
+            del self.stamps[: cut - 1], self.twists[: cut - 1]
+        return None
+
+    def fresh_at(self, stamp_ns: int) -> bool:
+        """True when the newest twist at or before ``stamp_ns`` is at most :attr:`max_age_s` old."""
+        i = bisect_right(self.stamps, stamp_ns) - 1
+        return i >= 0 and (stamp_ns - self.stamps[i]) <= self.max_age_s * 1e9
+
+    def motion(self, t0_ns: int, t1_ns: int) -> Motion2D | None:
+        """Motion from frame ``t0`` to frame ``t1``; None without a fresh twist at ``t1`` or any twist before it."""
+        if not self.stamps or t1_ns <= t0_ns or not self.fresh_at(t1_ns):
+            return None
+        i = max(bisect_right(self.stamps, t0_ns) - 1, 0)
+        out, t = Motion2D(), t0_ns
+        while t < t1_ns:
+            end = min(self.stamps[i + 1] if i + 1 < len(self.stamps) else t1_ns, t1_ns)
+            if end > t:
+                out = out.compose(from_twist(*self.twists[i], (end - t) / 1e9))
+                t = end
+            i += 1
+            if i >= len(self.stamps):
+                i = len(self.stamps) - 1
+        return out
+
+
+@dataclass
+class Registration:
+    """Result of :func:`register_cones`: the motion, its inlier count and whether it is trusted."""
+
+    motion: Motion2D
+    inliers: int
+    ok: bool
+    det_index: np.ndarray  # (K,) int: inlier detections
+    trk_index: np.ndarray  # (K,) int: their tracks
+
+
+def _rigid_fit(src: np.ndarray, dst: np.ndarray, w: np.ndarray | None = None) -> tuple[float, np.ndarray]:
+    """Weighted least-squares 2D rotation + translation with ``dst ~= R @ src + t``: (angle rad, t (2,))."""
+    w = np.ones(len(src)) if w is None else w
+    ws = w.sum()
+    ms, md = (w[:, None] * src).sum(0) / ws, (w[:, None] * dst).sum(0) / ws
+    a, b = src - ms, dst - md
+    sxx = np.sum(w * (a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1]))
+    sxy = np.sum(w * (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]))
+    th = float(np.arctan2(sxy, sxx))
+    c, s = np.cos(th), np.sin(th)
+    return th, md - np.array([c * ms[0] - s * ms[1], s * ms[0] + c * ms[1]])
+
+
+def register_cones(
+    det_xy: np.ndarray,
+    det_cls: np.ndarray,
+    trk_xy: np.ndarray,
+    trk_cls: np.ndarray,
+    prior: Motion2D,
+    det_var: np.ndarray | None = None,
+    search_m: float = 1.5,
+    inlier_m: float = 0.3,
+    min_inliers: int = 3,
+    iterations: int = 40,
+    rng: np.random.Generator | None = None,
+) -> Registration:
+    """Motion of the car from cones: the current frame's cones against the tracks of the previous frame.
+
+    ``det_xy`` (N, 2) m, current frame; ``trk_xy`` (M, 2) m, previous frame; ``det_cls`` / ``trk_cls``
+    class ids (``unknown`` pairs with any class); ``prior`` the expected motion (constant velocity).
+    Correspondence candidates are class-compatible pairs within ``search_m`` after the prior; RANSAC on
+    two candidates at a time (the prior itself is a hypothesis too) keeps the motion with most inliers
+    (residual <= ``inlier_m``, each detection once), refined by least squares weighted by
+    ``1 / det_var`` (N,) m^2. ``ok`` is False with fewer than ``min_inliers``; the motion is then the prior.
+    """
+    det_xy = np.asarray(det_xy, dtype=np.float64).reshape(-1, 2)
+    trk_xy = np.asarray(trk_xy, dtype=np.float64).reshape(-1, 2)
+    empty = np.zeros(0, dtype=np.intp)
+    fail = Registration(prior, 0, False, empty, empty)
+    if len(det_xy) < min_inliers or len(trk_xy) < min_inliers:
+        return fail
+    w_det = np.ones(len(det_xy)) if det_var is None else 1.0 / np.maximum(np.asarray(det_var, np.float64), 1e-4)
+    det_prev = prior.to_previous(det_xy)  # detections where the prior puts them in the previous frame
+    d = np.linalg.norm(det_prev[:, None, :] - trk_xy[None, :, :], axis=2)
+    dc, tc = np.asarray(det_cls)[:, None], np.asarray(trk_cls)[None, :]
+    compatible = (dc == tc) | (dc == UNKNOWN) | (tc == UNKNOWN)
+    cand_i, cand_j = np.nonzero((d <= search_m) & compatible)
+    if len(cand_i) < min_inliers:
+        return fail
+    src, dst = det_xy[cand_i], trk_xy[cand_j]  # dst ~= R src + t for the true motion
+
+    # hypotheses: the prior + rigid transforms from two random candidate pairs with distinct detections
+    rng = rng if rng is not None else np.random.default_rng(0)
+    k = len(cand_i)
+    a = rng.integers(0, k, iterations)
+    b = rng.integers(0, k, iterations)
+    good = (cand_i[a] != cand_i[b]) & (cand_j[a] != cand_j[b])
+    a, b = a[good], b[good]
+    vs, vd = src[b] - src[a], dst[b] - dst[a]
+    ok_len = np.abs(np.linalg.norm(vs, axis=1) - np.linalg.norm(vd, axis=1)) <= 2 * inlier_m
+    a, b, vs, vd = a[ok_len], b[ok_len], vs[ok_len], vd[ok_len]
+    th = np.arctan2(vd[:, 1], vd[:, 0]) - np.arctan2(vs[:, 1], vs[:, 0])
+    mid_s, mid_d = (src[a] + src[b]) / 2, (dst[a] + dst[b]) / 2
+    c, s = np.cos(th), np.sin(th)
+    t = mid_d - np.c_[c * mid_s[:, 0] - s * mid_s[:, 1], s * mid_s[:, 0] + c * mid_s[:, 1]]
+    th = np.r_[prior.dyaw, th]
+    t = np.r_[[[prior.dx, prior.dy]], t]
+    c, s = np.cos(th)[:, None], np.sin(th)[:, None]
+    px = c * src[None, :, 0] - s * src[None, :, 1] + t[:, 0:1]
+    py = s * src[None, :, 0] + c * src[None, :, 1] + t[:, 1:2]
+    inl = np.hypot(px - dst[None, :, 0], py - dst[None, :, 1]) <= inlier_m  # (H, K)
+    # each detection counted once: count distinct detections among the inliers
+    n_det = len(det_xy)
+    score = np.zeros(len(th), dtype=np.int64)
+    for h in range(len(th)):  # H <= iterations + 1, cheap
+        score[h] = np.unique(cand_i[inl[h]]).size
+    best = int(np.argmax(score))
+    motion = Motion2D(float(t[best, 0]), float(t[best, 1]), float(th[best]))
+    if score[best] < min_inliers:
+        return fail
+    # refine: nearest compatible track per detection under the current motion, then weighted LS
+    di = tj = empty
+    for _ in range(2):
+        p = motion.to_previous(det_xy)
+        dd = np.linalg.norm(p[:, None, :] - trk_xy[None, :, :], axis=2)
+        dd[~compatible] = np.inf
+        j = np.argmin(dd, axis=1)
+        dmin = dd[np.arange(n_det), j]
+        keep = dmin <= inlier_m
+        # one detection per track: keep the nearest
+        order = np.argsort(dmin)
+        seen, sel = set(), []
+        for i in order:
+            if not keep[i]:
+                break
+            if j[i] not in seen:
+                seen.add(int(j[i]))
+                sel.append(int(i))
+        if len(sel) < min_inliers:
+            break
+        di, tj = np.array(sel, dtype=np.intp), j[sel]
+        th1, t1 = _rigid_fit(det_xy[di], trk_xy[tj], w_det[di])
+        motion = Motion2D(float(t1[0]), float(t1[1]), float(th1))
+    if len(di) < min_inliers:
+        return Registration(prior, int(len(di)), False, di, tj)
+    return Registration(motion, int(len(di)), True, di, tj)
