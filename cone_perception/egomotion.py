@@ -49,9 +49,15 @@ class Motion2D:
         p = np.asarray(xy_cur, dtype=np.float64).reshape(-1, 2)
         return p @ self.rotation().T + (self.dx, self.dy)
 
-    def scaled(self, k: float) -> "Motion2D":
-        """The same twist held ``k`` times as long (constant velocity)."""
-        return from_twist(self.dx, self.dy, self.dyaw, k)
+    def twist(self, dt_s: float) -> tuple[float, float, float]:
+        """The constant body twist (m/s, m/s, rad/s) that moves the car by this motion in ``dt_s`` (inverse
+        of :func:`from_twist`)."""
+        th = self.dyaw
+        if abs(th) < 1e-9:
+            return self.dx / dt_s, self.dy / dt_s, th / dt_s
+        a, b = np.sin(th) / th, (1.0 - np.cos(th)) / th  # chord = dt [[a, -b], [b, a]] v
+        n = a * a + b * b
+        return (float((a * self.dx + b * self.dy) / (n * dt_s)), float((-b * self.dx + a * self.dy) / (n * dt_s)), th / dt_s)
 
     def compose(self, other: "Motion2D") -> "Motion2D":
         """This motion followed by ``other`` (both relative, result prev -> after other)."""
@@ -132,6 +138,41 @@ class Registration:
     trk_index: np.ndarray  # (K,) int: their tracks
 
 
+def _gauss_newton(src, dst, c_src, c_dst, start: Motion2D, prior: Motion2D, prior_std, iterations: int = 3,
+                  cauchy_m: float = 0.05) -> Motion2D:
+    """Motion with ``dst ~= R src + t`` minimising Mahalanobis residuals (Cauchy-weighted), plus the prior."""
+    x = np.array([start.dx, start.dy, start.dyaw])
+    if prior_std is not None:
+        w_prior = np.diag([1 / prior_std[0] ** 2, 1 / prior_std[0] ** 2, 1 / prior_std[1] ** 2])
+        x_prior = np.array([prior.dx, prior.dy, prior.dyaw])
+    for _ in range(iterations):
+        c, s = np.cos(x[2]), np.sin(x[2])
+        R = np.array([[c, -s], [s, c]])
+        rs = src @ R.T
+        r = rs + x[:2] - dst  # (n, 2)
+        cov = R[None] @ c_src @ R.T[None] + c_dst
+        a, b, d = cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 1]
+        det = a * d - b * b
+        W = np.stack([np.c_[d, -b], np.c_[-b, a]], axis=1) / det[:, None, None]  # inverse covariances
+        m2 = np.einsum("ni,nij,nj->n", r, W, r)
+        # Cauchy: weight 1 / (1 + m2 / k^2), with k the Mahalanobis size of cauchy_m
+        k2 = (cauchy_m**2) / np.maximum(np.trace(cov, axis1=1, axis2=2) / 2, 1e-6)
+        W = W * (1.0 / (1.0 + m2 / np.maximum(k2, 1.0)))[:, None, None]
+        J = np.zeros((len(src), 2, 3))
+        J[:, 0, 0] = J[:, 1, 1] = 1.0
+        J[:, :, 2] = np.c_[-rs[:, 1], rs[:, 0]]  # d(R src)/d yaw
+        JtW = np.transpose(J, (0, 2, 1)) @ W
+        A = (JtW @ J).sum(0)
+        g = np.einsum("nij,nj->i", JtW, r)
+        if prior_std is not None:
+            dp = x - x_prior
+            dp[2] = _wrap(dp[2])
+            A = A + w_prior
+            g = g + w_prior @ dp
+        x = x - np.linalg.solve(A, g)
+    return Motion2D(float(x[0]), float(x[1]), float(_wrap(x[2])))
+
+
 def _rigid_fit(src: np.ndarray, dst: np.ndarray, w: np.ndarray | None = None) -> tuple[float, np.ndarray]:
     """Weighted least-squares 2D rotation + translation with ``dst ~= R @ src + t``: (angle rad, t (2,))."""
     w = np.ones(len(src)) if w is None else w
@@ -151,11 +192,14 @@ def register_cones(
     trk_xy: np.ndarray,
     trk_cls: np.ndarray,
     prior: Motion2D,
-    det_var: np.ndarray | None = None,
+    det_cov: np.ndarray | None = None,
+    trk_cov: np.ndarray | None = None,
+    prior_std: tuple[float, float] | None = None,
     search_m: float = 1.5,
     inlier_m: float = 0.3,
     min_inliers: int = 3,
     iterations: int = 40,
+    prior_gate: float = 3.0,
     rng: np.random.Generator | None = None,
 ) -> Registration:
     """Motion of the car from cones: the current frame's cones against the tracks of the previous frame.
@@ -164,8 +208,11 @@ def register_cones(
     class ids (``unknown`` pairs with any class); ``prior`` the expected motion (constant velocity).
     Correspondence candidates are class-compatible pairs within ``search_m`` after the prior; RANSAC on
     two candidates at a time (the prior itself is a hypothesis too) keeps the motion with most inliers
-    (residual <= ``inlier_m``, each detection once), refined by least squares weighted by
-    ``1 / det_var`` (N,) m^2. ``ok`` is False with fewer than ``min_inliers``; the motion is then the prior.
+    (residual <= ``inlier_m``, each detection once), refined by Gauss-Newton least squares with each
+    pair's covariance ``R det_cov R^T + trk_cov`` ((N, 2, 2) / (M, 2, 2) m^2, default identity) and
+    Cauchy weights against outliers. With ``prior_std`` (translation m, yaw rad) the prior then joins as
+    one more measurement, if the cones' motion lies within ``prior_gate`` sigma of it. ``ok`` is False with fewer than ``min_inliers``; the motion is
+    then the prior.
     """
     det_xy = np.asarray(det_xy, dtype=np.float64).reshape(-1, 2)
     trk_xy = np.asarray(trk_xy, dtype=np.float64).reshape(-1, 2)
@@ -173,7 +220,8 @@ def register_cones(
     fail = Registration(prior, 0, False, empty, empty)
     if len(det_xy) < min_inliers or len(trk_xy) < min_inliers:
         return fail
-    w_det = np.ones(len(det_xy)) if det_var is None else 1.0 / np.maximum(np.asarray(det_var, np.float64), 1e-4)
+    det_cov = np.broadcast_to(np.eye(2) * 0.01, (len(det_xy), 2, 2)) if det_cov is None else np.asarray(det_cov, np.float64)
+    trk_cov = np.broadcast_to(np.eye(2) * 0.01, (len(trk_xy), 2, 2)) if trk_cov is None else np.asarray(trk_cov, np.float64)
     det_prev = prior.to_previous(det_xy)  # detections where the prior puts them in the previous frame
     d = np.linalg.norm(det_prev[:, None, :] - trk_xy[None, :, :], axis=2)
     dc, tc = np.asarray(det_cls)[:, None], np.asarray(trk_cls)[None, :]
@@ -233,8 +281,12 @@ def register_cones(
         if len(sel) < min_inliers:
             break
         di, tj = np.array(sel, dtype=np.intp), j[sel]
-        th1, t1 = _rigid_fit(det_xy[di], trk_xy[tj], w_det[di])
-        motion = Motion2D(float(t1[0]), float(t1[1]), float(th1))
+        motion = _gauss_newton(det_xy[di], trk_xy[tj], det_cov[di], trk_cov[tj], motion, prior, None)
+    if prior_std is not None and len(di) >= min_inliers:
+        # the prior joins only when the cones agree with it (a wrong prior must not hold the estimate)
+        off = np.hypot(motion.dx - prior.dx, motion.dy - prior.dy)
+        if off <= prior_gate * np.hypot(prior_std[0], 0.03) and abs(_wrap(motion.dyaw - prior.dyaw)) <= prior_gate * np.hypot(prior_std[1], 0.005):
+            motion = _gauss_newton(det_xy[di], trk_xy[tj], det_cov[di], trk_cov[tj], motion, prior, prior_std, iterations=1)
     if len(di) < min_inliers:
         return Registration(prior, int(len(di)), False, di, tj)
     return Registration(motion, int(len(di)), True, di, tj)

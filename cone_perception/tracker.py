@@ -6,7 +6,7 @@ constant-velocity prior, see :mod:`cone_perception.egomotion`), associated with 
 by gated Mahalanobis distance and one-to-one assignment (``scipy.optimize.linear_sum_assignment``),
 and updated by a Kalman filter with each cone's own covariance. Per track: id (uint32, never
 reused), fused class probabilities, position + covariance, hits, misses, age, and a certainty that
-rises with each hit and decays only while the cone should be visible (inside the band's ground
+rises with each confident hit (Bayes odds of the detection score) and decays only while the cone should be visible (inside the band's ground
 footprint, :class:`FieldOfView`) and is not seen. Tracks are deleted below
 :attr:`TrackerConfig.delete_below` or more than :attr:`TrackerConfig.behind_m` behind the axle.
 
@@ -28,7 +28,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from .classes import NUM_CLASSES, UNKNOWN
-from .egomotion import Motion2D, register_cones
+from .egomotion import Motion2D, from_twist, register_cones
 from .errors import FrameError
 from .records import CONE_DTYPE, TRACKED_CONE_DTYPE
 
@@ -46,18 +46,24 @@ class TrackerConfig:
     motion_std_frac: float = 0.02  # ego-motion translation error, fraction of the distance travelled
     motion_std_rad: float = 0.003  # ego-motion yaw error per frame
     class_weight: float = 2.0  # cost of a class mismatch: -class_weight * log p(track has the class)
-    certainty_init: float = 0.4
-    certainty_hit: float = 0.5  # c += (1 - c) * certainty_hit
-    certainty_miss: float = 0.6  # c *= certainty_miss per frame visible and not seen
+    certainty_prior: float = 0.3  # before the first detection
+    score_neutral: float = 0.45  # a detection with this score leaves the certainty as it is (Bayes odds)
+    miss_likelihood_ratio: float = 0.35  # odds *= this per frame visible and not seen
+    certainty_max: float = 0.98  # so that a few misses in view can still remove a track
     gap_tau_s: float = 1.0  # certainty *= exp(-gap / tau) over a gap above max_gap_s
-    delete_below: float = 0.15
+    delete_below: float = 0.1
     behind_m: float = 3.0  # delete when x < -behind_m
     min_hits: int = 2  # published from this many hits on
-    publish_min_certainty: float = 0.3
+    publish_min_certainty: float = 0.5
     max_gap_s: float = 0.5
     class_floor: float = 0.02  # no class probability below this (a wrong first class can recover)
     register: bool = True  # estimate ego-motion from the cones when no odometry is given
     register_min_inliers: int = 3
+    prior_std_m: float = 0.02  # constant-velocity prior of the registration: translation per frame
+    prior_std_rad: float = 0.005  # and yaw per frame
+    max_range_m: float = 20.0  # detections farther than this are not used (too uncertain along the ray)
+    spawn_chi2: float = 50.0  # an unassigned detection this near (Mahalanobis^2) to a track starts no new one
+    merge_chi2: float = 6.0  # two tracks this near (and of one class) are merged into the older one
 
 
 class FieldOfView:
@@ -121,7 +127,7 @@ class ConeTracker:
     def __post_init__(self):
         self.next_id = 1
         self.last_stamp_ns: int | None = None
-        self.velocity: Motion2D | None = None  # last motion per second (constant-velocity prior)
+        self.velocity: tuple[float, float, float] | None = None  # last body twist (constant-velocity prior)
         self._resize(0)
 
     def _resize(self, n: int) -> None:
@@ -145,7 +151,7 @@ class ConeTracker:
     def _prior(self, dt_s: float, gap: bool) -> Motion2D:
         if self.velocity is None or gap:
             return Motion2D()
-        return self.velocity.scaled(dt_s)
+        return from_twist(*self.velocity, dt_s)
 
     def predict(self, motion: Motion2D, dt_s: float, extra_std_m: float = 0.0) -> None:
         """Move the tracks into the current frame and grow their covariance by the motion's uncertainty."""
@@ -173,6 +179,7 @@ class ConeTracker:
             self.events[reason] += 1
             raise FrameError(reason, f"frame stamp {stamp_ns} ns is not after the last fused frame {self.last_stamp_ns} ns")
         cones = _valid_cones(cones, self.events)
+        cones = cones[np.hypot(cones["x"], cones["y"]) <= cfg.max_range_m]
         z = np.c_[cones["x"], cones["y"]].astype(np.float64)
         Rz = np.stack([np.c_[cones["cov_xx"], cones["cov_xy"]], np.c_[cones["cov_xy"], cones["cov_yy"]]], axis=1).astype(np.float64)
         Rz = _floor_cov(Rz, cfg.meas_var_floor_m2)
@@ -192,7 +199,8 @@ class ConeTracker:
                 prior = self._prior(dt, gap)
                 motion, info.motion_source = prior, "prior"
                 if cfg.register and len(self) and len(z):
-                    reg = register_cones(z, zc, self.xy, self._classes(), prior, Rz[:, 0, 0] + Rz[:, 1, 1],
+                    prior_std = None if gap or self.velocity is None else (cfg.prior_std_m, cfg.prior_std_rad)
+                    reg = register_cones(z, zc, self.xy, self._classes(), prior, Rz, self.P, prior_std,
                                          search_m=3.0 if gap else 1.5, min_inliers=cfg.register_min_inliers)
                     info.inliers = reg.inliers
                     if reg.ok:
@@ -206,10 +214,8 @@ class ConeTracker:
                 extra = max(extra, 0.5 * (dt - cfg.max_gap_s) + 0.1)
                 self.certainty *= np.exp(-dt / cfg.gap_tau_s)
             self.predict(motion, dt, extra)
-            if dt > 0 and not gap:
-                self.velocity = motion.scaled(1.0 / dt)
-            elif gap and info.motion_source in ("odometry", "registration"):
-                self.velocity = motion.scaled(1.0 / dt)
+            if dt > 0 and (not gap or info.motion_source in ("odometry", "registration")):
+                self.velocity = motion.twist(dt)
         info.motion = motion if motion is not None else Motion2D()
         self.last_stamp_ns = int(stamp_ns)
         self.age += 1
@@ -221,7 +227,7 @@ class ConeTracker:
         if n_t and n_z:
             d2 = _mahalanobis2(z, Rz, self.xy, self.P)  # (n_z, n_t)
             gated = d2 <= cfg.gate_chi2
-            gated_any = gated.any(axis=1)
+            gated_any = (d2 <= cfg.spawn_chi2).any(axis=1)
             pc = self.class_p[:, zc].T  # (n_z, n_t): p(track is the detected class)
             unknown = zc == UNKNOWN
             pc[unknown] = 1.0
@@ -242,19 +248,22 @@ class ConeTracker:
             self.class_p[cols] = _fuse_class(self.class_p[cols], zc[rows], cones["score"][rows], cfg.class_floor)
             self.hits[cols] += 1
             self.misses[cols] = 0
-            self.certainty[cols] += (1.0 - self.certainty[cols]) * cfg.certainty_hit
+            self.certainty[cols] = self._hit(self.certainty[cols], cones["score"][rows])
 
         # ---- misses: certainty decays only where the cone should have been seen ----
         missed = np.ones(n_t, dtype=bool)
         missed[cols] = False
         if missed.any():
             vis = self.fov.visible(self.xy[missed]) if self.fov is not None else np.ones(int(missed.sum()), bool)
+            vis &= np.hypot(self.xy[missed, 0], self.xy[missed, 1]) <= cfg.max_range_m
             idx = np.flatnonzero(missed)[vis]
             self.misses[idx] += 1
-            self.certainty[idx] *= cfg.certainty_miss
+            self.certainty[idx] = _bayes(self.certainty[idx], cfg.miss_likelihood_ratio)
 
-        # ---- deletion ----
+        # ---- deletion (and duplicates merged into the older track) ----
         keep = (self.certainty >= cfg.delete_below) & (self.xy[:, 0] >= -cfg.behind_m)
+        if n_t > 1 and cfg.merge_chi2 > 0:
+            keep &= ~self._duplicates()
         info.deleted = int((~keep).sum())
         if info.deleted:
             self._keep(keep)
@@ -267,6 +276,26 @@ class ConeTracker:
             self._spawn(z[new], Rz[new], zc[new], cones["score"][new])
         info.new = len(new)
         return info
+
+    def _duplicates(self) -> np.ndarray:
+        """(n,) bool: tracks that duplicate an older track (one class, within :attr:`TrackerConfig.merge_chi2`);
+        the older one keeps its id and takes the younger one's hits."""
+        d2 = _mahalanobis2(self.xy, self.P, self.xy, self.P)
+        cls = self._classes()
+        close = (d2 <= self.config.merge_chi2) & (cls[:, None] == cls[None, :])
+        np.fill_diagonal(close, False)
+        dup = np.zeros(len(self), dtype=bool)
+        if not close.any():
+            return dup
+        for i, j in zip(*np.nonzero(np.triu(close))):
+            young, old = (i, j) if self.ids[i] > self.ids[j] else (j, i)
+            if dup[old] or dup[young]:
+                continue
+            dup[young] = True
+            self.hits[old] = max(self.hits[old], self.hits[young])
+            self.certainty[old] = max(self.certainty[old], self.certainty[young])
+        self.events["merged"] += int(dup.sum())
+        return dup
 
     def _spawn(self, z: np.ndarray, Rz: np.ndarray, zc: np.ndarray, score: np.ndarray) -> None:
         cfg, n = self.config, len(z)
@@ -282,7 +311,13 @@ class ConeTracker:
         self.hits = np.r_[self.hits, np.ones(n, np.int64)]
         self.misses = np.r_[self.misses, np.zeros(n, np.int64)]
         self.age = np.r_[self.age, np.ones(n, np.int64)]
-        self.certainty = np.r_[self.certainty, np.full(n, cfg.certainty_init)]
+        self.certainty = np.r_[self.certainty, self._hit(np.full(n, cfg.certainty_prior), score)]
+
+    def _hit(self, c: np.ndarray, score: np.ndarray) -> np.ndarray:
+        """Certainty after a detection of confidence ``score``: odds times ``odds(score) / odds(score_neutral)``."""
+        s = np.clip(np.asarray(score, np.float64), 0.05, 0.95)
+        s0 = self.config.score_neutral
+        return np.minimum(_bayes(c, (s / (1 - s)) / (s0 / (1 - s0))), self.config.certainty_max)
 
     def _classes(self) -> np.ndarray:
         return np.argmax(self.class_p, axis=1) if len(self) else np.zeros(0, np.intp)
@@ -298,6 +333,11 @@ class ConeTracker:
         out["cov_xx"], out["cov_xy"], out["cov_yy"] = self.P[sel, 0, 0], self.P[sel, 0, 1], self.P[sel, 1, 1]
         out["track_id"] = self.ids[sel]
         return out
+
+
+def _bayes(p: np.ndarray, likelihood_ratio) -> np.ndarray:
+    """Probability ``p`` after evidence with the given likelihood ratio (odds multiplied)."""
+    return p * likelihood_ratio / (p * likelihood_ratio + (1.0 - p))
 
 
 # ---- small vectorised 2x2 helpers ------------------------------------------------------------
@@ -352,3 +392,43 @@ def _valid_cones(cones: np.ndarray, events: Counter) -> np.ndarray:
         events["bad_cone"] += int((~ok).sum())
         cones = cones[ok]
     return cones
+
+
+class TrackingStage:
+    """The tracker as a pipeline stage: ``/cones`` of a frame (+ odometry twists when the car has them)
+    -> ``/cones/tracked`` records. Used by the ``pipeline`` and ``cone_tracker`` nodes and ``replay``.
+
+    Twists (:meth:`add_twist`) are used for a frame when fresh (:attr:`TwistBuffer.max_age_s`); once
+    any twist has come, a frame without a fresh one is counted as ``odom_stale`` and its motion is
+    estimated from the cones. Refused twists are counted (``twist_nan``, ``twist_stamp``).
+    """
+
+    def __init__(self, calib=None, config: TrackerConfig | None = None, odom_max_age_s: float = 0.1):
+        from .egomotion import TwistBuffer
+
+        self.tracker = ConeTracker(config or TrackerConfig(), FieldOfView.from_calibration(calib) if calib is not None else None)
+        self.twists = TwistBuffer(max_age_s=odom_max_age_s)
+        self.last_info: FrameInfo | None = None
+
+    @property
+    def events(self) -> Counter:
+        return self.tracker.events
+
+    def add_twist(self, stamp_ns: int, vx: float, vy: float, wz: float) -> bool:
+        """One body twist (m/s, m/s, rad/s); False (and counted) when refused."""
+        why = self.twists.add(stamp_ns, vx, vy, wz)
+        if why is not None:
+            self.tracker.events[why] += 1
+        return why is None
+
+    def process(self, stamp_ns: int, cones: np.ndarray) -> tuple[np.ndarray, FrameInfo]:
+        """Fuse one frame; returns (:data:`TRACKED_CONE_DTYPE` records, :class:`FrameInfo`).
+        Raises ``FrameError`` for a stamp not after the last fused frame."""
+        motion = None
+        last = self.tracker.last_stamp_ns
+        if self.twists.stamps and last is not None and stamp_ns > last:
+            motion = self.twists.motion(last, stamp_ns)
+            if motion is None:
+                self.tracker.events["odom_stale"] += 1
+        self.last_info = self.tracker.update(stamp_ns, cones, motion)
+        return self.tracker.output(), self.last_info
