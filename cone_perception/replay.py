@@ -27,6 +27,7 @@ from .stats import FrameStats
 IMAGE_TYPES = (bagio.IMAGE, bagio.COMPRESSED_IMAGE)
 BOXES_TOPIC = "/cone_boxes"
 CONES_TOPIC = "/cones"
+TRACKED_TOPIC = "/cones/tracked"
 
 
 def find_image_topic(bag: str | os.PathLike, topic: str | None = None) -> tuple[str, str]:
@@ -98,6 +99,8 @@ class ReplayResult:
     drops: list[tuple[int, str]] = field(default_factory=list)  # (stamp, message)
     wall_s: float = 0.0
     localisation: dict | None = None
+    tracked: dict[int, np.ndarray] = field(default_factory=dict)  # stamp ns -> TRACKED_CONE_DTYPE (replay --track)
+    tracking: dict | None = None  # ReplayTracking.summary()
 
 
 def offline_replay(
@@ -107,10 +110,13 @@ def offline_replay(
     out: str | os.PathLike | None = None,
     gt_topic: str | None = None,
     progress: Callable[[int], Iterator] | None = None,
+    tracking=None,
 ) -> ReplayResult:
     """Replay ``bag`` through ``pipeline``; write ``/cone_boxes`` and ``/cones`` to ``out`` if given.
 
-    ``progress`` wraps the frame iterator (e.g. a tqdm factory taking the total).
+    ``progress`` wraps the frame iterator (e.g. a tqdm factory taking the total). ``tracking``: a
+    :class:`~cone_perception.track_replay.ReplayTracking` (drops detections, tracks; ``/cones/tracked``
+    is written too).
     """
     import time
 
@@ -119,7 +125,10 @@ def offline_replay(
     truth = read_ground_truth(bag, gt_topic) if gt_topic else None
     writer = None
     if out is not None:
-        writer = bagio.BagWriter(Path(out), {BOXES_TOPIC: bagio.POINTCLOUD2, CONES_TOPIC: bagio.POINTCLOUD2})
+        topics = {BOXES_TOPIC: bagio.POINTCLOUD2, CONES_TOPIC: bagio.POINTCLOUD2}
+        if tracking is not None and tracking.stage is not None:
+            topics[TRACKED_TOPIC] = bagio.POINTCLOUD2
+        writer = bagio.BagWriter(Path(out), topics)
     res = ReplayResult()
     report = LocalisationReport(max_range_m=pipeline.calib.max_range_m) if truth is not None else None
     frames = iter_frames(bag, topic)
@@ -139,6 +148,11 @@ def offline_replay(
             for k, v in r.timing_ms.items():
                 res.timer.add(k, v / 1e3)
             res.stats.count_ok()
+            tracked = None
+            if tracking is not None:
+                r.cones, tracked = tracking.frame(fr.stamp_ns, r.cones)
+                if tracked is not None:
+                    res.tracked[fr.stamp_ns] = tracked
             res.boxes[fr.stamp_ns], res.cones[fr.stamp_ns] = r.boxes, r.cones
             if writer is not None:
                 frame_id = getattr(fr.msg.header, "frame_id", "")
@@ -146,6 +160,9 @@ def offline_replay(
                     r.boxes.astype(BOX_DTYPE), bagio.header(fr.stamp_ns, frame_id), bagio.PointCloud2, bagio.PointField))
                 writer.write(CONES_TOPIC, fr.log_stamp_ns, to_pointcloud2(
                     r.cones, bagio.header(fr.stamp_ns, pipeline.calib.frame_id), bagio.PointCloud2, bagio.PointField))
+                if tracked is not None:
+                    writer.write(TRACKED_TOPIC, fr.log_stamp_ns, to_pointcloud2(
+                        tracked, bagio.header(fr.stamp_ns, pipeline.calib.frame_id), bagio.PointCloud2, bagio.PointField))
             if report is not None and fr.stamp_ns in truth:
                 report.add_frame(r.cones, truth[fr.stamp_ns])
     finally:
@@ -154,4 +171,6 @@ def offline_replay(
     res.wall_s = time.perf_counter() - t_start
     if report is not None:
         res.localisation = report.summary()
+    if tracking is not None:
+        res.tracking = tracking.summary()
     return res

@@ -9,7 +9,8 @@ within :attr:`TrackingReport.range_m` (15 m) of the rear axle:
   (matching as :func:`cone_perception.evaluation.match_cones`);
 * **false cones**: tracked cones that lie on no real cone (any cone of the drive seen at or before
   this frame: a tracked cone beside the car, out of view, is real, not false);
-* **position error** per distance group of the matched pairs (:data:`DISTANCE_GROUPS`);
+* **position error** per distance group of the cones the frame shows (the pairs of the recall), so
+  that it compares with the ``/cones`` error (:data:`DISTANCE_GROUPS`);
 * **ids**: an id switch when a truth cone is matched to another track id than at its last match;
   **IDF1** (Ristani et al. 2016): truth ids and track ids paired one-to-one over the whole drive to
   maximise the frames they are matched in, ``IDF1 = 2 IDTP / (n_truth + n_tracked)``;
@@ -163,7 +164,11 @@ class TrackingReport:
         r_vis = np.hypot(fr.xy_m[:, 0], fr.xy_m[:, 1])
         vis = r_vis <= self.range_m
         self.n_visible += int(vis.sum())
-        self.n_found += len(match_cones(p, fr.xy_m[vis]))
+        vis_pairs = match_cones(p, fr.xy_m[vis])
+        self.n_found += len(vis_pairs)
+        for _, j, d in vis_pairs:  # errors of the cones the frame shows, as for /cones
+            self.err.append(d)
+            self.err_range.append(r_vis[vis][j])
         # false cones, errors and ids against every real cone seen so far
         w_xy, w_id = self.truth.world_in_frame(stamp_ns)
         w_r = np.hypot(w_xy[:, 0], w_xy[:, 1])
@@ -171,11 +176,8 @@ class TrackingReport:
         w_xy, w_id, w_r = w_xy[near], w_id[near], w_r[near]
         pairs = match_cones(p, w_xy)
         matched_p = np.zeros(len(p), dtype=bool)
-        for i, j, d in pairs:
+        for i, _, _ in pairs:
             matched_p[i] = True
-            if w_r[j] <= self.range_m:
-                self.err.append(d)
-                self.err_range.append(w_r[j])
         self.n_false += int((p_in & ~matched_p).sum())
         # ids: truth cones within range (in front of the axle), tracked cones within range
         tid = tracked["track_id"] if len(tracked) else np.zeros(0, np.int64)

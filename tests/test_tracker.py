@@ -92,7 +92,8 @@ def test_missed_detections_are_bridged_and_certainty_decays_only_in_view():
     trk.update(5 * DT_NS, cones(xy[:1], [BLUE]), Motion2D())
     out = trk.output()
     assert len(out) == 2
-    assert trk.certainty[1] == pytest.approx(c_before[1] * cfg.certainty_miss)
+    lr = cfg.miss_likelihood_ratio
+    assert trk.certainty[1] == pytest.approx(c_before[1] * lr / (c_before[1] * lr + 1 - c_before[1]))
     # more misses in view: deleted after a few frames, id 2 never comes back
     for k in range(6, 12):
         trk.update(k * DT_NS, cones(xy[:1], [BLUE]), Motion2D())
@@ -184,8 +185,8 @@ def test_bad_stamps_not_fused_and_counted_gap_lowers_certainty():
     assert trk.events["gap"] == 1
     assert info.matched == 4 and info.new == 0
     assert info.motion.dx == pytest.approx(3.0, abs=0.05)
-    c_expected = c * np.exp(-2.0 / trk.config.gap_tau_s)
-    assert np.all(trk.certainty < c_expected + (1 - c_expected) * trk.config.certainty_hit + 1e-9)
+    c_gap = c * np.exp(-2.0 / trk.config.gap_tau_s)
+    assert np.allclose(trk.certainty, trk._hit(c_gap, np.full(4, 0.8)))  # lowered by the gap, then one hit
 
 
 def test_bad_cones_left_out_and_counted():
