@@ -145,25 +145,27 @@ def _gauss_newton(src, dst, c_src, c_dst, start: Motion2D, prior: Motion2D, prio
     if prior_std is not None:
         w_prior = np.diag([1 / prior_std[0] ** 2, 1 / prior_std[0] ** 2, 1 / prior_std[1] ** 2])
         x_prior = np.array([prior.dx, prior.dy, prior.dyaw])
+    n = len(src)
+    J = np.zeros((n, 2, 3))
+    J[:, 0, 0] = J[:, 1, 1] = 1.0
     for _ in range(iterations):
         c, s = np.cos(x[2]), np.sin(x[2])
         R = np.array([[c, -s], [s, c]])
         rs = src @ R.T
         r = rs + x[:2] - dst  # (n, 2)
-        cov = R[None] @ c_src @ R.T[None] + c_dst
+        cov = R @ c_src @ R.T + c_dst
         a, b, d = cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 1]
         det = a * d - b * b
-        W = np.stack([np.c_[d, -b], np.c_[-b, a]], axis=1) / det[:, None, None]  # inverse covariances
-        m2 = np.einsum("ni,nij,nj->n", r, W, r)
-        # Cauchy: weight 1 / (1 + m2 / k^2), with k the Mahalanobis size of cauchy_m
-        k2 = (cauchy_m**2) / np.maximum(np.trace(cov, axis1=1, axis2=2) / 2, 1e-6)
-        W = W * (1.0 / (1.0 + m2 / np.maximum(k2, 1.0)))[:, None, None]
-        J = np.zeros((len(src), 2, 3))
-        J[:, 0, 0] = J[:, 1, 1] = 1.0
-        J[:, :, 2] = np.c_[-rs[:, 1], rs[:, 0]]  # d(R src)/d yaw
+        W = np.empty((n, 2, 2))
+        W[:, 0, 0], W[:, 0, 1], W[:, 1, 0], W[:, 1, 1] = d / det, -b / det, -b / det, a / det  # inverse covariances
+        m2 = W[:, 0, 0] * r[:, 0] ** 2 + 2 * W[:, 0, 1] * r[:, 0] * r[:, 1] + W[:, 1, 1] * r[:, 1] ** 2
+        # Cauchy: weight 1 / (1 + m2 / k^2), with k the Mahalanobis size of cauchy_m (at least 1)
+        k2 = np.maximum(cauchy_m**2 / np.maximum((a + d) / 2, 1e-6), 1.0)
+        W *= (1.0 / (1.0 + m2 / k2))[:, None, None]
+        J[:, 0, 2], J[:, 1, 2] = -rs[:, 1], rs[:, 0]  # d(R src)/d yaw
         JtW = np.transpose(J, (0, 2, 1)) @ W
         A = (JtW @ J).sum(0)
-        g = np.einsum("nij,nj->i", JtW, r)
+        g = (JtW @ r[:, :, None]).sum(0)[:, 0]
         if prior_std is not None:
             dp = x - x_prior
             dp[2] = _wrap(dp[2])
@@ -218,70 +220,71 @@ def register_cones(
     trk_xy = np.asarray(trk_xy, dtype=np.float64).reshape(-1, 2)
     empty = np.zeros(0, dtype=np.intp)
     fail = Registration(prior, 0, False, empty, empty)
-    if len(det_xy) < min_inliers or len(trk_xy) < min_inliers:
-        return fail
-    det_cov = np.broadcast_to(np.eye(2) * 0.01, (len(det_xy), 2, 2)) if det_cov is None else np.asarray(det_cov, np.float64)
-    trk_cov = np.broadcast_to(np.eye(2) * 0.01, (len(trk_xy), 2, 2)) if trk_cov is None else np.asarray(trk_cov, np.float64)
-    det_prev = prior.to_previous(det_xy)  # detections where the prior puts them in the previous frame
-    d = np.linalg.norm(det_prev[:, None, :] - trk_xy[None, :, :], axis=2)
-    dc, tc = np.asarray(det_cls)[:, None], np.asarray(trk_cls)[None, :]
-    compatible = (dc == tc) | (dc == UNKNOWN) | (tc == UNKNOWN)
-    cand_i, cand_j = np.nonzero((d <= search_m) & compatible)
-    if len(cand_i) < min_inliers:
-        return fail
-    src, dst = det_xy[cand_i], trk_xy[cand_j]  # dst ~= R src + t for the true motion
-
-    # hypotheses: the prior + rigid transforms from two random candidate pairs with distinct detections
-    rng = rng if rng is not None else np.random.default_rng(0)
-    k = len(cand_i)
-    a = rng.integers(0, k, iterations)
-    b = rng.integers(0, k, iterations)
-    good = (cand_i[a] != cand_i[b]) & (cand_j[a] != cand_j[b])
-    a, b = a[good], b[good]
-    vs, vd = src[b] - src[a], dst[b] - dst[a]
-    ok_len = np.abs(np.linalg.norm(vs, axis=1) - np.linalg.norm(vd, axis=1)) <= 2 * inlier_m
-    a, b, vs, vd = a[ok_len], b[ok_len], vs[ok_len], vd[ok_len]
-    th = np.arctan2(vd[:, 1], vd[:, 0]) - np.arctan2(vs[:, 1], vs[:, 0])
-    mid_s, mid_d = (src[a] + src[b]) / 2, (dst[a] + dst[b]) / 2
-    c, s = np.cos(th), np.sin(th)
-    t = mid_d - np.c_[c * mid_s[:, 0] - s * mid_s[:, 1], s * mid_s[:, 0] + c * mid_s[:, 1]]
-    th = np.r_[prior.dyaw, th]
-    t = np.r_[[[prior.dx, prior.dy]], t]
-    c, s = np.cos(th)[:, None], np.sin(th)[:, None]
-    px = c * src[None, :, 0] - s * src[None, :, 1] + t[:, 0:1]
-    py = s * src[None, :, 0] + c * src[None, :, 1] + t[:, 1:2]
-    inl = np.hypot(px - dst[None, :, 0], py - dst[None, :, 1]) <= inlier_m  # (H, K)
-    # each detection counted once: count distinct detections among the inliers
     n_det = len(det_xy)
-    score = np.zeros(len(th), dtype=np.int64)
-    for h in range(len(th)):  # H <= iterations + 1, cheap
-        score[h] = np.unique(cand_i[inl[h]]).size
-    best = int(np.argmax(score))
-    motion = Motion2D(float(t[best, 0]), float(t[best, 1]), float(th[best]))
-    if score[best] < min_inliers:
+    if n_det < min_inliers or len(trk_xy) < min_inliers:
         return fail
-    # refine: nearest compatible track per detection under the current motion, then weighted LS
-    di = tj = empty
-    for _ in range(2):
+    det_cov = np.broadcast_to(np.eye(2) * 0.01, (n_det, 2, 2)) if det_cov is None else np.asarray(det_cov, np.float64)
+    trk_cov = np.broadcast_to(np.eye(2) * 0.01, (len(trk_xy), 2, 2)) if trk_cov is None else np.asarray(trk_cov, np.float64)
+    dc, tc = np.asarray(det_cls)[:, None], np.asarray(trk_cls)[None, :]
+    incompatible = (dc != tc) & (dc != UNKNOWN) & (tc != UNKNOWN)
+
+    def nearest(motion: Motion2D) -> tuple[np.ndarray, np.ndarray]:
+        """(N,) nearest compatible track of each detection under ``motion`` and its distance (m)."""
         p = motion.to_previous(det_xy)
-        dd = np.linalg.norm(p[:, None, :] - trk_xy[None, :, :], axis=2)
-        dd[~compatible] = np.inf
-        j = np.argmin(dd, axis=1)
-        dmin = dd[np.arange(n_det), j]
-        keep = dmin <= inlier_m
-        # one detection per track: keep the nearest
+        d2 = (p[:, None, 0] - trk_xy[None, :, 0]) ** 2 + (p[:, None, 1] - trk_xy[None, :, 1]) ** 2
+        d2[incompatible] = np.inf
+        j = np.argmin(d2, axis=1)
+        return j, np.sqrt(d2[np.arange(n_det), j])
+
+    motion = prior
+    j, dmin = nearest(prior)
+    if np.count_nonzero(dmin <= inlier_m) < max(min_inliers, n_det // 2):
+        # the prior explains too few cones: RANSAC over pairs of candidate correspondences
+        p = prior.to_previous(det_xy)
+        d = np.hypot(p[:, None, 0] - trk_xy[None, :, 0], p[:, None, 1] - trk_xy[None, :, 1])
+        cand_i, cand_j = np.nonzero((d <= search_m) & ~incompatible)
+        if len(cand_i) < min_inliers:
+            return fail
+        src, dst = det_xy[cand_i], trk_xy[cand_j]  # dst ~= R src + t for the true motion
+        rng = rng if rng is not None else np.random.default_rng(0)
+        k = len(cand_i)
+        a, b = rng.integers(0, k, iterations), rng.integers(0, k, iterations)
+        good = (cand_i[a] != cand_i[b]) & (cand_j[a] != cand_j[b])
+        a, b = a[good], b[good]
+        vs, vd = src[b] - src[a], dst[b] - dst[a]
+        ok_len = np.abs(np.hypot(vs[:, 0], vs[:, 1]) - np.hypot(vd[:, 0], vd[:, 1])) <= 2 * inlier_m
+        a, b, vs, vd = a[ok_len], b[ok_len], vs[ok_len], vd[ok_len]
+        th = np.arctan2(vd[:, 1], vd[:, 0]) - np.arctan2(vs[:, 1], vs[:, 0])
+        mid_s, mid_d = (src[a] + src[b]) / 2, (dst[a] + dst[b]) / 2
+        c, s = np.cos(th), np.sin(th)
+        tx = np.concatenate([[prior.dx], mid_d[:, 0] - (c * mid_s[:, 0] - s * mid_s[:, 1])])
+        ty = np.concatenate([[prior.dy], mid_d[:, 1] - (s * mid_s[:, 0] + c * mid_s[:, 1])])
+        th = np.concatenate([[prior.dyaw], th])
+        c, s = np.cos(th)[:, None], np.sin(th)[:, None]
+        px = c * src[None, :, 0] - s * src[None, :, 1] + tx[:, None]
+        py = s * src[None, :, 0] + c * src[None, :, 1] + ty[:, None]
+        hh, kk = np.nonzero(np.hypot(px - dst[None, :, 0], py - dst[None, :, 1]) <= inlier_m)  # (H, K) inliers
+        hit = np.zeros((len(th), n_det), dtype=bool)
+        hit[hh, cand_i[kk]] = True  # each detection counted once
+        score = hit.sum(axis=1)
+        best = int(np.argmax(score))
+        if score[best] < min_inliers:
+            return fail
+        motion = Motion2D(float(tx[best]), float(ty[best]), float(th[best]))
+        j, dmin = nearest(motion)
+    # refine: nearest compatible track per detection (one detection per track), then Gauss-Newton
+    di = tj = empty
+    for it in range(2):
+        if it:
+            j, dmin = nearest(motion)
         order = np.argsort(dmin)
-        seen, sel = set(), []
-        for i in order:
-            if not keep[i]:
-                break
-            if j[i] not in seen:
-                seen.add(int(j[i]))
-                sel.append(int(i))
-        if len(sel) < min_inliers:
+        order = order[dmin[order] <= inlier_m]
+        _, first = np.unique(j[order], return_index=True)  # the nearest detection of each track
+        di = np.sort(order[first])
+        tj = j[di]
+        if len(di) < min_inliers:
             break
-        di, tj = np.array(sel, dtype=np.intp), j[sel]
-        motion = _gauss_newton(det_xy[di], trk_xy[tj], det_cov[di], trk_cov[tj], motion, prior, None)
+        motion = _gauss_newton(det_xy[di], trk_xy[tj], det_cov[di], trk_cov[tj], motion, prior, None, iterations=2)
     if prior_std is not None and len(di) >= min_inliers:
         # the prior joins only when the cones agree with it (a wrong prior must not hold the estimate)
         off = np.hypot(motion.dx - prior.dx, motion.dy - prior.dy)

@@ -238,3 +238,38 @@ def format_tracking(s: dict, title: str = "/cones/tracked") -> str:
                     f"{s['ego_median_err_frac'] * 100:.1f} % of the distance travelled (p90 {s['ego_p90_err_frac'] * 100:.1f} %), "
                     f"median yaw error {s['ego_median_err_yaw_deg']:.3f} deg")
     return "\n".join(rows)
+
+
+def simulated_drive(n_frames: int, fov, rows_m: tuple[float, ...] = (1.75, -1.75, 5.0, -5.0, 8.5, -8.5),
+                    spacing_m: float = 2.0, step_m: float = 0.4, yaw_step_rad: float = 0.0, sigma_m: float = 0.05,
+                    drop: float = 0.1, seed: int = 0):
+    """Frames of cones seen from a car driving straight through rows of cones (benchmarks, tests).
+
+    Yields ``(true Motion2D from the last frame, CONE_DTYPE records of the cones inside ``fov``
+    (a :class:`~cone_perception.tracker.FieldOfView`), each kept with probability 1 - ``drop`` and
+    moved by ``sigma_m`` noise)``. Classes alternate blue / yellow by row.
+    """
+    from .records import CONE_DTYPE
+
+    rng = np.random.default_rng(seed)
+    length = n_frames * step_m + 60.0
+    xs = np.arange(-5.0, length, spacing_m)
+    world = np.array([(x, y) for y in rows_m for x in xs])
+    cls = np.array([k % 2 for k, _ in enumerate(rows_m) for _ in xs])
+    pose = np.zeros(3)
+    for k in range(n_frames):
+        m = Motion2D(step_m, 0.0, yaw_step_rad) if k else Motion2D()
+        c, s = np.cos(pose[2]), np.sin(pose[2])
+        pose = np.array([pose[0] + c * m.dx - s * m.dy, pose[1] + s * m.dx + c * m.dy, pose[2] + m.dyaw])
+        c, s = np.cos(pose[2]), np.sin(pose[2])
+        d = world - pose[:2]
+        local = np.c_[c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]]
+        near = (local[:, 0] > 0) & (local[:, 0] < 40)
+        idx = np.flatnonzero(near)[fov.visible(local[near])]
+        idx = idx[rng.random(len(idx)) >= drop]
+        out = np.zeros(len(idx), CONE_DTYPE)
+        out["x"] = local[idx, 0] + rng.normal(0, sigma_m, len(idx))
+        out["y"] = local[idx, 1] + rng.normal(0, sigma_m, len(idx))
+        out["class_id"], out["score"] = cls[idx], 0.8
+        out["cov_xx"] = out["cov_yy"] = sigma_m**2
+        yield m, out

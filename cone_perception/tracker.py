@@ -163,7 +163,7 @@ class ConeTracker:
         Rt = R.T  # rotation of vectors from the previous into the current frame
         self.P = Rt[None] @ self.P @ R[None]
         q = cfg.process_std_m**2 + (cfg.motion_std_frac * motion.translation_m) ** 2 + extra_std_m**2
-        perp = np.c_[-self.xy[:, 1], self.xy[:, 0]]  # yaw error moves a point along its normal
+        perp = np.stack([-self.xy[:, 1], self.xy[:, 0]], axis=1)  # yaw error moves a point along its normal
         self.P += q * np.eye(2)[None] + cfg.motion_std_rad**2 * perp[:, :, None] * perp[:, None, :]
 
     # ---- one frame ----------------------------------------------------------------------------
@@ -180,8 +180,10 @@ class ConeTracker:
             raise FrameError(reason, f"frame stamp {stamp_ns} ns is not after the last fused frame {self.last_stamp_ns} ns")
         cones = _valid_cones(cones, self.events)
         cones = cones[np.hypot(cones["x"], cones["y"]) <= cfg.max_range_m]
-        z = np.c_[cones["x"], cones["y"]].astype(np.float64)
-        Rz = np.stack([np.c_[cones["cov_xx"], cones["cov_xy"]], np.c_[cones["cov_xy"], cones["cov_yy"]]], axis=1).astype(np.float64)
+        z = np.empty((len(cones), 2))
+        z[:, 0], z[:, 1] = cones["x"], cones["y"]
+        Rz = np.empty((len(cones), 2, 2))
+        Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1] = cones["cov_xx"], cones["cov_xy"], cones["cov_xy"], cones["cov_yy"]
         Rz = _floor_cov(Rz, cfg.meas_var_floor_m2)
         zc = cones["class_id"].astype(np.intp)
 
@@ -304,14 +306,14 @@ class ConeTracker:
             raise OverflowError("track ids exhausted (uint32)")  # 4e9 cones: not in one run
         self.next_id += n
         uniform = np.full((n, NUM_CLASSES), 1.0 / NUM_CLASSES)
-        self.ids = np.r_[self.ids, ids.astype(np.uint32)]
-        self.xy = np.r_[self.xy, z]
-        self.P = np.r_[self.P, _floor_cov(Rz, cfg.init_var_floor_m2)]
-        self.class_p = np.r_[self.class_p, _fuse_class(uniform, zc, score, cfg.class_floor)]
-        self.hits = np.r_[self.hits, np.ones(n, np.int64)]
-        self.misses = np.r_[self.misses, np.zeros(n, np.int64)]
-        self.age = np.r_[self.age, np.ones(n, np.int64)]
-        self.certainty = np.r_[self.certainty, self._hit(np.full(n, cfg.certainty_prior), score)]
+        self.ids = np.concatenate([self.ids, ids.astype(np.uint32)])
+        self.xy = np.concatenate([self.xy, z])
+        self.P = np.concatenate([self.P, _floor_cov(Rz, cfg.init_var_floor_m2)])
+        self.class_p = np.concatenate([self.class_p, _fuse_class(uniform, zc, score, cfg.class_floor)])
+        self.hits = np.concatenate([self.hits, np.ones(n, np.int64)])
+        self.misses = np.concatenate([self.misses, np.zeros(n, np.int64)])
+        self.age = np.concatenate([self.age, np.ones(n, np.int64)])
+        self.certainty = np.concatenate([self.certainty, self._hit(np.full(n, cfg.certainty_prior), score)])
 
     def _hit(self, c: np.ndarray, score: np.ndarray) -> np.ndarray:
         """Certainty after a detection of confidence ``score``: odds times ``odds(score) / odds(score_neutral)``."""
@@ -386,8 +388,10 @@ def _valid_cones(cones: np.ndarray, events: Counter) -> np.ndarray:
     cones = np.asarray(cones)
     if cones.dtype != CONE_DTYPE:
         cones = cones.astype(CONE_DTYPE)
-    f = np.c_[cones["x"], cones["y"], cones["cov_xx"], cones["cov_xy"], cones["cov_yy"]]
-    ok = np.all(np.isfinite(f), axis=1) & (cones["class_id"] < NUM_CLASSES) & (cones["cov_xx"] >= 0) & (cones["cov_yy"] >= 0)
+    ok = np.ones(len(cones), dtype=bool)
+    for name in ("x", "y", "cov_xx", "cov_xy", "cov_yy"):
+        ok &= np.isfinite(cones[name])
+    ok = ok & (cones["class_id"] < NUM_CLASSES) & (cones["cov_xx"] >= 0) & (cones["cov_yy"] >= 0)
     if not ok.all():
         events["bad_cone"] += int((~ok).sum())
         cones = cones[ok]
