@@ -48,12 +48,12 @@ class TrackerConfig:
     class_weight: float = 2.0  # cost of a class mismatch: -class_weight * log p(track has the class)
     certainty_prior: float = 0.3  # before the first detection
     score_neutral: float = 0.45  # a detection with this score leaves the certainty as it is (Bayes odds)
-    miss_likelihood_ratio: float = 0.35  # odds *= this per frame visible and not seen
+    miss_likelihood_ratio: float = 0.5  # odds *= this per frame visible and not seen
     certainty_max: float = 0.98  # so that a few misses in view can still remove a track
     gap_tau_s: float = 1.0  # certainty *= exp(-gap / tau) over a gap above max_gap_s
     delete_below: float = 0.1
     behind_m: float = 3.0  # delete when x < -behind_m
-    min_hits: int = 2  # published from this many hits on
+    min_hits: int = 1  # published from this many hits on (and publish_min_certainty)
     publish_min_certainty: float = 0.5
     max_gap_s: float = 0.5
     class_floor: float = 0.02  # no class probability below this (a wrong first class can recover)

@@ -95,10 +95,10 @@ def test_missed_detections_are_bridged_and_certainty_decays_only_in_view():
     lr = cfg.miss_likelihood_ratio
     assert trk.certainty[1] == pytest.approx(c_before[1] * lr / (c_before[1] * lr + 1 - c_before[1]))
     # more misses in view: deleted after a few frames, id 2 never comes back
-    for k in range(6, 12):
+    for k in range(6, 20):
         trk.update(k * DT_NS, cones(xy[:1], [BLUE]), Motion2D())
     assert list(trk.ids) == [1]
-    trk.update(12 * DT_NS, cones(xy, [BLUE, YELLOW]), Motion2D())
+    trk.update(20 * DT_NS, cones(xy, [BLUE, YELLOW]), Motion2D())
     assert sorted(trk.ids) == [1, 3]
     # out of view (x < 2 m: beside the car): no decay while unseen
     trk2 = ConeTracker(cfg, fov=box_fov())
@@ -261,3 +261,15 @@ def test_field_of_view_from_calibration():
     fov = FieldOfView.from_calibration(load_calibration())
     pts = np.array([[8.0, 0.0], [0.5, 0.0], [-5.0, 0.0], [8.0, 40.0], [500.0, 0.0]])
     assert fov.visible(pts).tolist() == [True, False, False, False, False]
+
+
+def test_low_confidence_detections_are_not_published():
+    """The certainty follows the detections' scores: a cone seen again and again with score 0.3 (the
+    typical false detection) never goes out, one seen with 0.8 goes out at once."""
+    trk = ConeTracker(fov=box_fov())
+    for k in range(10):
+        trk.update(k * DT_NS, np.concatenate([cones([[8.0, 2.0]], BLUE, score=0.3), cones([[8.0, -2.0]], YELLOW, score=0.8)]),
+                   Motion2D() if k else None)
+        out = trk.output()
+        assert out["class_id"].tolist() == [YELLOW] and out["track_id"].tolist() == [2]
+    assert len(trk) == 1  # the doubtful one died out
