@@ -10,7 +10,9 @@ and moves every static cone by -0.4 m in x. ROS-free.
   older than :attr:`TwistBuffer.max_age_s` at a frame is not used for it.
 * :func:`register_cones`: a robust 2D rigid registration of a frame's cones against the tracks
   predicted by a prior motion (constant velocity): RANSAC over pairs of class-compatible
-  correspondences, then weighted least squares on the inliers, re-associated twice.
+  correspondences when the prior explains too few cones, then Gauss-Newton least squares with each
+  pair's covariance and Cauchy weights on the nearest pairs, re-associated once; the prior joins as
+  a measurement when the cones agree with it.
 """
 
 from __future__ import annotations
@@ -173,19 +175,6 @@ def _gauss_newton(src, dst, c_src, c_dst, start: Motion2D, prior: Motion2D, prio
             g = g + w_prior @ dp
         x = x - np.linalg.solve(A, g)
     return Motion2D(float(x[0]), float(x[1]), float(_wrap(x[2])))
-
-
-def _rigid_fit(src: np.ndarray, dst: np.ndarray, w: np.ndarray | None = None) -> tuple[float, np.ndarray]:
-    """Weighted least-squares 2D rotation + translation with ``dst ~= R @ src + t``: (angle rad, t (2,))."""
-    w = np.ones(len(src)) if w is None else w
-    ws = w.sum()
-    ms, md = (w[:, None] * src).sum(0) / ws, (w[:, None] * dst).sum(0) / ws
-    a, b = src - ms, dst - md
-    sxx = np.sum(w * (a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1]))
-    sxy = np.sum(w * (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]))
-    th = float(np.arctan2(sxy, sxx))
-    c, s = np.cos(th), np.sin(th)
-    return th, md - np.array([c * ms[0] - s * ms[1], s * ms[0] + c * ms[1]])
 
 
 def register_cones(
