@@ -42,7 +42,7 @@ class TrackerConfig:
     gate_chi2: float = 13.8  # Mahalanobis^2 gate, 2 dof (99.9 %)
     meas_var_floor_m2: float = 0.05**2  # least variance of a measured position (systematic errors)
     init_var_floor_m2: float = 0.1**2
-    process_std_m: float = 0.03  # per frame, position noise of a static cone (forgets old, biased far measurements)
+    process_std_m: float = 0.05  # per frame, position noise of a static cone (forgets old, biased far measurements)
     motion_std_frac: float = 0.02  # ego-motion translation error, fraction of the distance travelled
     motion_std_rad: float = 0.003  # ego-motion yaw error per frame
     class_weight: float = 2.0  # cost of a class mismatch: -class_weight * log p(track has the class)

@@ -54,7 +54,7 @@ def nearest_err(out, local):
 
 def test_static_cones_fused_better_than_one_measurement_with_stable_ids():
     rng = np.random.default_rng(0)
-    trk = ConeTracker(fov=box_fov())
+    trk = ConeTracker(TrackerConfig(process_std_m=0.01), fov=box_fov())  # exact motion, independent noise
     frames = drive(trk, 60, rng, sigma=0.05, give_motion=True)
     local, out, _ = frames[-1]
     assert out.dtype == TRACKED_CONE_DTYPE and out["track_id"].dtype == np.uint32
