@@ -11,7 +11,10 @@ within :attr:`TrackingReport.range_m` (15 m) of the rear axle:
   this frame: a tracked cone beside the car, out of view, is real, not false);
 * **position error** per distance group of the cones the frame shows (the pairs of the recall), so
   that it compares with the ``/cones`` error (:data:`DISTANCE_GROUPS`);
-* **ids**: an id switch when a truth cone is matched to another track id than at its last match;
+* **ids**: an id switch when a truth cone that stayed within range (and in front of the axle) is
+  matched to another track id than at its last match (``id_switches``; ``id_switches_all`` also
+  counts a cone that comes back into range, e.g. where the course passes a place again, under a new
+  id: the tracker keeps a local map, not a map of the course);
   **IDF1** (Ristani et al. 2016): truth ids and track ids paired one-to-one over the whole drive to
   maximise the frames they are matched in, ``IDF1 = 2 IDTP / (n_truth + n_tracked)``;
 * **ego-motion**: the estimated motion between consecutive frames against the true one
@@ -133,8 +136,10 @@ class TrackingReport:
     n_false: int = 0
     err: list = field(default_factory=list)
     err_range: list = field(default_factory=list)
-    id_switches: int = 0
+    id_switches: int = 0  # while the cone stays within range
+    id_switches_all: int = 0  # CLEAR MOT: also when a cone comes back into range under a new id
     last_id: dict = field(default_factory=dict)  # truth id -> track id
+    last_in_range: dict = field(default_factory=dict)  # truth id -> last frame number it was within range
     pairs: dict = field(default_factory=dict)  # (truth id, track id) -> frames
     n_truth_ids: int = 0  # truth cone-frames (for IDF1)
     n_tracked_ids: int = 0
@@ -183,6 +188,9 @@ class TrackingReport:
         tid = tracked["track_id"] if len(tracked) else np.zeros(0, np.int64)
         in_t = (w_r <= self.range_m) & (w_xy[:, 0] >= 0.0)
         self.n_truth_ids += int(in_t.sum())
+        stayed = {int(g) for g in w_id[in_t] if self.last_in_range.get(int(g)) == self.frames - 1}
+        for g in w_id[in_t]:
+            self.last_in_range[int(g)] = self.frames
         self.n_tracked_ids += int((p_in & (p[:, 0] >= 0.0)).sum())
         for i, j, _ in pairs:
             if not in_t[j] or not p_in[i] or p[i, 0] < 0.0:
@@ -190,7 +198,8 @@ class TrackingReport:
             g, t = int(w_id[j]), int(tid[i])
             self.pairs[(g, t)] = self.pairs.get((g, t), 0) + 1
             if g in self.last_id and self.last_id[g] != t:
-                self.id_switches += 1
+                self.id_switches_all += 1
+                self.id_switches += g in stayed
             self.last_id[g] = t
 
     def summary(self) -> dict:
@@ -217,6 +226,7 @@ class TrackingReport:
             "groups": groups,
             "id_switches": self.id_switches,
             "id_switches_per_100_frames": 100.0 * self.id_switches / self.frames if self.frames else nan,
+            "id_switches_all": self.id_switches_all,
             "idf1": f1,
             "ego_frames": int(ego.size),
             "ego_median_err_m": float(np.median(ego)) if ego.size else nan,
@@ -230,7 +240,8 @@ def format_tracking(s: dict, title: str = "/cones/tracked") -> str:
     """Plain-text lines of :meth:`TrackingReport.summary`."""
     rows = [f"{title} within {s['range_m']:g} m over {s['frames']} frames: recall {s['recall']:.3f}, "
             f"false cones {s['false_per_frame']:.2f}/frame, id switches {s['id_switches']} "
-            f"({s['id_switches_per_100_frames']:.2f}/100 frames), IDF1 {s['idf1']:.3f}"]
+            f"({s['id_switches_per_100_frames']:.2f}/100 frames; {s['id_switches_all']} counting cones back in range "
+            f"under a new id), IDF1 {s['idf1']:.3f}"]
     rows.append("  position error (m): " + ", ".join(
         f"{name} median {g['median_err_m']:.3f} p90 {g['p90_err_m']:.3f} (n {g['n']})" for name, g in s["groups"].items()))
     if s["ego_frames"]:

@@ -150,8 +150,26 @@ def test_tracking_report_counts_switches_false_cones_and_ego_error(tmp_path):
     rep.add_frame(2, rec([[8.0, 2.0], [8.0, -2.05], [5.0, 0.0]], [1, 7, 9]), Motion2D(0.99, 0.0, 0.0))  # switch 2 -> 7, one false
     rep.add_frame(3, rec([[7.0, 2.0]], [1]), Motion2D(1.0, 0.0, 0.0))  # yellow missed
     s = rep.summary()
-    assert s["id_switches"] == 1
+    assert s["id_switches"] == 1 and s["id_switches_all"] == 1
     assert s["false_per_frame"] == pytest.approx(1 / 4)
     assert s["recall"] == pytest.approx(7 / 8)
     assert s["ego_median_err_m"] == pytest.approx(0.01)
     assert s["idf1"] == pytest.approx(2 * 6 / (8 + 8))  # IDTP: cone A-1 4, B-2 2
+
+
+def test_a_cone_back_in_range_under_a_new_id_is_no_switch_while_in_range(tmp_path):
+    # the car stands still, then jumps 20 m back (the cone leaves the 15 m range) and returns
+    poses = [0.0, 0.0, -20.0, 0.0]
+    frames = [(k, (x, 0.0, 0.0), [(10.0 - x, 2.0, BLUE)] if x == 0.0 else []) for k, x in enumerate(poses)]
+    truth = load_drive_truth(_truth_file(tmp_path / "gt.jsonl", frames))
+    rep = TrackingReport(truth)
+    rec = np.zeros(1, TRACKED_CONE_DTYPE)
+    rec["x"], rec["y"] = 10.0, 2.0
+    for k, tid in zip(range(4), (1, 1, None, 5)):
+        if tid is None:
+            rep.add_frame(k, np.zeros(0, TRACKED_CONE_DTYPE))
+            continue
+        rec["track_id"] = tid
+        rep.add_frame(k, rec)
+    s = rep.summary()
+    assert s["id_switches"] == 0 and s["id_switches_all"] == 1
