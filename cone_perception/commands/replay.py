@@ -88,11 +88,11 @@ def _run_offline(args, calib) -> dict:
     from ..pipeline import Pipeline
     from ..replay import offline_replay
 
+    tracking = _tracking(args, calib)  # its bad options fail before the model loads
     # built for the calibration's band, as the pipeline node does (a fixed-size backend never letterboxes)
     det = Detector.load_for_band(args.model or default_model_path(), (calib.crop.out_width, calib.crop.out_height),
                                  backend=args.backend, conf=args.conf, threads=args.threads or None, bf16=args.bf16)
     det.warmup()
-    tracking = _tracking(args, calib)
     res = offline_replay(args.bag, Pipeline(calib, det), args.topic, args.out, args.gt_topic, _progress(args.no_progress),
                          tracking)
     stages = res.timer.summary()
