@@ -42,6 +42,7 @@ setup(
             "mapping = cone_perception.nodes.mapping:main",
             "detection = cone_perception.nodes.detection:main",
             "pipeline = cone_perception.nodes.pipeline:main",
+            "cone_tracker = cone_perception.nodes.cone_tracker:main",
         ],
     },
 )

@@ -7,6 +7,8 @@ and one point per box / cone. In Python they are numpy structured arrays:
   ``class_id`` uint8 (24 bytes a point, 4-byte aligned).
 * :data:`CONE_DTYPE`: ``x y z`` float32 (m, ``rear_axle``, z = 0), ``class_id``
   uint8, ``score`` float32, ``cov_xx cov_xy cov_yy`` float32 (m^2) (32 bytes).
+* :data:`TRACKED_CONE_DTYPE` (``/cones/tracked``): the ``CONE_DTYPE`` fields plus ``track_id``
+  uint32 (36 bytes); ``score`` is the track's certainty.
 
 The converters are duck-typed over the message classes, so the same code builds
 rclpy messages in the nodes and rosbags messages in the offline tools; this
@@ -36,6 +38,15 @@ CONE_DTYPE = np.dtype(
         "formats": ["<f4", "<f4", "<f4", "u1", "<f4", "<f4", "<f4", "<f4"],
         "offsets": [0, 4, 8, 12, 16, 20, 24, 28],
         "itemsize": 32,
+    }
+)
+
+TRACKED_CONE_DTYPE = np.dtype(
+    {
+        "names": list(CONE_DTYPE.names) + ["track_id"],
+        "formats": [CONE_DTYPE.fields[n][0] for n in CONE_DTYPE.names] + ["<u4"],
+        "offsets": [CONE_DTYPE.fields[n][1] for n in CONE_DTYPE.names] + [32],
+        "itemsize": 36,
     }
 )
 

@@ -31,6 +31,7 @@ CONES_TOPIC = "/cones"
 ATTITUDE_TOPIC = "/cones/attitude"
 ATTITUDE_GT_TOPIC = "/attitude_gt"
 IMU_TOPIC = "/imu"
+TRACKED_TOPIC = "/cones/tracked"
 
 
 def find_image_topic(bag: str | os.PathLike, topic: str | None = None) -> tuple[str, str]:
@@ -157,6 +158,8 @@ class ReplayResult:
     attitude: dict[int, Attitude] = field(default_factory=dict)  # stamp ns -> attitude used
     attitude_mode: str = "fixed"
     pipeline_attitude: dict | None = None  # image fit outcomes: fitted / too few cones / rejected
+    tracked: dict[int, np.ndarray] = field(default_factory=dict)  # stamp ns -> TRACKED_CONE_DTYPE (replay --track)
+    tracking: dict | None = None  # ReplayTracking.summary()
 
 
 def offline_replay(
@@ -167,10 +170,13 @@ def offline_replay(
     gt_topic: str | None = None,
     progress: Callable[[int], Iterator] | None = None,
     imu_topic: str = IMU_TOPIC,
+    tracking=None,
 ) -> ReplayResult:
     """Replay ``bag`` through ``pipeline``; write ``/cone_boxes`` and ``/cones`` to ``out`` if given.
 
-    ``progress`` wraps the frame iterator (e.g. a tqdm factory taking the total).
+    ``progress`` wraps the frame iterator (e.g. a tqdm factory taking the total). ``tracking``: a
+    :class:`~cone_perception.track_replay.ReplayTracking` (drops detections, tracks; ``/cones/tracked``
+    is written too).
     """
     import time
 
@@ -182,6 +188,8 @@ def offline_replay(
         topics = {BOXES_TOPIC: bagio.POINTCLOUD2, CONES_TOPIC: bagio.POINTCLOUD2}
         if pipeline.attitude_mode != "fixed":
             topics[ATTITUDE_TOPIC] = bagio.VECTOR3_STAMPED
+        if tracking is not None and tracking.stage is not None:
+            topics[TRACKED_TOPIC] = bagio.POINTCLOUD2
         writer = bagio.BagWriter(Path(out), topics)
     res = ReplayResult()
     report = LocalisationReport(max_range_m=pipeline.calib.max_range_m) if truth is not None else None
@@ -209,6 +217,11 @@ def offline_replay(
             for k, v in r.timing_ms.items():
                 res.timer.add(k, v / 1e3)
             res.stats.count_ok()
+            tracked = None
+            if tracking is not None:
+                r.cones, tracked = tracking.frame(fr.stamp_ns, r.cones)
+                if tracked is not None:
+                    res.tracked[fr.stamp_ns] = tracked
             res.boxes[fr.stamp_ns], res.cones[fr.stamp_ns] = r.boxes, r.cones
             if writer is not None:
                 frame_id = getattr(fr.msg.header, "frame_id", "")
@@ -216,6 +229,9 @@ def offline_replay(
                     r.boxes.astype(BOX_DTYPE), bagio.header(fr.stamp_ns, frame_id), bagio.PointCloud2, bagio.PointField))
                 writer.write(CONES_TOPIC, fr.log_stamp_ns, to_pointcloud2(
                     r.cones, bagio.header(fr.stamp_ns, pipeline.calib.frame_id), bagio.PointCloud2, bagio.PointField))
+                if tracked is not None:
+                    writer.write(TRACKED_TOPIC, fr.log_stamp_ns, to_pointcloud2(
+                        tracked, bagio.header(fr.stamp_ns, pipeline.calib.frame_id), bagio.PointCloud2, bagio.PointField))
                 if ATTITUDE_TOPIC in topics:
                     roll, pitch, yaw = attitude_vector(r.attitude)
                     writer.write(ATTITUDE_TOPIC, fr.log_stamp_ns, bagio.Vector3Stamped(
@@ -236,4 +252,6 @@ def offline_replay(
     if report is not None:
         res.localisation = report.summary()
         res.localisation["attitude"] = att_report.summary()
+    if tracking is not None:
+        res.tracking = tracking.summary()
     return res

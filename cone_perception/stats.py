@@ -86,6 +86,7 @@ class StreamMonitor:
     repeated: int = 0
     stale: int = 0
     silences: int = 0
+    optional: bool = False  # an input the node works without: silence and no publisher are no error
     last_stamp_ns: int | None = None
     last_arrival_ns: int | None = None
     started_ns: int | None = None

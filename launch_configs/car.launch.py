@@ -3,6 +3,7 @@
     ros2 launch cone_perception car.launch.py                       # example_mainhoop camera
     ros2 launch cone_perception car.launch.py camera:=mainhoop      # launch_configs/mainhoop.params.yaml
     ros2 launch cone_perception car.launch.py fused:=true           # one `pipeline` process instead
+    ros2 launch cone_perception car.launch.py track:=true           # + the cone tracker (/cones/tracked)
 
 ``camera`` names ``launch_configs/<camera>.params.yaml`` (parameters of all nodes, including the
 calibration file). ``image_topic`` is remapped to the nodes' ``image_raw`` input.
@@ -25,11 +26,14 @@ def _nodes(context):
         raise RuntimeError(f"no parameter file {params} for camera {camera!r}")
     image_topic = LaunchConfiguration("image_topic").perform(context)
     fused = LaunchConfiguration("fused").perform(context).lower() in ("1", "true", "yes")
+    track = LaunchConfiguration("track").perform(context).lower() in ("1", "true", "yes")
     remap = [("image_raw", image_topic), ("image_raw/compressed", image_topic + "/compressed")]
     if fused:
         return [Node(package="cone_perception", executable="pipeline", name="pipeline",
-                     parameters=[params], remappings=remap, output="screen")]
-    return [
+                     parameters=[params, {"track": track}], remappings=remap, output="screen")]
+    tracker = [Node(package="cone_perception", executable="cone_tracker", name="cone_tracker",
+                    parameters=[params], output="screen")] if track else []
+    return tracker + [
         Node(package="cone_perception", executable="driver_adapter", name="driver_adapter",
              parameters=[params], remappings=remap, output="screen"),
         Node(package="cone_perception", executable="detection", name="detection",
@@ -47,5 +51,7 @@ def generate_launch_description():
                               description="camera driver's image topic"),
         DeclareLaunchArgument("fused", default_value="false",
                               description="run the fused pipeline node instead of three nodes"),
+        DeclareLaunchArgument("track", default_value="false",
+                              description="also track the cones (/cones/tracked): the pipeline's tracker stage or a cone_tracker node"),
         OpaqueFunction(function=_nodes),
     ])

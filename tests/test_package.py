@@ -9,11 +9,11 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 PKG = ROOT / "cone_perception"
-ROS_MODULES = {"rclpy", "std_msgs", "sensor_msgs", "geometry_msgs", "visualization_msgs", "diagnostic_msgs",
+ROS_MODULES = {"rclpy", "std_msgs", "sensor_msgs", "geometry_msgs", "visualization_msgs", "diagnostic_msgs", "nav_msgs",
                "builtin_interfaces", "launch", "launch_ros", "ament_index_python"}
 # import name -> rosdep key in package.xml
 ROSDEP = {"numpy": "python3-numpy", "cv2": "python3-opencv", "yaml": "python3-yaml", "tqdm": "python3-tqdm",
-          "matplotlib": "python3-matplotlib"}
+          "matplotlib": "python3-matplotlib", "scipy": "python3-scipy"}
 # installed with pip on the car because rosdep has no valid key (README "On the car")
 PIP_ONLY = {"torch", "rosbags", "onnxruntime", "onnx", "pycocotools"}
 

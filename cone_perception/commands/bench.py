@@ -3,6 +3,7 @@
   cone-perception bench adapter  [--frames 300] [--calib CAL] [--encoding yuv422_yuy2] [--json]
   cone-perception bench pipeline [--frames 300] [--calib CAL] [--model M] [--backend B] [--threads N]
                                  [--input full|half|crop|crop_half] [--repeat N] [--json]
+  cone-perception bench tracker [--frames 300] [--rows 8] [--calib CAL] [--json]
   cone-perception bench table --models A.pt[,B.pt] --val DIR --gt-names A,B,.. --band V0,V1 --out DIR [--frames N]
 
 ``adapter``: 1920x1080 frames (size from the calibration) in the given encoding -> cropped,
@@ -12,6 +13,8 @@ model input, forward, decode + NMS, mapping) and the packing of ``cone_boxes`` a
 into PointCloud2 messages, as the ``pipeline`` node runs them. ``--input`` replaces the
 calibration's crop and downscale by one of the runtime-table settings (:meth:`CropSpec.for_setting`).
 ``table``: the runtime table (see ``bench_table.py``).
+``tracker``: the cone tracker's update per frame (ego-motion from the cones, association, Kalman
+update) on a simulated drive through rows of cones, about 100 tracks with the defaults.
 Warm-up frames are excluded; median, p90, p99, min-max (noise) and frames/s (from the median
 end-to-end time) are reported, plus peak RSS. ``pipeline --repeat N`` runs it N times, each in a
 fresh process, and reports the spread across runs (:func:`benchmark.summarize_runs`).
@@ -44,8 +47,9 @@ _BYTES_PER_PX = {"yuv422_yuy2": 2, "bgr8": 3, "rgb8": 3}
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.description = ("Benchmark per-frame stages on real-size frames (warm-up excluded); `table` adds mAP on real "
                      "validation frames per model and input setting (the thesis's runtime table).")
-    p.add_argument("target", choices=["adapter", "pipeline", "table"],
-                   help="what to benchmark: adapter, pipeline, or table (the runtime table: bench + mAP per model and input setting)")
+    p.add_argument("target", choices=["adapter", "pipeline", "table", "tracker"],
+                   help="what to benchmark: adapter, pipeline, table (the runtime table: bench + mAP per model and input "
+                        "setting), or tracker (the cone tracker's update per frame on a simulated drive)")
     p.add_argument("--frames", type=int, default=300, help="timed frames (>= 200 recommended; default %(default)s)")
     p.add_argument("--warmup", type=int, default=20, help="untimed warm-up frames (default %(default)s)")
     p.add_argument("--calib", default=DEFAULT_CAMERA, help="calibration (crop, downscale, image size); default %(default)s")
@@ -63,6 +67,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="pipeline: override the calibration's crop: full = all rows, downscale 1; half = all rows, "
                         "downscale 2; crop = the calibration's band, downscale 1; crop_half = the band, downscale 2 "
                         "(default: the calibration's own crop and downscale)")
+    p.add_argument("--rows", type=int, default=8,
+                   help="tracker: rows of cones beside the simulated drive, 2 m apart along it (default %(default)s: "
+                        "about 100 tracks, 50 cones a frame with the default calibration)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (--json implies it for pipeline)")
     p.add_argument("--repeat", type=int, default=1,
@@ -220,6 +227,8 @@ def run(args: argparse.Namespace) -> int:
     if args.repeat < 1 or (args.repeat > 1 and args.target != "pipeline"):
         raise ConfigError("bench", "--repeat", "need --repeat >= 1; more than one run is for `bench pipeline`")
     calib = load_calibration(args.calib)
+    if args.target == "tracker":
+        return _bench_tracker(args, calib)
     if args.target == "table":
         from ._table import run_table
 
@@ -267,4 +276,39 @@ def run(args: argparse.Namespace) -> int:
     print(f"bench {args.target}: {result['input']} -> {result['output']}, {args.frames} frames, {plural(args.threads, 'thread')}")
     print(format_table(s))
     print(f"frames/s (median): {result['fps']:.1f}   peak RSS: {result['peak_rss_mb']:.0f} MiB")
+    return 0
+
+
+def _bench_tracker(args: argparse.Namespace, calib) -> int:
+    """``bench tracker``: :meth:`ConeTracker.update` (motion from the cones: registration, association,
+    Kalman update) per frame of a simulated drive through rows of cones, seen through the calibration's band."""
+    from ..track_eval import simulated_drive
+    from ..tracker import ConeTracker, FieldOfView, TrackerConfig
+
+    if args.rows < 1:
+        raise ConfigError("bench", "--rows", f"must be >= 1, got {args.rows}")
+    fov = FieldOfView.from_calibration(calib)
+    rows = tuple(float(s * (1.75 + 3.5 * (k // 2))) for k, s in zip(range(args.rows), [1, -1] * args.rows))
+    trk = ConeTracker(TrackerConfig(), fov)
+    timer, n_tracks, n_cones = StageTimer(), [], []
+    frames = list(simulated_drive(args.warmup + args.frames, fov, rows_m=rows, spacing_m=1.5))
+    for k, (_, cones) in enumerate(frames):
+        if k < args.warmup:
+            trk.update(k * 50_000_000, cones)
+            continue
+        with timer("tracker"):
+            trk.update(k * 50_000_000, cones)
+        n_tracks.append(len(trk))
+        n_cones.append(len(cones))
+    s = timer.summary()
+    result = {"target": "tracker", "frames": args.frames, "tracks_mean": float(np.mean(n_tracks)),
+              "cones_per_frame": float(np.mean(n_cones)), "stages": s, "events": dict(trk.events)}
+    if args.json:
+        json.dump(result, sys.stdout, indent=1)
+        print()
+        return 0
+    print(f"bench tracker: {args.frames} frames of a simulated drive ({args.rows} rows of cones, {calib.camera} band), "
+          f"{result['tracks_mean']:.0f} tracks and {result['cones_per_frame']:.0f} cones a frame on average; "
+          "motion from the cones")
+    print(format_table(s))
     return 0

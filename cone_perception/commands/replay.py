@@ -1,6 +1,7 @@
 """``cone-perception replay``: run the full pipeline over a rosbag, offline (no ROS) or live.
 
   cone-perception replay BAG [--calib CAL] [--model M] [--out OUT] [--gt-topic /cones_gt]
+  cone-perception replay BAG --track [--drop-detections P] [--odom-topic odom] [--gt-topic /cones_gt] [...]
   cone-perception replay BAG --live fused|separate [...]
 
 Offline: every frame of the bag's camera topic (YUYV, bgr8/rgb8 or JPEG/PNG) goes through the
@@ -9,6 +10,8 @@ with the original stamps. Live: the frames are published (raw CDR) into node pro
 three separate nodes or the fused ``pipeline`` node - and what they publish is recorded.
 Prints frames, throughput, per-stage latency percentiles, dropped frames by cause, and with
 ``--gt-topic`` the localisation table (recall and position error per distance group).
+``--track`` adds the cone tracker (``/cones/tracked``); on a synthetic bag with ``--gt-topic`` it prints
+recall, false cones, error, id switches, IDF1 and ego-motion error within 15 m, tracked against raw.
 """
 
 from __future__ import annotations
@@ -44,6 +47,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--topic", default=None, help="camera topic (default: the bag's only image topic)")
     p.add_argument("--out", type=Path, default=None, help="write /cone_boxes and /cones to this new bag (MCAP)")
     p.add_argument("--gt-topic", default=None, help="ground-truth cones topic (e.g. /cones_gt): print the localisation table")
+    p.add_argument("--track", action="store_true",
+                   help="offline: run the cone tracker too; /cones/tracked goes to --out, and with --gt-topic on a synthetic "
+                        "bag (its <bag>_gt.jsonl beside it) the tracking figures are printed")
+    p.add_argument("--drop-detections", type=float, default=0.0, metavar="P",
+                   help="offline: drop a random share P (0..1) of the detections before tracking and scoring (seeded by "
+                        "--drop-seed), to measure gap filling (default 0)")
+    p.add_argument("--drop-seed", type=int, default=0, help="seed of --drop-detections (default %(default)s)")
+    p.add_argument("--odom-topic", default=None,
+                   help="offline, --track: the car's motion from this nav_msgs/Odometry or geometry_msgs/TwistStamped topic "
+                        "of the bag (default: estimated from the cones)")
     p.add_argument("--live", choices=["fused", "separate"], default=None,
                    help="play the bag into live node processes instead of replaying offline")
     p.add_argument("--pace", choices=["lockstep", "rate"], default="lockstep",
@@ -69,6 +82,10 @@ def _progress(disable: bool):
 
 def run(args: argparse.Namespace) -> int:
     calib = load_calibration(args.calib)
+    if args.live and (args.track or args.drop_detections or args.odom_topic):
+        from ..errors import ConfigError
+
+        raise ConfigError("--live", None, "--track, --drop-detections and --odom-topic work offline only")
     refuse_existing([p for p in (args.out, args.json) if p is not None], args.force, "replay")
     if args.out is not None:
         from ..bagio import check_new_output
@@ -122,13 +139,14 @@ def _run_offline(args, calib) -> dict:
     from ..pipeline import Pipeline
     from ..replay import offline_replay
 
+    tracking = _tracking(args, calib)  # its bad options fail before the model loads
     # built for the calibration's band, as the pipeline node does (a fixed-size backend never letterboxes)
     det = Detector.load_for_band(args.model or default_model_path(), (calib.crop.out_width, calib.crop.out_height),
                                  backend=args.backend, conf=args.conf, threads=args.threads or None, bf16=args.bf16)
     det.warmup()
     imu = _imu_source(args, calib)
     res = offline_replay(args.bag, Pipeline(calib, det, args.attitude, imu), args.topic, args.out, args.gt_topic,
-                         _progress(args.no_progress), imu_topic=args.imu_topic)
+                         _progress(args.no_progress), imu_topic=args.imu_topic, tracking=tracking)
     stages = res.timer.summary()
     n = res.stats.ok
     print(f"replay (offline) {args.bag}: {n} frames processed, {res.stats.summary()}")
@@ -141,6 +159,10 @@ def _run_offline(args, calib) -> dict:
         print(format_attitude_report(res.localisation["attitude"]))
     if res.pipeline_attitude is not None:
         print(f"attitude ({res.attitude_mode}): " + ", ".join(f"{k} {v}" for k, v in res.pipeline_attitude.items()))
+    if res.tracking:
+        from ..track_replay import format_replay_tracking
+
+        print(format_replay_tracking(res.tracking))
     if args.out:
         print_written([args.out], "replay")
     if args.attitude_png:
@@ -152,7 +174,18 @@ def _run_offline(args, calib) -> dict:
                       f"{args.bag.name}: attitude {res.attitude_mode}")
         print_written([args.attitude_png], "replay")
     return {"mode": "offline", "frames": n, "dropped": dict(res.stats.dropped), "wall_s": res.wall_s,
-            "stages": stages, "localisation": res.localisation}
+            "stages": stages, "localisation": res.localisation, "tracking": res.tracking}
+
+
+def _tracking(args, calib):
+    """The replay's tracking (``--track``, ``--drop-detections``), or None."""
+    if not args.track and args.drop_detections == 0:
+        return None
+    from ..track_replay import ReplayTracking, drive_truth_beside, read_twists
+
+    truth = drive_truth_beside(args.bag) if args.gt_topic else None
+    twists = read_twists(args.bag, args.odom_topic) if (args.odom_topic and args.track) else None
+    return ReplayTracking(calib, args.track, args.drop_detections, args.drop_seed, truth, twists)
 
 
 def _run_live(args, calib) -> dict:

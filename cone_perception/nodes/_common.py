@@ -64,7 +64,7 @@ class PerceptionNode(Node):
     def _now_ns(self) -> int:
         return self.get_clock().now().nanoseconds
 
-    def guarded(self, handler: Callable, topic: str, frames: bool = True) -> Callable:
+    def guarded(self, handler: Callable, topic: str, frames: bool = True, optional: bool = False) -> Callable:
         """Wrap the subscription callback of ``topic`` so that no message can end the process.
 
         Every message is counted once on the topic's :class:`~cone_perception.stats.StreamMonitor`
@@ -74,8 +74,12 @@ class PerceptionNode(Node):
         its traceback at debug level. A handler that returns ``False`` has put the message aside for
         later (:meth:`run_guarded` counts it then). ``frames``: processed messages also count as
         frames ok (not for ``camera_info``); drops always go into the node's counts by cause.
+        ``optional``: an input the node works without (odometry): its silence and a missing publisher
+        are no error.
         """
         stream = self.health.stream(self.resolve_topic_name(topic), self._now_ns())
+        if optional:
+            stream.timeout_s, stream.optional = 0.0, True
 
         def callback(msg):
             try:
@@ -168,7 +172,7 @@ class PerceptionNode(Node):
                 self.get_logger().warning(f"diagnostics not published: {type(e).__name__}: {e}")
 
     def _publish_health(self) -> None:
-        pubs = {t: self.count_publishers(t) for t in self.health.streams}
+        pubs = {t: self.count_publishers(t) for t, s in self.health.streams.items() if not s.optional}
         rep = self.health.assess(self._now_ns(), pubs)
         st = DiagnosticStatus()
         st.name = f"cone_perception/{self.get_name()}"

@@ -128,3 +128,37 @@ def attitude_msg(att, header):
     m.header = header
     m.vector.x, m.vector.y, m.vector.z = attitude_vector(att)
     return m
+
+
+def tracked_msg(records: np.ndarray, header: Header) -> PointCloud2:
+    """``TRACKED_CONE_DTYPE`` records -> ``/cones/tracked`` PointCloud2."""
+    from ..records import TRACKED_CONE_DTYPE
+
+    return to_pointcloud2(records.astype(TRACKED_CONE_DTYPE, copy=False), header, PointCloud2, PointField)
+
+
+def tracked_from_msg(msg: PointCloud2) -> np.ndarray:
+    from ..records import TRACKED_CONE_DTYPE
+
+    return from_pointcloud2(msg, TRACKED_CONE_DTYPE)
+
+
+def tracked_markers(tracked: np.ndarray, header: Header) -> MarkerArray:
+    """Tracked cones as cylinders (marker id = track id) plus their id as text above each one."""
+    arr = cone_markers(tracked, header, ns="tracked")
+    for m, c in zip(arr.markers[1:], tracked):
+        m.id = int(c["track_id"]) & 0x7FFFFFFF  # Marker.id is int32
+    clear = Marker()
+    clear.header, clear.ns, clear.action = header, "tracked_ids", Marker.DELETEALL
+    arr.markers.append(clear)
+    for c in tracked:
+        t = Marker()
+        t.header, t.ns, t.id = header, "tracked_ids", int(c["track_id"]) & 0x7FFFFFFF
+        t.type, t.action = Marker.TEXT_VIEW_FACING, Marker.ADD
+        t.pose.position.x, t.pose.position.y, t.pose.position.z = float(c["x"]), float(c["y"]), 0.7
+        t.pose.orientation.w = 1.0
+        t.scale.z = 0.3
+        t.color.r = t.color.g = t.color.b = t.color.a = 1.0
+        t.text = str(int(c["track_id"]))
+        arr.markers.append(t)
+    return arr

@@ -3,7 +3,9 @@
 ``image_raw`` (or ``image_raw/compressed``) in; ``cone_boxes``, ``/cones`` and ``/cones/markers`` out.
 
 Parameters: those of ``driver_adapter`` (calibration, input_transport), ``mapping``
-(publish_markers, attitude, imu_rest_deg; ``imu`` in for attitude imu / fused) and ``detection`` (model, backend, device, fp16, bf16, conf, iou, max_det, threads).
+(publish_markers, attitude, imu_rest_deg; ``imu`` in for attitude imu / fused) and ``detection`` (model,
+backend, device, fp16, bf16, conf, iou, max_det, threads); ``track`` (bool, false): also the tracker
+stage, ``/cones/tracked`` out (parameters as ``cone_tracker``).
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import time
 from sensor_msgs.msg import CompressedImage, Image, PointCloud2
 
 from ..calib import DEFAULT_CAMERA, load_calibration
+from ..errors import FrameError
 from ..pipeline import FrameResult, Pipeline
 from . import _msgs
 from ._attitude import declare_attitude, publish_attitude
@@ -32,6 +35,11 @@ class PipelineNode(PerceptionNode):
         mode, imu = declare_attitude(self)
         self.pipeline = Pipeline(calib, detector, mode, imu)
         self.pub_boxes = self.create_publisher(PointCloud2, "cone_boxes", QOS_DATA)
+        self.tracking = None
+        if bool(self.declare_parameter("track", False).value):
+            from ._tracking import NodeTracking
+
+            self.tracking = NodeTracking(self, calib)
         self.subscribe_camera(transport)
         self.get_logger().info(f"calibration {calib.source}, frame {calib.frame_id}, attitude {self.pipeline.attitude_mode}")
 
@@ -49,6 +57,13 @@ class PipelineNode(PerceptionNode):
         self.pub_boxes.publish(_msgs.boxes_msg(res.boxes, header))
         self.publish_cones(res.cones, header)
         publish_attitude(self, res.attitude, header)
+        if self.tracking is not None:
+            try:
+                self.tracking.process(res.cones, header)
+            except FrameError as e:  # /cones went out; only this frame's tracking is dropped
+                n = self.stats.count_drop(f"tracker_{e.reason}")
+                self.get_logger().warning(f"tracker: frame not fused ({e.reason}, {n} so far): {e}",
+                                          throttle_duration_sec=2.0)
         self.get_logger().debug(
             f"{len(res.boxes)} boxes, {len(res.cones)} cones in {(time.perf_counter() - t0) * 1e3:.1f} ms "
             + " ".join(f"{k}={v:.1f}" for k, v in res.timing_ms.items())

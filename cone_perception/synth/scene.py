@@ -128,7 +128,7 @@ def drive_poses(
     out = []
     for i in range(n):
         s = (start_m + speed_mps * i / fps) % max(L - 1.0, 1.0)
-        x, y, yaw = track.pose_at(s)
+        x, y, yaw = track.pose_at(s, interpolate=True)
         out.append(CarPose(x, y, yaw, float(jit[i, 0]), float(jit[i, 1])))
     return out
 

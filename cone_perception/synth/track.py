@@ -51,9 +51,22 @@ class Track:
     def length_m(self) -> float:
         return float(np.sum(np.hypot(*np.diff(self.centerline_m, axis=0).T)))
 
-    def pose_at(self, s_m: float) -> tuple[float, float, float]:
-        """Position (m) and heading (rad) of the driving line at arc length ``s_m`` (clamped)."""
+    def pose_at(self, s_m: float, interpolate: bool = False) -> tuple[float, float, float]:
+        """Position (m) and heading (rad) of the driving line at arc length ``s_m`` (clamped).
+
+        By default the nearest sample (every :data:`STEP_M`); ``interpolate`` blends the two samples
+        around ``s_m`` (a drive then moves smoothly, not in 0.25 m steps)."""
         c = self.centerline_m
+        if interpolate:
+            f = float(np.clip(s_m / STEP_M, 0, len(c) - 1))
+            i0 = min(int(np.floor(f)), len(c) - 2) if len(c) > 1 else 0
+            a = f - i0
+            x0, y0, h0 = self.pose_at(i0 * STEP_M)
+            if a <= 0 or len(c) < 2:
+                return x0, y0, h0
+            x1, y1, h1 = self.pose_at((i0 + 1) * STEP_M)
+            dh = (h1 - h0 + np.pi) % (2 * np.pi) - np.pi
+            return x0 + a * (x1 - x0), y0 + a * (y1 - y0), float(h0 + a * dh)
         i = int(np.clip(round(s_m / STEP_M), 0, len(c) - 1))
         j0, j1 = max(i - 4, 0), min(i + 4, len(c) - 1)  # heading over +-1 m
         d = c[j1] - c[j0]

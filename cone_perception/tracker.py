@@ -1,0 +1,438 @@
+"""A local map of static cones in ``rear_axle``: tracks that survive missed frames, with ids. ROS-free.
+
+Per frame (:meth:`ConeTracker.update`): the tracks are moved by the car's motion since the last
+frame (odometry when given, else a registration of the frame's cones against the tracks with a
+constant-velocity prior, see :mod:`cone_perception.egomotion`), associated with the frame's cones
+by gated Mahalanobis distance and one-to-one assignment (``scipy.optimize.linear_sum_assignment``),
+and updated by a Kalman filter with each cone's own covariance. Per track: id (uint32, never
+reused), fused class probabilities, position + covariance, hits, misses, age, and a certainty that
+rises with each confident hit (Bayes odds of the detection score) and decays only while the cone should be visible (inside the band's ground
+footprint, :class:`FieldOfView`) and is not seen. Tracks are deleted below
+:attr:`TrackerConfig.delete_below` or more than :attr:`TrackerConfig.behind_m` behind the axle.
+
+Bad input: a stamp not after the last fused one raises ``FrameError`` (``stamp_backwards`` /
+``stamp_repeated``: not fused, tracks kept); a gap above :attr:`TrackerConfig.max_gap_s` predicts
+the tracks with inflated covariance and certainty lowered by the gap, and registers without the
+constant-velocity prior; a failed registration predicts from the last motion. Each case is counted
+in :attr:`ConeTracker.events`.
+
+Arrays are held per field (struct of arrays), so one frame costs a fixed number of numpy calls.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from .classes import NUM_CLASSES, UNKNOWN
+from .egomotion import Motion2D, from_twist, register_cones
+from .errors import FrameError
+from .records import CONE_DTYPE, TRACKED_CONE_DTYPE
+
+_BIG = 1e9
+
+
+@dataclass
+class TrackerConfig:
+    """Tuning of :class:`ConeTracker` (units in the names)."""
+
+    gate_chi2: float = 13.8  # Mahalanobis^2 gate, 2 dof (99.9 %)
+    meas_var_floor_m2: float = 0.05**2  # least variance of a measured position (systematic errors)
+    init_var_floor_m2: float = 0.1**2
+    process_std_m: float = 0.05  # per frame, position noise of a static cone (forgets old, biased far measurements)
+    motion_std_frac: float = 0.02  # ego-motion translation error, fraction of the distance travelled
+    motion_std_rad: float = 0.003  # ego-motion yaw error per frame
+    class_weight: float = 2.0  # cost of a class mismatch: -class_weight * log p(track has the class)
+    certainty_prior: float = 0.3  # before the first detection
+    score_neutral: float = 0.45  # a detection with this score leaves the certainty as it is (Bayes odds)
+    miss_likelihood_ratio: float = 0.5  # odds *= this per frame visible and not seen
+    certainty_max: float = 0.98  # so that a few misses in view can still remove a track
+    gap_tau_s: float = 1.0  # certainty *= exp(-gap / tau) over a gap above max_gap_s
+    delete_below: float = 0.1
+    behind_m: float = 3.0  # delete when x < -behind_m
+    min_hits: int = 1  # published from this many hits on (and publish_min_certainty)
+    publish_min_certainty: float = 0.5
+    max_gap_s: float = 0.5
+    class_floor: float = 0.02  # no class probability below this (a wrong first class can recover)
+    register: bool = True  # estimate ego-motion from the cones when no odometry is given
+    register_min_inliers: int = 3
+    prior_std_m: float = 0.02  # constant-velocity prior of the registration: translation per frame
+    prior_std_rad: float = 0.005  # and yaw per frame
+    max_range_m: float = 20.0  # detections farther than this are not used (too uncertain along the ray)
+    spawn_chi2: float = 50.0  # an unassigned detection this near (Mahalanobis^2) to a track starts no new one
+    merge_chi2: float = 6.0  # two tracks this near (and of one class) are merged into the older one
+
+
+class FieldOfView:
+    """Where the camera can see a cone: ground points whose foot pixel lies inside the band (with a
+    margin) and within ``max_range_m``.
+
+    ``ground_to_pixels`` maps (N, 2) rear_axle m to (N, 2) full-image px (NaN behind the camera),
+    e.g. :meth:`cone_perception.mapping.ConeMapper.ground_to_pixels`.
+    """
+
+    def __init__(self, ground_to_pixels, band_px: tuple[float, float, float, float], max_range_m: float,
+                 margin_frac: float = 0.03, min_range_m: float = 0.0):
+        self.ground_to_pixels = ground_to_pixels
+        u0, v0, u1, v1 = (float(x) for x in band_px)
+        mu, mv = margin_frac * (u1 - u0), margin_frac * (v1 - v0)
+        # a cone whose foot is near the top of the band is cut off by it: half the band's margin more there
+        self.u0, self.u1, self.v0, self.v1 = u0 + mu, u1 - mu, v0 + 3 * mv, v1 - mv
+        self.max_range_m = float(max_range_m)
+        self.min_range_m = float(min_range_m)
+
+    @classmethod
+    def from_calibration(cls, calib, margin_frac: float = 0.03) -> "FieldOfView":
+        from .mapping import ConeMapper
+
+        c = calib.crop
+        return cls(ConeMapper(calib).ground.ground_to_pixels, (c.u0, c.v0, c.u1, c.v1), calib.max_range_m, margin_frac)
+
+    def visible(self, xy_m: np.ndarray) -> np.ndarray:
+        """(N, 2) rear_axle m -> (N,) bool."""
+        xy = np.asarray(xy_m, dtype=np.float64).reshape(-1, 2)
+        if len(xy) == 0:
+            return np.zeros(0, dtype=bool)
+        uv = self.ground_to_pixels(xy)
+        r = np.hypot(xy[:, 0], xy[:, 1])
+        with np.errstate(invalid="ignore"):
+            return ((uv[:, 0] >= self.u0) & (uv[:, 0] < self.u1) & (uv[:, 1] >= self.v0) & (uv[:, 1] < self.v1)
+                    & (r <= self.max_range_m) & (r >= self.min_range_m))
+
+
+@dataclass
+class FrameInfo:
+    """What one :meth:`ConeTracker.update` did."""
+
+    stamp_ns: int
+    motion: Motion2D
+    motion_source: str  # "odometry", "registration", "prior" (registration failed / off), "none" (first frame)
+    matched: int = 0
+    new: int = 0
+    deleted: int = 0
+    inliers: int = 0
+
+
+@dataclass
+class ConeTracker:
+    """The track set. :meth:`update` once per frame; :meth:`output` for the published tracks."""
+
+    config: TrackerConfig = field(default_factory=TrackerConfig)
+    fov: FieldOfView | None = None
+    events: Counter = field(default_factory=Counter)
+
+    def __post_init__(self):
+        self.next_id = 1
+        self.last_stamp_ns: int | None = None
+        self.velocity: tuple[float, float, float] | None = None  # last body twist (constant-velocity prior)
+        self._resize(0)
+
+    def _resize(self, n: int) -> None:
+        self.ids = np.zeros(n, np.uint32)
+        self.xy = np.zeros((n, 2))
+        self.P = np.zeros((n, 2, 2))
+        self.class_p = np.zeros((n, NUM_CLASSES))
+        self.hits = np.zeros(n, np.int64)
+        self.misses = np.zeros(n, np.int64)
+        self.age = np.zeros(n, np.int64)
+        self.certainty = np.zeros(n)
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+    def _keep(self, keep: np.ndarray) -> None:
+        for name in ("ids", "xy", "P", "class_p", "hits", "misses", "age", "certainty"):
+            setattr(self, name, getattr(self, name)[keep])
+
+    # ---- motion -------------------------------------------------------------------------------
+    def _prior(self, dt_s: float, gap: bool) -> Motion2D:
+        if self.velocity is None or gap:
+            return Motion2D()
+        return from_twist(*self.velocity, dt_s)
+
+    def predict(self, motion: Motion2D, dt_s: float, extra_std_m: float = 0.0) -> None:
+        """Move the tracks into the current frame and grow their covariance by the motion's uncertainty."""
+        if len(self) == 0:
+            return
+        cfg = self.config
+        R = motion.rotation()
+        self.xy = motion.to_current(self.xy)
+        Rt = R.T  # rotation of vectors from the previous into the current frame
+        self.P = Rt[None] @ self.P @ R[None]
+        q = cfg.process_std_m**2 + (cfg.motion_std_frac * motion.translation_m) ** 2 + extra_std_m**2
+        perp = np.stack([-self.xy[:, 1], self.xy[:, 0]], axis=1)  # yaw error moves a point along its normal
+        self.P += q * np.eye(2)[None] + cfg.motion_std_rad**2 * perp[:, :, None] * perp[:, None, :]
+
+    # ---- one frame ----------------------------------------------------------------------------
+    def update(self, stamp_ns: int, cones: np.ndarray, motion: Motion2D | None = None) -> FrameInfo:
+        """Fuse one frame's ``CONE_DTYPE`` records (``rear_axle``, this frame) taken at ``stamp_ns``.
+
+        ``motion``: the car's motion since the last fused frame (odometry), or None to estimate it.
+        Raises :class:`FrameError` for a stamp not after the last fused frame (nothing changes).
+        """
+        cfg = self.config
+        if self.last_stamp_ns is not None and stamp_ns <= self.last_stamp_ns:
+            reason = "stamp_repeated" if stamp_ns == self.last_stamp_ns else "stamp_backwards"
+            self.events[reason] += 1
+            raise FrameError(reason, f"frame stamp {stamp_ns} ns is not after the last fused frame {self.last_stamp_ns} ns")
+        cones = _valid_cones(cones, self.events)
+        cones = cones[np.hypot(cones["x"], cones["y"]) <= cfg.max_range_m]
+        z = np.empty((len(cones), 2))
+        z[:, 0], z[:, 1] = cones["x"], cones["y"]
+        Rz = np.empty((len(cones), 2, 2))
+        Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1] = cones["cov_xx"], cones["cov_xy"], cones["cov_xy"], cones["cov_yy"]
+        Rz = _floor_cov(Rz, cfg.meas_var_floor_m2)
+        zc = cones["class_id"].astype(np.intp)
+
+        first = self.last_stamp_ns is None
+        dt = 0.0 if first else (stamp_ns - self.last_stamp_ns) / 1e9
+        gap = not first and dt > cfg.max_gap_s
+        if gap:
+            self.events["gap"] += 1
+        info = FrameInfo(stamp_ns, Motion2D(), "none")
+        if not first:
+            extra = 0.0
+            if motion is not None:
+                info.motion_source = "odometry"
+            else:
+                prior = self._prior(dt, gap)
+                motion, info.motion_source = prior, "prior"
+                if cfg.register and len(self) and len(z):
+                    prior_std = None if gap or self.velocity is None else (cfg.prior_std_m, cfg.prior_std_rad)
+                    reg = register_cones(z, zc, self.xy, self._classes(), prior, Rz, self.P, prior_std,
+                                         search_m=3.0 if gap else 1.5, min_inliers=cfg.register_min_inliers)
+                    info.inliers = reg.inliers
+                    if reg.ok:
+                        motion, info.motion_source = reg.motion, "registration"
+                    else:
+                        self.events["registration_failed"] += 1
+                        extra = 0.1  # m: the prior may be off
+                elif cfg.register and len(self):
+                    self.events["registration_failed"] += 1
+            if gap:
+                extra = max(extra, 0.5 * (dt - cfg.max_gap_s) + 0.1)
+                self.certainty *= np.exp(-dt / cfg.gap_tau_s)
+            self.predict(motion, dt, extra)
+            if dt > 0 and (not gap or info.motion_source in ("odometry", "registration")):
+                self.velocity = motion.twist(dt)
+        info.motion = motion if motion is not None else Motion2D()
+        self.last_stamp_ns = int(stamp_ns)
+        self.age += 1
+
+        # ---- association ----
+        n_t, n_z = len(self), len(z)
+        rows = cols = np.zeros(0, dtype=np.intp)
+        gated_any = np.zeros(n_z, dtype=bool)
+        if n_t and n_z:
+            d2 = _mahalanobis2(z, Rz, self.xy, self.P)  # (n_z, n_t)
+            gated = d2 <= cfg.gate_chi2
+            gated_any = (d2 <= cfg.spawn_chi2).any(axis=1)
+            pc = self.class_p[:, zc].T  # (n_z, n_t): p(track is the detected class)
+            unknown = zc == UNKNOWN
+            pc[unknown] = 1.0
+            cost = d2 - cfg.class_weight * np.log(np.maximum(pc, cfg.class_floor))
+            cost[~gated] = _BIG
+            rows, cols = linear_sum_assignment(cost)
+            ok = cost[rows, cols] < _BIG
+            rows, cols = rows[ok], cols[ok]
+        info.matched = len(rows)
+
+        # ---- Kalman update of the matched tracks ----
+        if len(rows):
+            P, S = self.P[cols], self.P[cols] + Rz[rows]
+            K = P @ _inv2(S)
+            innov = z[rows] - self.xy[cols]
+            self.xy[cols] += np.einsum("nij,nj->ni", K, innov)
+            self.P[cols] = _symmetrise(P - K @ P)
+            self.class_p[cols] = _fuse_class(self.class_p[cols], zc[rows], cones["score"][rows], cfg.class_floor)
+            self.hits[cols] += 1
+            self.misses[cols] = 0
+            self.certainty[cols] = self._hit(self.certainty[cols], cones["score"][rows])
+
+        # ---- misses: certainty decays only where the cone should have been seen ----
+        missed = np.ones(n_t, dtype=bool)
+        missed[cols] = False
+        if missed.any():
+            vis = self.fov.visible(self.xy[missed]) if self.fov is not None else np.ones(int(missed.sum()), bool)
+            vis &= np.hypot(self.xy[missed, 0], self.xy[missed, 1]) <= cfg.max_range_m
+            idx = np.flatnonzero(missed)[vis]
+            self.misses[idx] += 1
+            self.certainty[idx] = _bayes(self.certainty[idx], cfg.miss_likelihood_ratio)
+
+        # ---- deletion (and duplicates merged into the older track) ----
+        keep = (self.certainty >= cfg.delete_below) & (self.xy[:, 0] >= -cfg.behind_m)
+        if n_t > 1 and cfg.merge_chi2 > 0:
+            keep &= ~self._duplicates()
+        info.deleted = int((~keep).sum())
+        if info.deleted:
+            self._keep(keep)
+
+        # ---- new tracks from detections no track could take ----
+        assigned = np.zeros(n_z, dtype=bool)
+        assigned[rows] = True
+        new = np.flatnonzero(~assigned & ~gated_any)
+        if len(new):
+            self._spawn(z[new], Rz[new], zc[new], cones["score"][new])
+        info.new = len(new)
+        return info
+
+    def _duplicates(self) -> np.ndarray:
+        """(n,) bool: tracks that duplicate an older track (one class, within :attr:`TrackerConfig.merge_chi2`);
+        the older one keeps its id and takes the younger one's hits."""
+        d2 = _mahalanobis2(self.xy, self.P, self.xy, self.P)
+        cls = self._classes()
+        close = (d2 <= self.config.merge_chi2) & (cls[:, None] == cls[None, :])
+        np.fill_diagonal(close, False)
+        dup = np.zeros(len(self), dtype=bool)
+        if not close.any():
+            return dup
+        for i, j in zip(*np.nonzero(np.triu(close))):
+            young, old = (i, j) if self.ids[i] > self.ids[j] else (j, i)
+            if dup[old] or dup[young]:
+                continue
+            dup[young] = True
+            self.hits[old] = max(self.hits[old], self.hits[young])
+            self.certainty[old] = max(self.certainty[old], self.certainty[young])
+        self.events["merged"] += int(dup.sum())
+        return dup
+
+    def _spawn(self, z: np.ndarray, Rz: np.ndarray, zc: np.ndarray, score: np.ndarray) -> None:
+        cfg, n = self.config, len(z)
+        ids = np.arange(self.next_id, self.next_id + n, dtype=np.uint64)
+        if ids[-1] > np.iinfo(np.uint32).max:
+            raise OverflowError("track ids exhausted (uint32)")  # 4e9 cones: not in one run
+        self.next_id += n
+        uniform = np.full((n, NUM_CLASSES), 1.0 / NUM_CLASSES)
+        self.ids = np.concatenate([self.ids, ids.astype(np.uint32)])
+        self.xy = np.concatenate([self.xy, z])
+        self.P = np.concatenate([self.P, _floor_cov(Rz, cfg.init_var_floor_m2)])
+        self.class_p = np.concatenate([self.class_p, _fuse_class(uniform, zc, score, cfg.class_floor)])
+        self.hits = np.concatenate([self.hits, np.ones(n, np.int64)])
+        self.misses = np.concatenate([self.misses, np.zeros(n, np.int64)])
+        self.age = np.concatenate([self.age, np.ones(n, np.int64)])
+        self.certainty = np.concatenate([self.certainty, self._hit(np.full(n, cfg.certainty_prior), score)])
+
+    def _hit(self, c: np.ndarray, score: np.ndarray) -> np.ndarray:
+        """Certainty after a detection of confidence ``score``: odds times ``odds(score) / odds(score_neutral)``."""
+        s = np.clip(np.asarray(score, np.float64), 0.05, 0.95)
+        s0 = self.config.score_neutral
+        return np.minimum(_bayes(c, (s / (1 - s)) / (s0 / (1 - s0))), self.config.certainty_max)
+
+    def _classes(self) -> np.ndarray:
+        return np.argmax(self.class_p, axis=1) if len(self) else np.zeros(0, np.intp)
+
+    def output(self) -> np.ndarray:
+        """The published tracks: :data:`TRACKED_CONE_DTYPE` records (``score`` = certainty)."""
+        cfg = self.config
+        sel = (self.hits >= cfg.min_hits) & (self.certainty >= cfg.publish_min_certainty)
+        out = np.zeros(int(sel.sum()), dtype=TRACKED_CONE_DTYPE)
+        out["x"], out["y"] = self.xy[sel, 0], self.xy[sel, 1]
+        out["class_id"] = self._classes()[sel]
+        out["score"] = self.certainty[sel]
+        out["cov_xx"], out["cov_xy"], out["cov_yy"] = self.P[sel, 0, 0], self.P[sel, 0, 1], self.P[sel, 1, 1]
+        out["track_id"] = self.ids[sel]
+        return out
+
+
+def _bayes(p: np.ndarray, likelihood_ratio) -> np.ndarray:
+    """Probability ``p`` after evidence with the given likelihood ratio (odds multiplied)."""
+    return p * likelihood_ratio / (p * likelihood_ratio + (1.0 - p))
+
+
+# ---- small vectorised 2x2 helpers ------------------------------------------------------------
+def _inv2(S: np.ndarray) -> np.ndarray:
+    a, b, c, d = S[:, 0, 0], S[:, 0, 1], S[:, 1, 0], S[:, 1, 1]
+    det = a * d - b * c
+    out = np.empty_like(S)
+    out[:, 0, 0], out[:, 0, 1], out[:, 1, 0], out[:, 1, 1] = d / det, -b / det, -c / det, a / det
+    return out
+
+
+def _symmetrise(P: np.ndarray) -> np.ndarray:
+    return 0.5 * (P + np.transpose(P, (0, 2, 1)))
+
+
+def _floor_cov(C: np.ndarray, var_floor: float) -> np.ndarray:
+    """Add ``var_floor`` on the diagonal (a measured cone is never surer than that)."""
+    return C + var_floor * np.eye(2)[None]
+
+
+def _mahalanobis2(z: np.ndarray, Rz: np.ndarray, xy: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """(n_z, n_t) squared Mahalanobis distance of each detection to each track, S = P + R."""
+    a = P[None, :, 0, 0] + Rz[:, None, 0, 0]
+    b = P[None, :, 0, 1] + Rz[:, None, 0, 1]
+    c = P[None, :, 1, 1] + Rz[:, None, 1, 1]
+    dx = z[:, None, 0] - xy[None, :, 0]
+    dy = z[:, None, 1] - xy[None, :, 1]
+    return (c * dx * dx - 2 * b * dx * dy + a * dy * dy) / (a * c - b * b)
+
+
+def _fuse_class(p: np.ndarray, cls: np.ndarray, score: np.ndarray, floor: float) -> np.ndarray:
+    """Bayes update of class probabilities (n, K) with detections of class ``cls`` and confidence ``score``:
+    likelihood ``s`` for the detected class, ``(1 - s) / (K - 1)`` for each other one (``unknown``: no information)."""
+    s = np.clip(np.asarray(score, np.float64), 0.3, 0.95)[:, None]
+    like = np.repeat((1.0 - s) / (NUM_CLASSES - 1), NUM_CLASSES, axis=1)
+    like[np.arange(len(cls)), cls] = s[:, 0]
+    like[cls == UNKNOWN] = 1.0
+    q = p * like
+    q /= q.sum(axis=1, keepdims=True)
+    q = np.maximum(q, floor)
+    return q / q.sum(axis=1, keepdims=True)
+
+
+def _valid_cones(cones: np.ndarray, events: Counter) -> np.ndarray:
+    """The frame's cones with finite position and covariance and a known class; others counted and left out."""
+    cones = np.asarray(cones)
+    if cones.dtype != CONE_DTYPE:
+        cones = cones.astype(CONE_DTYPE)
+    ok = np.ones(len(cones), dtype=bool)
+    for name in ("x", "y", "cov_xx", "cov_xy", "cov_yy"):
+        ok &= np.isfinite(cones[name])
+    ok = ok & (cones["class_id"] < NUM_CLASSES) & (cones["cov_xx"] >= 0) & (cones["cov_yy"] >= 0)
+    if not ok.all():
+        events["bad_cone"] += int((~ok).sum())
+        cones = cones[ok]
+    return cones
+
+
+class TrackingStage:
+    """The tracker as a pipeline stage: ``/cones`` of a frame (+ odometry twists when the car has them)
+    -> ``/cones/tracked`` records. Used by the ``pipeline`` and ``cone_tracker`` nodes and ``replay``.
+
+    Twists (:meth:`add_twist`) are used for a frame when fresh (:attr:`TwistBuffer.max_age_s`); once
+    any twist has come, a frame without a fresh one is counted as ``odom_stale`` and its motion is
+    estimated from the cones. Refused twists are counted (``twist_nan``, ``twist_stamp``).
+    """
+
+    def __init__(self, calib=None, config: TrackerConfig | None = None, odom_max_age_s: float = 0.1):
+        from .egomotion import TwistBuffer
+
+        self.tracker = ConeTracker(config or TrackerConfig(), FieldOfView.from_calibration(calib) if calib is not None else None)
+        self.twists = TwistBuffer(max_age_s=odom_max_age_s)
+        self.last_info: FrameInfo | None = None
+
+    @property
+    def events(self) -> Counter:
+        return self.tracker.events
+
+    def add_twist(self, stamp_ns: int, vx: float, vy: float, wz: float) -> bool:
+        """One body twist (m/s, m/s, rad/s); False (and counted) when refused."""
+        why = self.twists.add(stamp_ns, vx, vy, wz)
+        if why is not None:
+            self.tracker.events[why] += 1
+        return why is None
+
+    def process(self, stamp_ns: int, cones: np.ndarray) -> tuple[np.ndarray, FrameInfo]:
+        """Fuse one frame; returns (:data:`TRACKED_CONE_DTYPE` records, :class:`FrameInfo`).
+        Raises ``FrameError`` for a stamp not after the last fused frame."""
+        motion = None
+        last = self.tracker.last_stamp_ns
+        if self.twists.stamps and last is not None and stamp_ns > last:
+            motion = self.twists.motion(last, stamp_ns)
+            if motion is None:
+                self.tracker.events["odom_stale"] += 1
+        self.last_info = self.tracker.update(stamp_ns, cones, motion)
+        return self.tracker.output(), self.last_info

@@ -1,0 +1,276 @@
+"""The cone tracker (core, ROS-free): association, Kalman fusion, certainty, ids, bad input, ego-motion."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cone_perception.classes import BLUE, LARGE_ORANGE, UNKNOWN, YELLOW
+from cone_perception.egomotion import Motion2D, TwistBuffer, from_twist, register_cones
+from cone_perception.errors import FrameError
+from cone_perception.records import CONE_DTYPE, TRACKED_CONE_DTYPE
+from cone_perception.tracker import ConeTracker, FieldOfView, TrackerConfig, _mahalanobis2
+
+DT_NS = 50_000_000  # 20 Hz
+
+
+def cones(xy, cls, sigma=0.05, score=0.8) -> np.ndarray:
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    out = np.zeros(len(xy), CONE_DTYPE)
+    out["x"], out["y"] = xy[:, 0], xy[:, 1]
+    out["class_id"] = np.broadcast_to(cls, len(xy))
+    out["score"] = score
+    out["cov_xx"] = out["cov_yy"] = np.broadcast_to(np.asarray(sigma) ** 2, len(xy))
+    return out
+
+
+def box_fov() -> FieldOfView:
+    """Sees x in [2, 20] m, |y| <= 5 m: 'pixels' are (y, x) in metres, band u -5..5, v 2..20."""
+    return FieldOfView(lambda xy: np.asarray(xy)[:, ::-1], (-5.0, 2.0, 5.0, 20.0), 30.0, margin_frac=0.0)
+
+
+WORLD = np.array([[x, s * 2.0] for x in np.arange(0.0, 120.0, 4.0) for s in (1, -1)])
+WORLD_CLS = np.array([BLUE, YELLOW] * (len(WORLD) // 2))
+
+
+def drive(tracker, n, rng, motion=Motion2D(0.4, 0.0, 0.0), drop=0.0, sigma=0.03, give_motion=False, start=0):
+    """Drive straight through WORLD; returns per frame (local truth, output, info)."""
+    frames = []
+    x = start * motion.dx
+    for k in range(start, start + n):
+        local = WORLD - (x, 0.0)
+        vis = box_fov().visible(local) & (rng.random(len(local)) >= drop)
+        z = local[vis] + rng.normal(0, sigma, (vis.sum(), 2))
+        info = tracker.update(k * DT_NS, cones(z, WORLD_CLS[vis], sigma), motion if give_motion and k > start else None)
+        frames.append((local, tracker.output(), info))
+        x += motion.dx
+    return frames
+
+
+def nearest_err(out, local):
+    d = np.hypot(out["x"][:, None] - local[None, :, 0], out["y"][:, None] - local[None, :, 1])
+    return d.min(axis=1), d.argmin(axis=1)
+
+
+def test_static_cones_fused_better_than_one_measurement_with_stable_ids():
+    rng = np.random.default_rng(0)
+    trk = ConeTracker(TrackerConfig(process_std_m=0.01), fov=box_fov())  # exact motion, independent noise
+    frames = drive(trk, 60, rng, sigma=0.05, give_motion=True)
+    local, out, _ = frames[-1]
+    assert out.dtype == TRACKED_CONE_DTYPE and out["track_id"].dtype == np.uint32
+    err, _ = nearest_err(out, local)
+    assert len(out) >= 8
+    assert np.median(err) < 0.03  # one measurement: 0.05 * sqrt(2) * 0.83 ~ 0.06 m median
+    # the same world cone keeps its id from frame to frame
+    ids_by_cone = {}
+    for local, out, _ in frames[5:]:
+        e, j = nearest_err(out, local)
+        for tid, jj, ee in zip(out["track_id"], j, e):
+            assert ee < 0.2
+            ids_by_cone.setdefault(int(jj) + 0, set())
+    ids_by_world = {}
+    x = 0.0
+    for k, (local, out, _) in enumerate(frames):
+        _, j = nearest_err(out, local)
+        for tid, jj in zip(out["track_id"], j):
+            ids_by_world.setdefault(int(jj), set()).add(int(tid))
+    assert all(len(s) == 1 for s in ids_by_world.values())
+    # ids never reused: all ids ever published are distinct per world cone
+    all_ids = [next(iter(s)) for s in ids_by_world.values()]
+    assert len(set(all_ids)) == len(all_ids)
+
+
+def test_missed_detections_are_bridged_and_certainty_decays_only_in_view():
+    rng = np.random.default_rng(1)
+    cfg = TrackerConfig()
+    trk = ConeTracker(cfg, fov=box_fov())
+    xy = [[10.0, 2.0], [10.0, -2.0]]
+    for k in range(5):
+        trk.update(k * DT_NS, cones(xy, [BLUE, YELLOW]), Motion2D() if k else None)
+    c_before = trk.certainty.copy()
+    # frame 5: only the first cone seen; the other is in view -> decays, still published
+    trk.update(5 * DT_NS, cones(xy[:1], [BLUE]), Motion2D())
+    out = trk.output()
+    assert len(out) == 2
+    lr = cfg.miss_likelihood_ratio
+    assert trk.certainty[1] == pytest.approx(c_before[1] * lr / (c_before[1] * lr + 1 - c_before[1]))
+    # more misses in view: deleted after a few frames, id 2 never comes back
+    for k in range(6, 20):
+        trk.update(k * DT_NS, cones(xy[:1], [BLUE]), Motion2D())
+    assert list(trk.ids) == [1]
+    trk.update(20 * DT_NS, cones(xy, [BLUE, YELLOW]), Motion2D())
+    assert sorted(trk.ids) == [1, 3]
+    # out of view (x < 2 m: beside the car): no decay while unseen
+    trk2 = ConeTracker(cfg, fov=box_fov())
+    for k in range(4):
+        trk2.update(k * DT_NS, cones([[3.0, 2.0]], [BLUE]), Motion2D() if k else None)
+    c = trk2.certainty[0]
+    for k in range(4, 30):
+        trk2.update(k * DT_NS, cones(np.zeros((0, 2)), []), Motion2D(0.5, 0.0, 0.0))
+        if trk2.xy[0, 0] < 2.0:
+            break
+    assert trk2.xy[0, 0] < 2.0 and len(trk2) == 1
+    c_out = trk2.certainty[0]
+    for k in range(k + 1, k + 11):
+        trk2.update(k * DT_NS, cones(np.zeros((0, 2)), []), Motion2D(0.0, 0.0, 0.0))
+    assert trk2.certainty[0] == c_out < c
+    # far behind the car: deleted
+    trk2.update((k + 1) * DT_NS, cones(np.zeros((0, 2)), []), Motion2D(10.0, 0.0, 0.0))
+    assert len(trk2) == 0
+
+
+def test_recall_with_20_percent_dropped_and_estimated_motion():
+    rng = np.random.default_rng(2)
+    trk = ConeTracker(fov=box_fov())
+    frames = drive(trk, 150, rng, drop=0.2, sigma=0.03)
+    n_true = n_found = n_false = 0
+    for local, out, info in frames[10:]:
+        r = np.hypot(local[:, 0], local[:, 1])
+        want = box_fov().visible(local) & (r <= 15)
+        d = np.hypot(out["x"][:, None] - local[None, want, 0], out["y"][:, None] - local[None, want, 1])
+        n_true += int(want.sum())
+        n_found += int((d.min(axis=0) < 0.3).sum()) if len(out) else 0
+        near = np.hypot(out["x"], out["y"]) <= 15
+        dd = np.hypot(out["x"][:, None] - local[None, :, 0], out["y"][:, None] - local[None, :, 1]).min(axis=1)
+        n_false += int((near & (dd > 0.5)).sum())
+        assert info.motion_source == "registration"
+        assert abs(info.motion.dx - 0.4) < 0.05
+    assert n_found / n_true >= 0.98
+    assert n_false / len(frames[10:]) <= 0.2
+
+
+def test_class_probabilities_fused_over_frames():
+    trk = ConeTracker(fov=box_fov())
+    for k in range(6):
+        trk.update(k * DT_NS, cones([[8.0, 1.0]], [BLUE]), Motion2D() if k else None)
+    trk.update(6 * DT_NS, cones([[8.0, 1.0]], [YELLOW], score=0.6), Motion2D())
+    trk.update(7 * DT_NS, cones([[8.0, 1.0]], [UNKNOWN]), Motion2D())
+    out = trk.output()
+    assert len(out) == 1 and out["class_id"][0] == BLUE and out["track_id"][0] == 1
+    assert trk.class_p[0, BLUE] > 0.8
+    # many yellow detections win in the end (no lock-in)
+    for k in range(8, 20):
+        trk.update(k * DT_NS, cones([[8.0, 1.0]], [YELLOW]), Motion2D())
+    assert trk.output()["class_id"][0] == YELLOW
+
+
+def test_one_to_one_assignment_keeps_two_close_cones_apart():
+    trk = ConeTracker(fov=box_fov())
+    xy = np.array([[6.0, -0.3], [6.0, 0.3]])  # timekeeping pair, 0.6 m apart
+    rng = np.random.default_rng(3)
+    for k in range(30):
+        trk.update(k * DT_NS, cones(xy + rng.normal(0, 0.03, (2, 2)), LARGE_ORANGE, 0.03), Motion2D() if k else None)
+    out = trk.output()
+    assert sorted(out["track_id"]) == [1, 2]
+    assert np.allclose(np.sort(out["y"]), [-0.3, 0.3], atol=0.05)
+
+
+def test_bad_stamps_not_fused_and_counted_gap_lowers_certainty():
+    trk = ConeTracker(fov=box_fov())
+    xy = [[8.0, 2.0], [8.0, -2.0], [12.0, 2.0], [12.0, -2.0]]
+    cls = [BLUE, YELLOW, BLUE, YELLOW]
+    for k in range(5):
+        trk.update(k * DT_NS, cones(xy, cls), Motion2D() if k else None)
+    before = (trk.xy.copy(), trk.hits.copy())
+    for stamp, reason in ((4 * DT_NS, "stamp_repeated"), (2 * DT_NS, "stamp_backwards")):
+        with pytest.raises(FrameError) as e:
+            trk.update(stamp, cones([[5.0, 0.0]], [BLUE]))
+        assert e.value.reason == reason
+    assert np.array_equal(trk.xy, before[0]) and np.array_equal(trk.hits, before[1])
+    assert trk.events["stamp_repeated"] == 1 and trk.events["stamp_backwards"] == 1
+    c = trk.certainty.copy()
+    # 2 s gap; the car moved 3 m: the tracks are predicted with a widened gate and re-found
+    moved = np.asarray(xy) - (3.0, 0.0)
+    info = trk.update(4 * DT_NS + 2_000_000_000, cones(moved, cls), None)
+    assert trk.events["gap"] == 1
+    assert info.matched == 4 and info.new == 0
+    assert info.motion.dx == pytest.approx(3.0, abs=0.05)
+    c_gap = c * np.exp(-2.0 / trk.config.gap_tau_s)
+    assert np.allclose(trk.certainty, trk._hit(c_gap, np.full(4, 0.8)))  # lowered by the gap, then one hit
+
+
+def test_bad_cones_left_out_and_counted():
+    trk = ConeTracker(fov=box_fov())
+    c = cones([[8.0, 2.0], [np.nan, 1.0], [9.0, -2.0]], BLUE)
+    info = trk.update(0, c)
+    assert info.new == 2 and trk.events["bad_cone"] == 1
+
+
+def test_registration_recovers_motion_with_outliers_and_fails_with_too_few():
+    rng = np.random.default_rng(4)
+    trk_xy = rng.uniform([2, -6], [20, 6], (25, 2))
+    trk_cls = rng.integers(0, 2, 25)
+    true = Motion2D(0.45, 0.02, 0.03)
+    det = true.to_current(trk_xy) + rng.normal(0, 0.01, (25, 2))
+    det_cls = trk_cls.copy()
+    det[:6] = rng.uniform([2, -6], [20, 6], (6, 2))  # 6 outliers
+    reg = register_cones(det, det_cls, trk_xy, trk_cls, prior=Motion2D(0.2, 0.0, 0.0))
+    assert reg.ok and reg.inliers >= 17
+    assert reg.motion.dx == pytest.approx(0.45, abs=0.01)
+    assert reg.motion.dy == pytest.approx(0.02, abs=0.01)
+    assert reg.motion.dyaw == pytest.approx(0.03, abs=0.002)
+    # class-aware: with the classes of the detections swapped nothing pairs up
+    assert not register_cones(det, 1 - det_cls, trk_xy, trk_cls, prior=Motion2D()).ok
+    few = register_cones(det[6:8], det_cls[6:8], trk_xy, trk_cls, prior=Motion2D(0.3, 0, 0))
+    assert not few.ok and few.motion == Motion2D(0.3, 0, 0)
+
+
+def test_failed_registration_predicts_from_last_motion_and_is_counted():
+    rng = np.random.default_rng(5)
+    trk = ConeTracker(fov=box_fov())
+    drive(trk, 20, rng, sigma=0.01)
+    info = trk.update(20 * DT_NS, cones(np.zeros((0, 2)), []))
+    assert trk.events["registration_failed"] == 1
+    assert info.motion_source == "prior" and info.motion.dx == pytest.approx(0.4, abs=0.03)
+
+
+def test_motion_and_twist_buffer():
+    m = Motion2D(1.0, 0.5, 0.3)
+    p = np.array([[3.0, -1.0], [0.0, 2.0]])
+    assert np.allclose(m.to_previous(m.to_current(p)), p)
+    # a quarter circle of radius 2 at 1 m/s
+    q = from_twist(1.0, 0.0, 0.5, np.pi)
+    assert (q.dx, q.dy, q.dyaw) == pytest.approx((2.0, 2.0, np.pi / 2))
+    assert m.compose(Motion2D()).dx == m.dx
+    buf = TwistBuffer(max_age_s=0.1)
+    for k in range(11):
+        assert buf.add(k * 10_000_000, 2.0, 0.0, 0.1) is None
+    assert buf.add(50_000_000, 2.0, 0.0, 0.1) == "twist_stamp"
+    assert buf.add(200_000_000, float("nan"), 0.0, 0.0) == "twist_nan"
+    got = buf.motion(0, 100_000_000)
+    want = from_twist(2.0, 0.0, 0.1, 0.1)
+    assert (got.dx, got.dy, got.dyaw) == pytest.approx((want.dx, want.dy, want.dyaw), abs=1e-9)
+    assert buf.motion(100_000_000, 250_000_000) is None  # newest twist 150 ms old at the frame: stale
+
+
+def test_mahalanobis_matches_direct_formula():
+    rng = np.random.default_rng(6)
+    z, xy = rng.normal(size=(3, 2)), rng.normal(size=(4, 2))
+    A, B = rng.normal(size=(3, 2, 2)), rng.normal(size=(4, 2, 2))
+    Rz, P = A @ A.transpose(0, 2, 1) + np.eye(2), B @ B.transpose(0, 2, 1) + np.eye(2)
+    d2 = _mahalanobis2(z, Rz, xy, P)
+    for i in range(3):
+        for j in range(4):
+            e = z[i] - xy[j]
+            assert d2[i, j] == pytest.approx(e @ np.linalg.inv(Rz[i] + P[j]) @ e)
+
+
+def test_field_of_view_from_calibration():
+    from cone_perception.calib import load_calibration
+
+    fov = FieldOfView.from_calibration(load_calibration())
+    pts = np.array([[8.0, 0.0], [0.5, 0.0], [-5.0, 0.0], [8.0, 40.0], [500.0, 0.0]])
+    assert fov.visible(pts).tolist() == [True, False, False, False, False]
+
+
+def test_low_confidence_detections_are_not_published():
+    """The certainty follows the detections' scores: a cone seen again and again with score 0.3 (the
+    typical false detection) never goes out, one seen with 0.8 goes out at once."""
+    trk = ConeTracker(fov=box_fov())
+    for k in range(10):
+        trk.update(k * DT_NS, np.concatenate([cones([[8.0, 2.0]], BLUE, score=0.3), cones([[8.0, -2.0]], YELLOW, score=0.8)]),
+                   Motion2D() if k else None)
+        out = trk.output()
+        assert out["class_id"].tolist() == [YELLOW] and out["track_id"].tolist() == [2]
+    doubtful = trk.ids != 2
+    assert np.all(trk.certainty[doubtful] < trk.config.publish_min_certainty)
