@@ -20,11 +20,13 @@ STAGES = ("adapter", "preprocess", "forward", "postprocess", "mapping")
 
 @dataclass
 class FrameResult:
-    """Output of one frame: boxes (``BOX_DTYPE``, full-image px), cones (``CONE_DTYPE``, m), stage ms."""
+    """Output of one frame: boxes (``BOX_DTYPE``, full-image px), cones (``CONE_DTYPE``, m), stage ms,
+    and the band (for the debug image)."""
 
     boxes: np.ndarray
     cones: np.ndarray
     timing_ms: dict[str, float] = field(default_factory=dict)
+    band: np.ndarray | None = None  # (H, W, 3) uint8 BGR: the cropped band the detector saw
 
 
 class Pipeline:
@@ -48,7 +50,7 @@ class Pipeline:
         timing = {"adapter": t_adapter_s * 1e3}
         timing.update({k.removesuffix("_ms"): v for k, v in self.detector.timing.items()})
         timing["mapping"] = t_map * 1e3
-        return FrameResult(boxes, cones, timing)
+        return FrameResult(boxes, cones, timing, band)
 
     def process_raw(self, encoding: str, width: int, height: int, step: int, data) -> FrameResult:
         """sensor_msgs/Image fields -> :class:`FrameResult`. Raises ``FrameError`` for a bad frame."""

@@ -11,10 +11,20 @@ import numpy as np
 from .classes import CLASS_BGR, CLASS_NAMES, CLASS_RGBA
 
 
-def draw_boxes(bgr: np.ndarray, boxes: np.ndarray, scale: float = 1.0, thickness: int = 2, labels: bool = True) -> np.ndarray:
-    """Draw ``BOX_DTYPE`` records (image px, multiplied by ``scale``) on a copy of ``bgr``."""
+def draw_boxes(
+    bgr: np.ndarray,
+    boxes: np.ndarray,
+    scale: float = 1.0,
+    thickness: int = 2,
+    labels: bool = True,
+    texts: Sequence[str] | None = None,
+) -> np.ndarray:
+    """Draw ``BOX_DTYPE`` records (image px, multiplied by ``scale``) on a copy of ``bgr``.
+
+    Each label reads "class score", or ``texts[i]`` where given.
+    """
     out = bgr.copy()
-    for b in boxes:
+    for i, b in enumerate(boxes):
         cid = int(b["class_id"])
         color = CLASS_BGR[cid] if cid < len(CLASS_BGR) else (255, 255, 255)
         p1 = (int(round(b["u1"] * scale)), int(round(b["v1"] * scale)))
@@ -22,9 +32,11 @@ def draw_boxes(bgr: np.ndarray, boxes: np.ndarray, scale: float = 1.0, thickness
         cv2.rectangle(out, p1, p2, color, thickness, cv2.LINE_AA)
         if labels:
             name = CLASS_NAMES[cid] if cid < len(CLASS_NAMES) else str(cid)
-            text = f"{name} {float(b['score']):.2f}"
-            cv2.putText(out, text, (p1[0], max(12, p1[1] - 4)), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 0), 3, cv2.LINE_AA)
-            cv2.putText(out, text, (p1[0], max(12, p1[1] - 4)), cv2.FONT_HERSHEY_SIMPLEX, 0.45, color, 1, cv2.LINE_AA)
+            text = texts[i] if texts is not None else f"{name} {float(b['score']):.2f}"
+            (tw, _), _ = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, 0.45, 1)
+            org = (max(0, min(p1[0], out.shape[1] - tw - 2)), max(12, p1[1] - 4))  # inside the image
+            cv2.putText(out, text, org, cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 0), 3, cv2.LINE_AA)
+            cv2.putText(out, text, org, cv2.FONT_HERSHEY_SIMPLEX, 0.45, color, 1, cv2.LINE_AA)
     return out
 
 

@@ -2,7 +2,7 @@
 
 Parameters
   calibration (str, "example_mainhoop"): calibration YAML path or shipped camera name.
-  publish_markers (bool, true): also publish ``/cones/markers`` for rviz2.
+  publish_markers (bool, true): also publish ``/cones/markers`` for rviz2; changeable at run time.
 """
 
 from __future__ import annotations
@@ -11,19 +11,22 @@ from ._common import QOS_DATA, PerceptionNode, run_node  # noqa: I001 (sets DDS 
 
 from sensor_msgs.msg import PointCloud2
 
-from ..calib import DEFAULT_CAMERA, load_calibration
+from ..calib import load_calibration
 from ..mapping import ConeMapper
 from . import _msgs
+from ._params import RuntimeParameters, declare
 
 
 class MappingNode(PerceptionNode):
     def __init__(self, **node_kwargs):
         super().__init__("mapping", **node_kwargs)
-        calib_name = self.declare_parameter("calibration", DEFAULT_CAMERA).value
-        markers = bool(self.declare_parameter("publish_markers", True).value)
+        calib_name = declare(self, "calibration")
+        markers = bool(declare(self, "publish_markers"))
         calib = load_calibration(calib_name)
         self.mapper = ConeMapper(calib)
         self.advertise_cones(calib.frame_id, markers)
+        self.runtime = RuntimeParameters(self)
+        self.runtime.register("publish_markers", lambda v: setattr(self, "publish_markers", bool(v)))
         self.create_subscription(PointCloud2, "cone_boxes", self.guarded(self.on_boxes), QOS_DATA)
         self.get_logger().info(f"calibration {calib.source}, frame {calib.frame_id}, max range {calib.max_range_m} m")
 

@@ -3,7 +3,9 @@
 ``image_raw`` (or ``image_raw/compressed``) in; ``cone_boxes``, ``/cones`` and ``/cones/markers`` out.
 
 Parameters: those of ``driver_adapter`` (calibration, input_transport), ``mapping``
-(publish_markers) and ``detection`` (model, backend, device, fp16, bf16, conf, iou, max_det, threads).
+(publish_markers) and ``detection`` (model, backend, device, fp16, bf16, conf, iou, max_det, threads,
+debug_image, debug_image_hz; the debug image is the band of ``image_raw`` after the adapter).
+Changeable at run time: publish_markers, conf, iou, max_det, debug_image, debug_image_hz.
 """
 
 from __future__ import annotations
@@ -14,22 +16,30 @@ import time
 
 from sensor_msgs.msg import CompressedImage, Image, PointCloud2
 
-from ..calib import DEFAULT_CAMERA, load_calibration
+from ..calib import load_calibration
 from ..pipeline import FrameResult, Pipeline
 from . import _msgs
-from ._detector_params import load_detector
+from ._debug import DebugImagePublisher
+from ._detector_params import DetectorLoader
+from ._params import RuntimeParameters, declare
 
 
 class PipelineNode(PerceptionNode):
     def __init__(self, **node_kwargs):
         super().__init__("pipeline", **node_kwargs)
-        calib = load_calibration(self.declare_parameter("calibration", DEFAULT_CAMERA).value)
-        transport = self.declare_parameter("input_transport", "raw").value
-        markers = bool(self.declare_parameter("publish_markers", True).value)
-        detector = load_detector(self, (calib.crop.out_width, calib.crop.out_height))
+        calib = load_calibration(declare(self, "calibration"))
+        transport = declare(self, "input_transport")
+        markers = bool(declare(self, "publish_markers"))
+        self.loader = DetectorLoader(self)
+        detector = self.loader.load((calib.crop.out_width, calib.crop.out_height))
         self.pipeline = Pipeline(calib, detector)
         self.pub_boxes = self.create_publisher(PointCloud2, "cone_boxes", QOS_DATA)
         self.advertise_cones(calib.frame_id, markers)
+        self.runtime = RuntimeParameters(self)
+        self.runtime.register("publish_markers", lambda v: setattr(self, "publish_markers", bool(v)))
+        for name in DetectorLoader.RUNTIME:
+            self.runtime.register(name, lambda v, name=name: self.loader.set_threshold(self.pipeline.detector, name, v))
+        self.debug = DebugImagePublisher(self, self.pipeline.mapper, self.runtime)
         self.subscribe_camera(transport)
         self.get_logger().info(f"calibration {calib.source}, frame {calib.frame_id}")
 
@@ -44,6 +54,7 @@ class PipelineNode(PerceptionNode):
     def _publish(self, res: FrameResult, header, t0: float) -> None:
         self.pub_boxes.publish(_msgs.boxes_msg(res.boxes, header))
         self.publish_cones(res.cones, header)
+        self.debug.publish(res.band, res.boxes, self.pipeline.calib.crop, header)
         self.get_logger().debug(
             f"{len(res.boxes)} boxes, {len(res.cones)} cones in {(time.perf_counter() - t0) * 1e3:.1f} ms "
             + " ".join(f"{k}={v:.1f}" for k, v in res.timing_ms.items())
