@@ -4,7 +4,9 @@ Fields (see ``calib/README.md``): ``camera``, ``image_width``, ``image_height``,
 ``H_S_B`` (3x3 rows), ``T_F_S`` (3x3 rows), ``crop`` (``v0``, ``v1``, optional
 ``u0``, ``u1``), ``downscale``, ``foot_points`` (class name -> rule),
 ``max_range_m``, ``pixel_sigma`` (``u``, ``v``); optional ``frame_id``
-(default ``rear_axle``), ``camera_matrix`` (3x3), ``dist_coeffs`` (list).
+(default ``rear_axle``), ``camera_matrix`` (3x3), ``dist_coeffs`` (list), ``mount_pose``
+(``x_m``, ``y_m``, ``z_m``, ``yaw_deg``, ``pitch_deg``, ``roll_deg``: the camera in ``frame_id``,
+angles as :class:`~cone_perception.camera.MountPose`).
 Other keys are kept as they are (``extra``) and written back on save.
 
 Every problem raises :class:`~cone_perception.errors.ConfigError` naming the
@@ -21,6 +23,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from .camera import MountPose
 from .classes import CLASS_NAMES
 from .crop import CropSpec
 from .errors import ConfigError
@@ -58,7 +61,11 @@ _KNOWN_KEYS = {
     "dist_coeffs",
     "foot_offset_m",
     "camera_xy_m",
+    "mount_pose",
 }
+#: ``mount_pose`` fields -> :class:`~cone_perception.camera.MountPose` fields
+MOUNT_POSE_FIELDS = {"x_m": "x_m", "y_m": "y_m", "z_m": "height_m", "yaw_deg": "yaw_deg", "pitch_deg": "pitch_deg",
+                     "roll_deg": "roll_deg"}
 
 
 @dataclass
@@ -80,6 +87,7 @@ class Calibration:
     dist_coeffs: np.ndarray | None = None
     foot_offset_m: tuple[float, ...] = (0.0,) * len(CLASS_NAMES)  # per project class id
     camera_xy_m: tuple[float, float] | None = None
+    mount_pose: MountPose | None = None  # the camera's pose in frame_id (m, degrees), if measured
     extra: dict[str, Any] = field(default_factory=dict)
     source: str = "<memory>"
 
@@ -131,6 +139,8 @@ class Calibration:
             d["foot_offset_m"] = {CLASS_NAMES[i]: float(v) for i, v in enumerate(self.foot_offset_m)}
         if self.camera_xy_m is not None:
             d["camera_xy_m"] = [float(v) for v in self.camera_xy_m]
+        if self.mount_pose is not None:
+            d["mount_pose"] = {k: float(getattr(self.mount_pose, a)) for k, a in MOUNT_POSE_FIELDS.items()}
         d.update(self.extra)
         return d
 
@@ -274,6 +284,22 @@ def calibration_from_dict(data: dict, source: str = "<memory>") -> Calibration:
         if len(cam_xy) != 2 or not all(np.isfinite(cam_xy)):
             raise f.err("camera_xy_m", f"must be two finite numbers [x, y], got {cam_xy}")
 
+    mount_pose = None
+    mp = f.get("mount_pose", None)
+    if mp is not None:
+        if not isinstance(mp, dict):
+            raise f.err("mount_pose", f"must be a mapping with {', '.join(MOUNT_POSE_FIELDS)}")
+        unknown = sorted(set(mp) - set(MOUNT_POSE_FIELDS))
+        if unknown:
+            raise f.err(f"mount_pose.{unknown[0]}", f"unknown field; known: {', '.join(MOUNT_POSE_FIELDS)}")
+        v = {k: f.number(k, 0.0 if k.endswith("_deg") or k == "y_m" else ..., where=mp, prefix="mount_pose.")
+             for k in MOUNT_POSE_FIELDS}
+        if v["z_m"] <= 0:
+            raise f.err("mount_pose.z_m", f"the camera must be above the ground (z_m > 0), got {v['z_m']}")
+        if not -90.0 < v["pitch_deg"] < 90.0:
+            raise f.err("mount_pose.pitch_deg", f"must be within -90..90 degrees, got {v['pitch_deg']}")
+        mount_pose = MountPose(**{MOUNT_POSE_FIELDS[k]: val for k, val in v.items()})
+
     sigma = f.get("pixel_sigma", {"u": 1.0, "v": 1.0})
     if not isinstance(sigma, dict):
         raise f.err("pixel_sigma", "must be a mapping with u and v (pixels)")
@@ -305,6 +331,7 @@ def calibration_from_dict(data: dict, source: str = "<memory>") -> Calibration:
         dist_coeffs=dist,
         foot_offset_m=tuple(offsets[n] for n in CLASS_NAMES),
         camera_xy_m=cam_xy,
+        mount_pose=mount_pose,
         extra={k: v for k, v in data.items() if k not in _KNOWN_KEYS},
         source=source,
     )

@@ -66,7 +66,7 @@ def test_every_node_has_an_executable_and_every_shipped_file_is_installed() -> N
             continue  # a library module of the nodes (e.g. live_replay), not a node
         assert f'"{node.stem} = cone_perception.nodes.{node.stem}:main"' in setup_py, f"no console script for {node.stem}"
     assert '"cone-perception = cone_perception.cli:main"' in setup_py
-    for folder, patterns in {"calib": ("*.yaml", "*.md"), "launch_configs": ("*.py", "*.yaml")}.items():
+    for folder, patterns in {"calib": ("*.yaml", "*.md"), "launch_configs": ("*.py", "*.yaml", "*.rviz")}.items():
         for pattern in patterns:
             assert f'share("{folder}/{pattern}")' in setup_py
     assert (PKG / "config" / "fastdds_localhost_shm.xml").is_file() and (PKG / "config" / "fastdds_shm.xml").is_file()
