@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 
 from .classes import CLASS_BGR, CLASS_NAMES, CLASS_RGBA
+from .geometry import covariance_ellipses
 
 
 def draw_boxes(
@@ -76,15 +77,12 @@ def birdseye_plot(
             for cid in np.unique(truth["class_id"]):
                 t = truth[truth["class_id"] == cid]
                 ax.scatter(t["y"], t["x"], s=70, facecolors="none", edgecolors=[CLASS_RGBA[int(cid)]], linewidths=1.5)
-        for c in cones:
+        major, minor, yaw = covariance_ellipses(cones, sigma_scale) if len(cones) else ((), (), ())
+        for c, a, b, yaw_i in zip(cones, major, minor, yaw):
             cid = int(c["class_id"])
-            cov = np.array([[c["cov_xx"], c["cov_xy"]], [c["cov_xy"], c["cov_yy"]]], dtype=np.float64)
-            vals, vecs = np.linalg.eigh(cov)
-            vals = np.clip(vals, 0, None)
-            # plot axes are (y, x): the major eigenvector (x, y) points along (y, x) in the plot
-            angle = np.degrees(np.arctan2(vecs[0, 1], vecs[1, 1]))
-            ax.add_patch(Ellipse((c["y"], c["x"]), 2 * sigma_scale * np.sqrt(vals[1]), 2 * sigma_scale * np.sqrt(vals[0]),
-                                 angle=angle, facecolor=CLASS_RGBA[cid][:3] + (0.25,), edgecolor=CLASS_RGBA[cid][:3] + (0.6,)))
+            # plot axes are (y, x): a major axis at yaw from +x lies at 90 deg - yaw from the plot's first axis
+            ax.add_patch(Ellipse((c["y"], c["x"]), a, b, angle=90.0 - np.degrees(yaw_i),
+                                 facecolor=CLASS_RGBA[cid][:3] + (0.25,), edgecolor=CLASS_RGBA[cid][:3] + (0.6,)))
             ax.plot(c["y"], c["x"], "o", color=CLASS_RGBA[cid], markersize=4)
         ax.plot([0], [0], marker="s", color="k", markersize=6)
         ax.set_xlim(y_half_m, -y_half_m)  # y to the left, as seen from the driver's seat

@@ -75,3 +75,21 @@ def test_ranges_one_bad_box_does_not_hide_the_others():
     assert r[0] == pytest.approx(good[0]) and np.isnan(r[1]) and np.isnan(r[2])
     many = np.concatenate([boxes] * 100)  # 300 boxes: the tag in the score still tells them apart
     np.testing.assert_allclose(box_ranges_m(mapper, many), np.tile(good, 100), rtol=1e-6)
+
+
+def test_covariance_ellipses_axes_and_yaw():
+    from cone_perception.geometry import covariance_ellipses
+    from cone_perception.records import CONE_DTYPE
+
+    c = np.zeros(3, CONE_DTYPE)
+    # sigma 0.3 m along x, 0.1 m along y; then the same turned by 30 degrees; then a round one
+    rot = np.radians(30.0)
+    R = np.array([[np.cos(rot), -np.sin(rot)], [np.sin(rot), np.cos(rot)]])
+    for i, cov in enumerate([np.diag([0.09, 0.01]), R @ np.diag([0.09, 0.01]) @ R.T, np.diag([0.04, 0.04])]):
+        c["cov_xx"][i], c["cov_xy"][i], c["cov_yy"][i] = cov[0, 0], cov[0, 1], cov[1, 1]
+    major, minor, yaw = covariance_ellipses(c, 2.0)
+    np.testing.assert_allclose(major[:2], [1.2, 1.2], rtol=1e-5)  # 2 * 2 sigma * 0.3 m
+    np.testing.assert_allclose(minor[:2], [0.4, 0.4], rtol=1e-4)
+    assert np.sin(yaw[0]) == pytest.approx(0.0, abs=1e-6)
+    assert np.degrees(yaw[1]) % 180.0 == pytest.approx(30.0, abs=1e-3)
+    assert major[2] == pytest.approx(minor[2]) == pytest.approx(0.8)
