@@ -22,7 +22,7 @@ help:
 	@echo "make test-car - detector/adapter/mapping/replay tests with the car's OpenCV 4.6 + numpy 1.26"
 	@echo "               ($(CAR_VENV)), and vermin: nothing needs Python newer than 3.10"
 	@echo "make demo   - setup + the main job on a built-in sample (writes demo_out/)"
-	@echo "make clean  - remove $(VENV) and build outputs"
+	@echo "make clean  - remove $(VENV), $(CAR_VENV) and build outputs"
 
 setup: $(STAMP)
 
