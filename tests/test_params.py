@@ -146,36 +146,38 @@ def test_detection_node_debug_image_only_when_on_and_subscribed(ros: RosFixture)
     boxes = Inbox()
     t.create_subscription(PointCloud2, "cone_boxes", boxes, 10)
     assert ros.spin_until(lambda: pub_img.get_subscription_count() > 0 and pub_info.get_subscription_count() > 0)
-    header = Header(frame_id="camera_optical")
     w, h = CALIB.image_width, CALIB.image_height
-    info = _msgs.camera_info(CALIB.crop.camera_info_fields(w, h), header)
     band = DriverAdapter(CALIB.crop, w, h).from_raw("yuv422_yuy2", w, h, 2 * w, rendered_frames(CALIB, 1)[0])
     empty = np.zeros_like(band)
+    debug = Inbox()
 
-    def send(img, n):
-        k = len(boxes.msgs)
-        assert ros.spin_until(lambda: (pub_info.publish(info) or pub_img.publish(_msgs.bgr_image(img, header)) or True)
-                              and len(boxes.msgs) >= k + n, 30)
+    def stamped(inbox, sec):
+        return [m for m in inbox.msgs if m.header.stamp.sec == sec]
+
+    def send_until(img, sec, cond):
+        """Publish ``img`` (camera_info first) stamped ``sec`` until ``cond()``; frames in flight from an
+        earlier call carry another stamp, so they are told apart."""
+        header = Header(frame_id="camera_optical")
+        header.stamp.sec = sec
+        info = _msgs.camera_info(CALIB.crop.camera_info_fields(w, h), header)
+        msg = _msgs.bgr_image(img, header)
+        assert ros.spin_until(lambda: (pub_info.publish(info) or pub_img.publish(msg) or True) and cond(), 30)
 
     assert node.debug.pub is None  # off by default: not even advertised
     assert all(r.successful for r in _set(ros, client, debug_image=True, debug_image_hz=100.0))
     assert node.debug.enabled and node.debug.pub is not None
-    send(band, 2)
+    send_until(band, 1, lambda: len(stamped(boxes, 1)) >= 2)
     assert node.debug.published == 0  # nobody subscribed: nothing drawn
 
-    debug = Inbox()
     t.create_subscription(Image, "image_cropped/debug", debug, 2)
     assert ros.spin_until(lambda: node.debug.pub.get_subscription_count() > 0)
-    send(empty, 1)
-    assert ros.spin_until(lambda: len(debug.msgs) > 0, 10)
-    first = debug.msgs[-1]
+    send_until(empty, 2, lambda: len(stamped(debug, 2)) > 0)
+    first = stamped(debug, 2)[0]
     assert (first.encoding, first.width, first.height) == ("bgr8", band.shape[1], band.shape[0])
-    assert len(_msgs.boxes_from_msg(boxes.msgs[-1])) == 0  # an empty frame: an image, no error
+    assert all(len(_msgs.boxes_from_msg(m)) == 0 for m in stamped(boxes, 2))  # an empty frame: an image, no error
     assert node.stats.dropped_total == 0
 
-    n = len(debug.msgs)
-    send(band, 1)
-    assert ros.spin_until(lambda: len(debug.msgs) > n, 10)
-    img = np.frombuffer(bytes(debug.msgs[-1].data), np.uint8).reshape(band.shape)
-    assert len(_msgs.boxes_from_msg(boxes.msgs[-1])) > 0
+    send_until(band, 3, lambda: len(stamped(debug, 3)) > 0)
+    img = np.frombuffer(bytes(stamped(debug, 3)[0].data), np.uint8).reshape(band.shape)
+    assert all(len(_msgs.boxes_from_msg(m)) > 0 for m in stamped(boxes, 3))
     assert (img != band).any(axis=2).mean() > 0.001  # boxes and labels drawn on the band
