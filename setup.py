@@ -24,7 +24,8 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
-        (f"share/{PACKAGE}/launch_configs", share("launch_configs/*.py") + share("launch_configs/*.yaml")),
+        (f"share/{PACKAGE}/launch_configs", share("launch_configs/*.py") + share("launch_configs/*.yaml")
+         + share("launch_configs/*.rviz")),
         (f"share/{PACKAGE}/calib", share("calib/*.yaml") + share("calib/*.md")),
         (f"share/{PACKAGE}/models", share("models/*.pt") + share("models/*.md") + share("models/*.yaml")),
     ],

@@ -322,6 +322,8 @@ def calibration_from_dict(data: dict, source: str = "<memory>") -> Calibration:
              for k in MOUNT_POSE_KEYS}
         if v["z_m"] <= 0:
             raise f.err("mount_pose.z_m", f"camera height must be > 0 m, got {v['z_m']}")
+        if not -90.0 < v["pitch_deg"] < 90.0:
+            raise f.err("mount_pose.pitch_deg", f"must be within -90..90 degrees, got {v['pitch_deg']}")
         if K is None:
             raise f.err("mount_pose", "needs camera_matrix too")
         mount_pose = MountPose(v["x_m"], v["y_m"], v["z_m"], v["pitch_deg"], v["roll_deg"], v["yaw_deg"])

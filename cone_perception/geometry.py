@@ -176,3 +176,20 @@ class GroundMapper:
         J = self.jacobian(uv_px)
         S = np.diag(self.sigma**2)
         return J @ S @ np.transpose(J, (0, 2, 1))
+
+
+def covariance_ellipses(cones: np.ndarray, n_sigma: float = 2.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The ``n_sigma`` ellipse of each cone's position covariance (``CONE_DTYPE`` ``cov_xx cov_xy cov_yy``, m^2).
+
+    Returns ((N,) major, (N,) minor full axis lengths in m (2 * n_sigma * sqrt(eigenvalue)),
+    (N,) yaw of the major axis from +x towards +y, rad).
+    """
+    cov = np.empty((len(cones), 2, 2))
+    cov[:, 0, 0] = cones["cov_xx"]
+    cov[:, 0, 1] = cov[:, 1, 0] = cones["cov_xy"]
+    cov[:, 1, 1] = cones["cov_yy"]
+    vals, vecs = np.linalg.eigh(cov)  # ascending: [:, 1] is the major axis
+    vals = np.clip(vals, 0.0, None)
+    major, minor = 2 * n_sigma * np.sqrt(vals[:, 1]), 2 * n_sigma * np.sqrt(vals[:, 0])
+    yaw = np.arctan2(vecs[:, 1, 1], vecs[:, 0, 1])
+    return major, minor, yaw

@@ -21,12 +21,14 @@ STAGES = ("adapter", "preprocess", "forward", "postprocess", "attitude", "mappin
 
 @dataclass
 class FrameResult:
-    """Output of one frame: boxes (``BOX_DTYPE``, full-image px), cones (``CONE_DTYPE``, m), stage ms."""
+    """Output of one frame: boxes (``BOX_DTYPE``, full-image px), cones (``CONE_DTYPE``, m), stage ms,
+    and the band (for the debug image)."""
 
     boxes: np.ndarray
     cones: np.ndarray
     timing_ms: dict[str, float] = field(default_factory=dict)
     attitude: Attitude = FIXED  # the body attitude offset the cones were mapped with
+    band: np.ndarray | None = None  # (H, W, 3) uint8 BGR: the cropped band the detector saw
 
 
 class Pipeline:
@@ -61,7 +63,7 @@ class Pipeline:
         t0 = time.perf_counter()
         cones = self.mapper.map_boxes(boxes, att)
         timing["mapping"] = (time.perf_counter() - t0) * 1e3
-        return FrameResult(boxes, cones, timing, att)
+        return FrameResult(boxes, cones, timing, att, band)
 
     def process_raw(self, encoding: str, width: int, height: int, step: int, data) -> FrameResult:
         """sensor_msgs/Image fields -> :class:`FrameResult`. Raises ``FrameError`` for a bad frame."""

@@ -47,9 +47,13 @@ def launch_dir() -> Path:
     return share_dir() / "launch_configs"
 
 
-def dds_profile_path() -> Path:
-    """The shipped Fast DDS profile (shared memory 64 MiB + UDP on 127.0.0.1)."""
-    return PACKAGE_DIR / "config" / "fastdds_localhost_shm.xml"
+DDS_PROFILES = {"shm": "fastdds_shm.xml", "localhost": "fastdds_localhost_shm.xml"}
+
+
+def dds_profile_path(kind: str = "localhost") -> Path:
+    """A shipped Fast DDS profile: ``shm`` (64 MiB shared memory + the standard UDPv4) or
+    ``localhost`` (64 MiB shared memory + UDPv4 on 127.0.0.1 only); see :mod:`.ros_env`."""
+    return PACKAGE_DIR / "config" / DDS_PROFILES[kind]
 
 
 def resolve_in(directory: Path, name_or_path: str | os.PathLike, suffixes: tuple[str, ...]) -> Path:

@@ -1,15 +1,20 @@
 """DDS settings every entry point applies before rclpy starts.
 
-Images of 4 MB between processes need Fast DDS's shared-memory transport with a
-large segment, and discovery must stay on this machine. :func:`apply` sets:
+``CONE_PERCEPTION_DDS`` chooses (read by :func:`apply`):
 
-* ``FASTRTPS_DEFAULT_PROFILES_FILE`` -> the shipped profile
-  (``cone_perception/config/fastdds_localhost_shm.xml``), unless already set;
-* ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` (Jazzy and newer), or
-  ``ROS_LOCALHOST_ONLY=1`` on Humble (``ROS_DISTRO=humble``), unless set.
+* ``shm`` (default, what ``ros2 run`` / ``ros2 launch`` get): ``FASTRTPS_DEFAULT_PROFILES_FILE``
+  -> ``cone_perception/config/fastdds_shm.xml`` unless the user set one (theirs always wins).
+  That profile only enlarges Fast DDS's shared-memory segment (64 MiB, for 1-4 MB images between
+  local processes) and keeps the standard UDPv4 transport; the discovery range is the system's
+  (``ROS_AUTOMATIC_DISCOVERY_RANGE`` untouched), so rviz2 or Foxglove on a laptop see the topics
+  as they see any ROS 2 node.
+* ``localhost``: nothing leaves this computer: the profile
+  ``cone_perception/config/fastdds_localhost_shm.xml`` (shared memory + UDPv4 on 127.0.0.1 only,
+  builtin transports off) and ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` (``ROS_LOCALHOST_ONLY=1``
+  on Humble), both set even over the user's own. The tests, ``replay --live`` and ``demo`` force
+  this mode (:func:`use_localhost`), also for the node processes they start.
+* ``system``: touch nothing (the car's own DDS set-up).
 
-A team whose car spreads nodes over several computers sets
-``CONE_PERCEPTION_DDS=system`` to keep its own DDS settings untouched.
 This module does not import rclpy.
 """
 
@@ -18,28 +23,57 @@ from __future__ import annotations
 import os
 from typing import MutableMapping
 
+from .errors import ConfigError
 from .resources import dds_profile_path
 
-OPT_OUT_VAR = "CONE_PERCEPTION_DDS"
+MODE_VAR = "CONE_PERCEPTION_DDS"
+MODES = ("shm", "localhost", "system")
+DEFAULT_MODE = "shm"
+
+
+def mode_of(env: MutableMapping[str, str] | None = None) -> str:
+    """The DDS mode ``CONE_PERCEPTION_DDS`` asks for (default ``shm``); an unknown value is a
+    :class:`~cone_perception.errors.ConfigError` naming the allowed ones."""
+    env = os.environ if env is None else env
+    value = env.get(MODE_VAR, "").strip().lower() or DEFAULT_MODE
+    if value not in MODES:
+        raise ConfigError(
+            MODE_VAR, None, f"unknown value {env.get(MODE_VAR)!r}; allowed: {', '.join(MODES)} (default {DEFAULT_MODE})"
+        )
+    return value
 
 
 def apply(env: MutableMapping[str, str] | None = None) -> dict[str, str]:
-    """Set the DDS variables in ``env`` (default ``os.environ``) unless opted out.
+    """Set the DDS variables in ``env`` (default ``os.environ``) for the mode of :func:`mode_of`.
 
-    Returns the variables this call set (empty when opted out or all were set).
-    Must run before ``rclpy.init()`` (Fast DDS reads them when it starts).
+    Returns the variables this call set. Must run before ``rclpy.init()`` (Fast DDS reads them
+    when it starts).
     """
     env = os.environ if env is None else env
-    if env.get(OPT_OUT_VAR, "").lower() in ("system", "off", "0", "false"):
+    mode = mode_of(env)
+    if mode == "system":
         return {}
-    wanted = {"FASTRTPS_DEFAULT_PROFILES_FILE": str(dds_profile_path())}
-    if env.get("ROS_DISTRO", "").lower() == "humble":
-        wanted["ROS_LOCALHOST_ONLY"] = "1"
+    if mode == "shm":
+        wanted = {"FASTRTPS_DEFAULT_PROFILES_FILE": str(dds_profile_path("shm"))}
+        force = False
     else:
-        wanted["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+        wanted = {"FASTRTPS_DEFAULT_PROFILES_FILE": str(dds_profile_path("localhost"))}
+        if env.get("ROS_DISTRO", "").lower() == "humble":
+            wanted["ROS_LOCALHOST_ONLY"] = "1"
+        else:
+            wanted["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+        force = True
     done = {}
     for key, value in wanted.items():
-        if not env.get(key):
+        if force or not env.get(key):
+            if env.get(key) != value:
+                done[key] = value
             env[key] = value
-            done[key] = value
     return done
+
+
+def use_localhost(env: MutableMapping[str, str] | None = None) -> dict[str, str]:
+    """Force the ``localhost`` mode in ``env`` (and so in every process started from it), then apply it."""
+    env = os.environ if env is None else env
+    env[MODE_VAR] = "localhost"
+    return apply(env)

@@ -9,15 +9,17 @@ import cv2
 import numpy as np
 
 from .classes import CLASS_BGR, CLASS_NAMES, CLASS_RGBA
+from .geometry import covariance_ellipses
 
 
 def draw_boxes(bgr: np.ndarray, boxes: np.ndarray, scale: float = 1.0, thickness: int = 2, labels: bool = True,
-               font_scale: float = 0.45, min_label_height: float = 0.0) -> np.ndarray:
+               font_scale: float = 0.45, min_label_height: float = 0.0,
+               texts: Sequence[str] | None = None) -> np.ndarray:
     """Draw ``BOX_DTYPE`` records (image px, multiplied by ``scale``) on a copy of ``bgr``.
 
-    Labels (class and score) are outlined, placed largest box first, and left out where they would
-    cover a label already placed (far cones crowd together; their boxes are still drawn); boxes less than
-    ``min_label_height`` px tall get no label."""
+    Labels ("class score", or ``texts[k]`` where given) are outlined, kept inside the image, placed
+    largest box first, and left out where they would cover a label already placed (far cones crowd
+    together; their boxes are still drawn); boxes less than ``min_label_height`` px tall get no label."""
     out = bgr.copy()
     order = sorted(range(len(boxes)), key=lambda k: -float(boxes[k]["v2"] - boxes[k]["v1"]))
     placed: list[tuple[int, int, int, int]] = []
@@ -30,10 +32,10 @@ def draw_boxes(bgr: np.ndarray, boxes: np.ndarray, scale: float = 1.0, thickness
         cv2.rectangle(out, p1, p2, color, thickness, cv2.LINE_AA)
         if labels and p2[1] - p1[1] >= min_label_height:
             name = CLASS_NAMES[cid] if cid < len(CLASS_NAMES) else str(cid)
-            text = f"{name} {float(b['score']):.2f}"
+            text = texts[k] if texts is not None else f"{name} {float(b['score']):.2f}"
             weight = max(1, int(round(font_scale / 0.45)))
             (tw, th), _ = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, font_scale, weight)
-            org = (p1[0], max(th + 2, p1[1] - 4))
+            org = (max(0, min(p1[0], out.shape[1] - tw - 2)), max(th + 2, p1[1] - 4))  # inside the image
             rect = (org[0], org[1] - th - 2, org[0] + tw, org[1] + 2)
             if any(rect[0] < q[2] and q[0] < rect[2] and rect[1] < q[3] and q[1] < rect[3] for q in placed):
                 continue
@@ -78,15 +80,12 @@ def birdseye_plot(
             for cid in np.unique(truth["class_id"]):
                 t = truth[truth["class_id"] == cid]
                 ax.scatter(t["y"], t["x"], s=70, facecolors="none", edgecolors=[CLASS_RGBA[int(cid)]], linewidths=1.5)
-        for c in cones:
+        major, minor, yaw = covariance_ellipses(cones, sigma_scale) if len(cones) else ((), (), ())
+        for c, a, b, yaw_i in zip(cones, major, minor, yaw):
             cid = int(c["class_id"])
-            cov = np.array([[c["cov_xx"], c["cov_xy"]], [c["cov_xy"], c["cov_yy"]]], dtype=np.float64)
-            vals, vecs = np.linalg.eigh(cov)
-            vals = np.clip(vals, 0, None)
-            # plot axes are (y, x): the major eigenvector (x, y) points along (y, x) in the plot
-            angle = np.degrees(np.arctan2(vecs[0, 1], vecs[1, 1]))
-            ax.add_patch(Ellipse((c["y"], c["x"]), 2 * sigma_scale * np.sqrt(vals[1]), 2 * sigma_scale * np.sqrt(vals[0]),
-                                 angle=angle, facecolor=CLASS_RGBA[cid][:3] + (0.25,), edgecolor=CLASS_RGBA[cid][:3] + (0.6,)))
+            # plot axes are (y, x): a major axis at yaw from +x lies at 90 deg - yaw from the plot's first axis
+            ax.add_patch(Ellipse((c["y"], c["x"]), a, b, angle=90.0 - np.degrees(yaw_i),
+                                 facecolor=CLASS_RGBA[cid][:3] + (0.25,), edgecolor=CLASS_RGBA[cid][:3] + (0.6,)))
             ax.plot(c["y"], c["x"], "o", color=CLASS_RGBA[cid], markersize=4)
         ax.plot([0], [0], marker="s", color="k", markersize=6)
         ax.set_xlim(y_half_m, -y_half_m)  # y to the left, as seen from the driver's seat

@@ -4,9 +4,13 @@
     ros2 launch cone_perception car.launch.py camera:=mainhoop      # launch_configs/mainhoop.params.yaml
     ros2 launch cone_perception car.launch.py fused:=true           # one `pipeline` process instead
     ros2 launch cone_perception car.launch.py track:=true           # + the cone tracker (/cones/tracked)
+    ros2 launch cone_perception car.launch.py tf:=true rviz:=true   # + camera transform, rviz2
 
 ``camera`` names ``launch_configs/<camera>.params.yaml`` (parameters of all nodes, including the
 calibration file). ``image_topic`` is remapped to the nodes' ``image_raw`` input.
+``tf:=true`` starts tf2_ros ``static_transform_publisher`` for ``rear_axle`` ->
+``<calibration camera>_optical_frame`` (or ``camera_frame:=...``) from the calibration's mount pose
+(``cone_perception.transforms``). ``rviz:=true`` starts rviz2 with ``launch_configs/cone_perception.rviz``.
 """
 
 import os
@@ -18,6 +22,10 @@ from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
 
+def _true(context, name):
+    return LaunchConfiguration(name).perform(context).lower() in ("1", "true", "yes")
+
+
 def _nodes(context):
     share = get_package_share_directory("cone_perception")
     camera = LaunchConfiguration("camera").perform(context)
@@ -25,15 +33,27 @@ def _nodes(context):
     if not os.path.isfile(params):
         raise RuntimeError(f"no parameter file {params} for camera {camera!r}")
     image_topic = LaunchConfiguration("image_topic").perform(context)
-    fused = LaunchConfiguration("fused").perform(context).lower() in ("1", "true", "yes")
-    track = LaunchConfiguration("track").perform(context).lower() in ("1", "true", "yes")
+    fused = _true(context, "fused")
+    track = _true(context, "track")
     remap = [("image_raw", image_topic), ("image_raw/compressed", image_topic + "/compressed")]
+    extra = []
+    if _true(context, "tf"):
+        from cone_perception.calib import DEFAULT_CAMERA, load_calibration
+        from cone_perception.transforms import calibration_in_params_file, optical_frame_transform
+
+        calib = load_calibration(calibration_in_params_file(params) or DEFAULT_CAMERA)
+        tf = optical_frame_transform(calib, LaunchConfiguration("camera_frame").perform(context) or None)
+        extra.append(Node(package="tf2_ros", executable="static_transform_publisher", name="camera_transform",
+                          arguments=tf.args(), output="screen"))
+    if _true(context, "rviz"):
+        extra.append(Node(package="rviz2", executable="rviz2", name="rviz2", output="screen",
+                          arguments=["-d", os.path.join(share, "launch_configs", "cone_perception.rviz")]))
     if fused:
         return [Node(package="cone_perception", executable="pipeline", name="pipeline",
-                     parameters=[params, {"track": track}], remappings=remap, output="screen")]
+                     parameters=[params, {"track": track}], remappings=remap, output="screen")] + extra
     tracker = [Node(package="cone_perception", executable="cone_tracker", name="cone_tracker",
                     parameters=[params], output="screen")] if track else []
-    return tracker + [
+    return extra + tracker + [
         Node(package="cone_perception", executable="driver_adapter", name="driver_adapter",
              parameters=[params], remappings=remap, output="screen"),
         Node(package="cone_perception", executable="detection", name="detection",
@@ -53,5 +73,12 @@ def generate_launch_description():
                               description="run the fused pipeline node instead of three nodes"),
         DeclareLaunchArgument("track", default_value="false",
                               description="also track the cones (/cones/tracked): the pipeline's tracker stage or a cone_tracker node"),
+        DeclareLaunchArgument("tf", default_value="false",
+                              description="publish the static transform rear_axle -> camera optical frame "
+                                          "(from the calibration's mount pose)"),
+        DeclareLaunchArgument("camera_frame", default_value="",
+                              description="the camera's optical frame (default <calibration camera>_optical_frame)"),
+        DeclareLaunchArgument("rviz", default_value="false",
+                              description="start rviz2 with launch_configs/cone_perception.rviz"),
         OpaqueFunction(function=_nodes),
     ])

@@ -8,4 +8,4 @@ from cone_perception import ros_env
 
 # Each test run gets its own ROS_DOMAIN_ID so parallel runs (developers, CI) never see each other.
 os.environ.setdefault("ROS_DOMAIN_ID", str(100 + os.getpid() % 100))
-ros_env.apply()
+ros_env.use_localhost()  # tests never send traffic off this computer (nor do the node processes they start)

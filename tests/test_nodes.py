@@ -116,8 +116,11 @@ def test_mapping_node_boxes_to_cones_and_markers(ros: RosFixture) -> None:
     np.testing.assert_allclose(np.c_[out["x"], out["y"]], [[7.0, 2.0], [9.0, -2.0]], atol=0.2)
     assert out["class_id"].tolist() == [BLUE, YELLOW]
     ma = markers.msgs[0].markers
-    assert ma[0].action == Marker.DELETEALL and [m.type for m in ma[1:]] == [Marker.CYLINDER] * 2
+    assert ma[0].action == Marker.DELETEALL and [m.type for m in ma[1:] if m.ns == "cones"] == [Marker.CYLINDER] * 2
     assert ma[1].header.frame_id == "rear_axle" and ma[1].color.b > ma[1].color.r  # blue cone drawn blue
+    ell = [m for m in ma if m.ns == "cones_2sigma"]  # each cone's 2-sigma position ellipse
+    assert len(ell) == 2 and (ell[0].pose.position.x, ell[0].pose.position.y) == (ma[1].pose.position.x, ma[1].pose.position.y)
+    assert ell[0].scale.x >= ell[0].scale.y > 0
     assert node.stats.ok >= 1
 
 

@@ -10,7 +10,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 PKG = ROOT / "cone_perception"
 ROS_MODULES = {"rclpy", "std_msgs", "sensor_msgs", "geometry_msgs", "visualization_msgs", "diagnostic_msgs", "nav_msgs",
-               "builtin_interfaces", "launch", "launch_ros", "ament_index_python"}
+               "builtin_interfaces", "launch", "launch_ros", "ament_index_python", "rcl_interfaces"}
 # import name -> rosdep key in package.xml
 ROSDEP = {"numpy": "python3-numpy", "cv2": "python3-opencv", "yaml": "python3-yaml", "tqdm": "python3-tqdm",
           "matplotlib": "python3-matplotlib", "scipy": "python3-scipy"}
@@ -66,10 +66,10 @@ def test_every_node_has_an_executable_and_every_shipped_file_is_installed() -> N
             continue  # a library module of the nodes (e.g. live_replay), not a node
         assert f'"{node.stem} = cone_perception.nodes.{node.stem}:main"' in setup_py, f"no console script for {node.stem}"
     assert '"cone-perception = cone_perception.cli:main"' in setup_py
-    for folder, patterns in {"calib": ("*.yaml", "*.md"), "launch_configs": ("*.py", "*.yaml")}.items():
+    for folder, patterns in {"calib": ("*.yaml", "*.md"), "launch_configs": ("*.py", "*.yaml", "*.rviz")}.items():
         for pattern in patterns:
             assert f'share("{folder}/{pattern}")' in setup_py
-    assert (PKG / "config" / "fastdds_localhost_shm.xml").is_file()
+    assert (PKG / "config" / "fastdds_localhost_shm.xml").is_file() and (PKG / "config" / "fastdds_shm.xml").is_file()
     assert (ROOT / "resource" / "cone_perception").is_file()
 
 

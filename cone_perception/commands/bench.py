@@ -10,7 +10,9 @@
 downscaled BGR band, exactly as the ``driver_adapter`` node does it.
 ``pipeline``: rendered 1920x1080 YUYV scenes with cones through the fused pipeline (adapter,
 model input, forward, decode + NMS, mapping) and the packing of ``cone_boxes`` and ``/cones``
-into PointCloud2 messages, as the ``pipeline`` node runs them. ``--input`` replaces the
+into PointCloud2 messages, as the ``pipeline`` node runs them; ``debug_image`` is the cost of one
+``image_cropped/debug`` image (drawn and copied; outside end_to_end: opt-in, at most
+``debug_image_hz`` a second). ``--input`` replaces the
 calibration's crop and downscale by one of the runtime-table settings (:meth:`CropSpec.for_setting`).
 ``table``: the runtime table (see ``bench_table.py``).
 ``tracker``: the cone tracker's update per frame (ego-motion from the cones, association, Kalman
@@ -128,10 +130,12 @@ def bench_pipeline(calib, det, frames: list[bytes], n_frames: int, warmup: int =
     import time
 
     from .. import bagio
+    from ..debug_image import DebugImage
     from ..pipeline import Pipeline
     from ..records import to_pointcloud2
 
     pipe = Pipeline(calib, det)
+    debug = DebugImage(pipe.mapper)
     w, h = calib.image_width, calib.image_height
     crop = calib.crop
     timer = StageTimer()
@@ -145,12 +149,15 @@ def bench_pipeline(calib, det, frames: list[bytes], n_frames: int, warmup: int =
         to_pointcloud2(res.boxes, hdr, bagio.PointCloud2, bagio.PointField)
         to_pointcloud2(res.cones, bagio.header(i, calib.frame_id), bagio.PointCloud2, bagio.PointField)
         t2 = time.perf_counter()
+        np.ascontiguousarray(debug.render(res.band, res.boxes, crop)).tobytes()  # + its Image message's copy
+        t3 = time.perf_counter()
         if i < warmup:
             continue
         for k, v in res.timing_ms.items():
             timer.add(k, v / 1e3)
         timer.add("packing", t2 - t1)
         timer.add("end_to_end", t2 - t0)
+        timer.add("debug_image", t3 - t2)  # not in end_to_end: opt-in, at most debug_image_hz per second
         n_boxes += len(res.boxes)
     s = timer.summary()
     in_w, in_h = det.input_size_for(crop.out_width, crop.out_height)

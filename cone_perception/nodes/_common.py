@@ -11,7 +11,10 @@ from .. import ros_env
 from ..errors import ConePerceptionError, ConfigError, FrameError
 from ..stats import ERROR, NodeHealth, StreamMonitor
 
-ros_env.apply()  # before rclpy loads the middleware
+try:
+    ros_env.apply()  # before rclpy loads the middleware
+except ConfigError as _e:  # an unknown CONE_PERCEPTION_DDS: one line, exit 1
+    raise SystemExit(f"[cone_perception] error: {_e}") from None
 
 import rclpy  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue  # noqa: E402

@@ -5,26 +5,36 @@ from __future__ import annotations
 import numpy as np
 from rclpy.node import Node
 
-from ..detector import DEFAULT_BACKEND, RUNTIME_THREADS, Detector, default_model_path
+from ..detector import Detector, default_model_path
+from ._params import declare
 
 
 class DetectorLoader:
     """Declares the detector parameters on a node once; :meth:`load` loads and warms a detector."""
 
+    #: The detector settings a node changes at run time (``ros2 param set``): :meth:`set_threshold`.
+    RUNTIME = ("conf", "iou", "max_det")
+
     def __init__(self, node: Node) -> None:
         self.node = node
-        self.model = node.declare_parameter("model", "").value or str(default_model_path())
-        self.threads = int(node.declare_parameter("threads", RUNTIME_THREADS).value)  # 0 = library default
+        self.model = declare(node, "model") or str(default_model_path())
+        self.threads = int(declare(node, "threads"))  # 0 = library default
         self.kw = dict(
-            backend=node.declare_parameter("backend", DEFAULT_BACKEND).value,
-            device=node.declare_parameter("device", "cpu").value,
-            fp16=bool(node.declare_parameter("fp16", False).value),
-            bf16=bool(node.declare_parameter("bf16", False).value),
-            conf=float(node.declare_parameter("conf", 0.25).value),
-            iou=float(node.declare_parameter("iou", 0.45).value),
-            max_det=int(node.declare_parameter("max_det", 100).value),
+            backend=declare(node, "backend"),
+            device=declare(node, "device"),
+            fp16=bool(declare(node, "fp16")),
+            bf16=bool(declare(node, "bf16")),
+            conf=float(declare(node, "conf")),
+            iou=float(declare(node, "iou")),
+            max_det=int(declare(node, "max_det")),
             threads=self.threads or None,
         )
+
+    def set_threshold(self, detector: Detector, name: str, value) -> None:
+        """Apply a new ``conf``, ``iou`` or ``max_det`` to ``detector`` and to later (re)loads."""
+        value = int(value) if name == "max_det" else float(value)
+        self.kw[name] = value
+        setattr(detector, name, value)
 
     def load(self, band_wh: tuple[int, int] | None = None) -> Detector:
         """Load the model and warm it up. ``band_wh`` (W, H) is the size of the images the node will

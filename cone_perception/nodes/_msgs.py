@@ -9,6 +9,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from ..classes import CLASS_RGBA, LARGE_ORANGE
 from ..crop import CropSpec, camera_info_crop
+from ..geometry import covariance_ellipses
 from ..records import BOX_DTYPE, CONE_DTYPE, from_pointcloud2, to_pointcloud2
 
 # FS cone sizes (m): small cones 228 mm base, 325 mm high; large orange 285 mm, 505 mm.
@@ -89,7 +90,8 @@ def cones_from_msg(msg: PointCloud2) -> np.ndarray:
 
 
 def cone_markers(cones: np.ndarray, header: Header, ns: str = "cones") -> MarkerArray:
-    """One coloured cylinder per cone; a leading DELETEALL removes the previous frame's markers."""
+    """One coloured cylinder per cone, and (namespace ``<ns>_2sigma``) a flat disc of its 2-sigma
+    position ellipse; a leading DELETEALL removes the previous frame's markers."""
     arr = MarkerArray()
     clear = Marker()
     clear.header = header
@@ -115,6 +117,20 @@ def cone_markers(cones: np.ndarray, header: Header, ns: str = "cones") -> Marker
         r, g, b, a = CLASS_RGBA[cid]
         m.color.r, m.color.g, m.color.b, m.color.a = r, g, b, a
         arr.markers.append(m)
+    major, minor, yaw = covariance_ellipses(cones, 2.0)
+    for i, c in enumerate(cones):
+        e = Marker()
+        e.header = header
+        e.ns = f"{ns}_2sigma"
+        e.id = i
+        e.type = Marker.CYLINDER
+        e.action = Marker.ADD
+        e.pose.position.x, e.pose.position.y, e.pose.position.z = float(c["x"]), float(c["y"]), 0.01
+        e.pose.orientation.z, e.pose.orientation.w = float(np.sin(yaw[i] / 2)), float(np.cos(yaw[i] / 2))
+        e.scale.x, e.scale.y, e.scale.z = max(float(major[i]), 0.01), max(float(minor[i]), 0.01), 0.02
+        r, g, b, _ = CLASS_RGBA[int(c["class_id"])]
+        e.color.r, e.color.g, e.color.b, e.color.a = r, g, b, 0.3
+        arr.markers.append(e)
     return arr
 
 

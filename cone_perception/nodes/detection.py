@@ -4,7 +4,10 @@ Parameters
   model (str, "" = the shipped default model), backend ("auto" | "torch" | "torchscript" | "onnx";
   auto: ONNX Runtime on the CPU where installed, else torch), device ("cpu" | "cuda" | "cuda:N"),
   fp16 (bool, CUDA only), bf16 (bool, CPU autocast, backend torch), conf (0.25), iou (0.45),
-  max_det (100), threads (1, see detector.RUNTIME_THREADS; 0 = library default).
+  max_det (100), threads (1, see detector.RUNTIME_THREADS; 0 = library default), calibration
+  (for the debug image's distances), debug_image (false), debug_image_hz (5).
+  Changeable at run time (``ros2 param set``): conf, iou, max_det, debug_image, debug_image_hz.
+  Descriptions and ranges: ``cone_perception/params.py`` (``ros2 param describe``).
 The crop and downscale of each image come from the newest ``image_cropped/camera_info``
 (``roi``, ``binning``), so boxes go out in full-image pixels whatever the band. A ``camera_info`` is
 validated as an image is (sizes, roi inside the image, binning 1/2/4, band size:
@@ -22,9 +25,13 @@ import time
 
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
+from ..calib import load_calibration
 from ..errors import FrameError
+from ..mapping import ConeMapper
 from . import _msgs
+from ._debug import DebugImagePublisher
 from ._detector_params import DetectorLoader
+from ._params import RuntimeParameters, declare
 
 #: Distinct band sizes the node builds a fixed-size network for (each 1-3 s, blocking); a camera_info
 #: with yet another band is dropped (``band_limit``) and the node keeps its band.
@@ -36,6 +43,10 @@ class DetectionNode(PerceptionNode):
         super().__init__("detection", **node_kwargs)
         self.loader = DetectorLoader(self)
         self.detector = self.loader.load()
+        self.runtime = RuntimeParameters(self)
+        for name in DetectorLoader.RUNTIME:
+            self.runtime.register(name, lambda v, name=name: self.loader.set_threshold(self.detector, name, v))
+        self.debug = DebugImagePublisher(self, ConeMapper(load_calibration(declare(self, "calibration"))), self.runtime)
         self.crop = None
         self.pending = None  # newest image received before any camera_info
         self.networks = [self.detector]  # the model's own and those built for a band (MAX_NETWORK_BANDS more)
@@ -77,8 +88,10 @@ class DetectionNode(PerceptionNode):
                 f"{self.crop.out_width}x{self.crop.out_height}",
             )
         t0 = time.perf_counter()
-        boxes = self.detector.detect(_msgs.image_to_bgr(msg), self.crop)
+        band = _msgs.image_to_bgr(msg)
+        boxes = self.detector.detect(band, self.crop)
         self.pub_boxes.publish(_msgs.boxes_msg(boxes, msg.header))
+        self.debug.publish(band, boxes, self.crop, msg.header)
         self.get_logger().debug(
             f"{len(boxes)} boxes in {(time.perf_counter() - t0) * 1e3:.1f} ms "
             + " ".join(f"{k}={v:.1f}" for k, v in self.detector.timing.items())

@@ -14,15 +14,16 @@ from ._common import QOS_IMAGE_OUT, PerceptionNode, run_node  # noqa: I001 (sets
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 
 from ..adapter import DriverAdapter
-from ..calib import DEFAULT_CAMERA, load_calibration
+from ..calib import load_calibration
 from . import _msgs
+from ._params import declare
 
 
 class DriverAdapterNode(PerceptionNode):
     def __init__(self, **node_kwargs):
         super().__init__("driver_adapter", **node_kwargs)
-        calib_name = self.declare_parameter("calibration", DEFAULT_CAMERA).value
-        transport = self.declare_parameter("input_transport", "raw").value
+        calib_name = declare(self, "calibration")
+        transport = declare(self, "input_transport")
         calib = load_calibration(calib_name)
         self.adapter = DriverAdapter(calib.crop, calib.image_width, calib.image_height)
         self.camera_matrix = calib.camera_matrix

@@ -11,7 +11,11 @@ time from publishing the frame to receiving its ``/cones``), or ``rate`` at the 
 
 from __future__ import annotations
 
-from ._common import QOS_DATA, run_node  # noqa: F401,I001 (sets DDS env first)
+from .. import ros_env
+
+ros_env.use_localhost()  # replay --live and demo keep all traffic on this computer, node processes too
+
+from ._common import QOS_DATA, run_node  # noqa: E402,F401,I001 (sets DDS env first)
 
 import os
 import shutil

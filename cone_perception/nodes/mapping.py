@@ -2,7 +2,7 @@
 
 Parameters
   calibration (str, "example_mainhoop"): calibration YAML path or shipped camera name.
-  publish_markers (bool, true): also publish ``/cones/markers`` for rviz2.
+  publish_markers (bool, true): also publish ``/cones/markers`` for rviz2; changeable at run time.
   attitude (str, ""), imu_rest_deg (double[2]): camera attitude per frame (nodes/_attitude.py); the
     attitude used is published on ``cones/attitude`` (geometry_msgs/Vector3Stamped, x = roll,
     y = pitch, radians); ``imu`` (sensor_msgs/Imu) in for attitude ``imu`` / ``fused``.
@@ -15,20 +15,23 @@ from ._common import QOS_DATA, PerceptionNode, run_node  # noqa: I001 (sets DDS 
 from sensor_msgs.msg import PointCloud2
 
 from ..attitude import attitude_estimator, attitude_for_boxes
-from ..calib import DEFAULT_CAMERA, load_calibration
+from ..calib import load_calibration
 from ..mapping import ConeMapper, validate_boxes
 from . import _msgs
 from ._attitude import declare_attitude, publish_attitude
+from ._params import RuntimeParameters, declare
 
 
 class MappingNode(PerceptionNode):
     def __init__(self, **node_kwargs):
         super().__init__("mapping", **node_kwargs)
-        calib_name = self.declare_parameter("calibration", DEFAULT_CAMERA).value
-        markers = bool(self.declare_parameter("publish_markers", True).value)
+        calib_name = declare(self, "calibration")
+        markers = bool(declare(self, "publish_markers"))
         calib = load_calibration(calib_name)
         self.mapper = ConeMapper(calib)
         self.advertise_cones(calib.frame_id, markers)
+        self.runtime = RuntimeParameters(self)
+        self.runtime.register("publish_markers", lambda v: setattr(self, "publish_markers", bool(v)))
         mode, imu = declare_attitude(self)
         self.attitude_mode, self.attitude = attitude_estimator(self.mapper, mode, imu)
         self.subscribe_frames(PointCloud2, "cone_boxes", self.on_boxes, QOS_DATA)

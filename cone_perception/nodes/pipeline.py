@@ -4,8 +4,10 @@
 
 Parameters: those of ``driver_adapter`` (calibration, input_transport), ``mapping``
 (publish_markers, attitude, imu_rest_deg; ``imu`` in for attitude imu / fused) and ``detection`` (model,
-backend, device, fp16, bf16, conf, iou, max_det, threads); ``track`` (bool, false): also the tracker
-stage, ``/cones/tracked`` out (parameters as ``cone_tracker``).
+backend, device, fp16, bf16, conf, iou, max_det, threads, debug_image, debug_image_hz; the debug image is
+the band of ``image_raw`` after the adapter); ``track`` (bool, false): also the tracker stage,
+``/cones/tracked`` out (parameters as ``cone_tracker``).
+Changeable at run time: publish_markers, conf, iou, max_det, debug_image, debug_image_hz.
 """
 
 from __future__ import annotations
@@ -16,25 +18,33 @@ import time
 
 from sensor_msgs.msg import CompressedImage, Image, PointCloud2
 
-from ..calib import DEFAULT_CAMERA, load_calibration
+from ..calib import load_calibration
 from ..errors import FrameError
 from ..pipeline import FrameResult, Pipeline
 from . import _msgs
 from ._attitude import declare_attitude, publish_attitude
-from ._detector_params import load_detector
+from ._debug import DebugImagePublisher
+from ._detector_params import DetectorLoader
+from ._params import RuntimeParameters, declare
 
 
 class PipelineNode(PerceptionNode):
     def __init__(self, **node_kwargs):
         super().__init__("pipeline", **node_kwargs)
-        calib = load_calibration(self.declare_parameter("calibration", DEFAULT_CAMERA).value)
-        transport = self.declare_parameter("input_transport", "raw").value
-        markers = bool(self.declare_parameter("publish_markers", True).value)
-        detector = load_detector(self, (calib.crop.out_width, calib.crop.out_height))
+        calib = load_calibration(declare(self, "calibration"))
+        transport = declare(self, "input_transport")
+        markers = bool(declare(self, "publish_markers"))
+        self.loader = DetectorLoader(self)
+        detector = self.loader.load((calib.crop.out_width, calib.crop.out_height))
         self.advertise_cones(calib.frame_id, markers)
         mode, imu = declare_attitude(self)
         self.pipeline = Pipeline(calib, detector, mode, imu)
         self.pub_boxes = self.create_publisher(PointCloud2, "cone_boxes", QOS_DATA)
+        self.runtime = RuntimeParameters(self)
+        self.runtime.register("publish_markers", lambda v: setattr(self, "publish_markers", bool(v)))
+        for name in DetectorLoader.RUNTIME:
+            self.runtime.register(name, lambda v, name=name: self.loader.set_threshold(self.pipeline.detector, name, v))
+        self.debug = DebugImagePublisher(self, self.pipeline.mapper, self.runtime)
         self.tracking = None
         if bool(self.declare_parameter("track", False).value):
             from ._tracking import NodeTracking
@@ -56,6 +66,7 @@ class PipelineNode(PerceptionNode):
     def _publish(self, res: FrameResult, header, t0: float) -> None:
         self.pub_boxes.publish(_msgs.boxes_msg(res.boxes, header))
         self.publish_cones(res.cones, header)
+        self.debug.publish(res.band, res.boxes, self.pipeline.calib.crop, header)
         publish_attitude(self, res.attitude, header)
         if self.tracking is not None:
             try:
