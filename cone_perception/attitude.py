@@ -381,13 +381,14 @@ def attitude_estimator(mapper, mode: str | None, imu: "ImuAttitude | None" = Non
     from .errors import ConfigError
 
     calib = mapper.calib
-    mode = mode or default_attitude_mode(calib.mount_pose is not None, imu is not None)
+    mode = mode or default_attitude_mode(calib.has_attitude_model, imu is not None)
     if mode not in ATTITUDE_MODES:
         raise ConfigError("attitude", None, f"unknown attitude mode {mode!r}; known: {', '.join(ATTITUDE_MODES)}")
     if mode == "fixed":
         return mode, None
-    if calib.mount_pose is None:
-        raise ConfigError(calib.source, "mount_pose", f"attitude {mode!r} needs the mount pose in the calibration")
+    if not calib.has_attitude_model:
+        raise ConfigError(calib.source, "mount_pose" if calib.mount_pose is None else "camera_matrix",
+                          f"attitude {mode!r} needs mount_pose and camera_matrix in the calibration")
     if mode == "image":
         return mode, mapper.image_attitude()
     if imu is None:

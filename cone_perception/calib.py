@@ -91,6 +91,11 @@ class Calibration:
     source: str = "<memory>"
 
     @property
+    def has_attitude_model(self) -> bool:
+        """Mount pose and camera matrix both given: ``H_F_B`` can be recomposed per body attitude."""
+        return self.mount_pose is not None and self.camera_matrix is not None
+
+    @property
     def downscale(self) -> int:
         return self.crop.downscale
 
@@ -318,14 +323,12 @@ def calibration_from_dict(data: dict, source: str = "<memory>") -> Calibration:
         for k in mp:
             if k not in MOUNT_POSE_KEYS:
                 raise f.err(f"mount_pose.{k}", f"unknown key; known: {', '.join(MOUNT_POSE_KEYS)}")
-        v = {k: f.number(k, 0.0 if k in ("y_m", "yaw_deg", "roll_deg") else ..., where=mp, prefix="mount_pose.")
+        v = {k: f.number(k, 0.0 if k.endswith("_deg") or k == "y_m" else ..., where=mp, prefix="mount_pose.")
              for k in MOUNT_POSE_KEYS}
         if v["z_m"] <= 0:
             raise f.err("mount_pose.z_m", f"camera height must be > 0 m, got {v['z_m']}")
         if not -90.0 < v["pitch_deg"] < 90.0:
             raise f.err("mount_pose.pitch_deg", f"must be within -90..90 degrees, got {v['pitch_deg']}")
-        if K is None:
-            raise f.err("mount_pose", "needs camera_matrix too")
         mount_pose = MountPose(v["x_m"], v["y_m"], v["z_m"], v["pitch_deg"], v["roll_deg"], v["yaw_deg"])
 
     calib = Calibration(
@@ -352,7 +355,7 @@ def calibration_from_dict(data: dict, source: str = "<memory>") -> Calibration:
         calib.H_F_B
     except ValueError as e:
         raise f.err("H_S_B", str(e)) from None
-    if mount_pose is not None:
+    if calib.has_attitude_model:
         from .attitude import MOUNT_POSE_CHECK_RANGE_M, MOUNT_POSE_TOLERANCE, mount_pose_disagreement
 
         bad = mount_pose_disagreement(calib.H_F_B, K, mount_pose, width, height)

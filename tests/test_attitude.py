@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from cone_perception.attitude import (
+    attitude_estimator,
     Attitude,
     ImageAttitude,
     attitude_rotation,
@@ -95,7 +96,7 @@ def test_calibration_without_mount_pose_keeps_the_fixed_homography():
         ({"x_m": 0.5, "y_m": 0.0, "z_m": 1.2, "yaw_deg": 0.0, "pitch_deg": 11.0, "roll_deg": 0.0}, "mount_pose"),
         ({"x_m": 0.5, "y_m": 0.0, "z_m": 1.3, "yaw_deg": 0.0, "pitch_deg": 10.0, "roll_deg": 0.0}, "mount_pose"),
         ({"x_m": 0.5, "z_m": -1.2, "pitch_deg": 10.0}, "mount_pose.z_m"),
-        ({"x_m": 0.5, "z_m": 1.2}, "mount_pose.pitch_deg"),
+        ({"x_m": 0.5, "z_m": 1.2}, "mount_pose: disagrees"),  # pitch defaults to 0: the H check refuses it
         ({"x_m": 0.5, "z_m": 1.2, "pitch_deg": 10.0, "height_m": 1.2}, "mount_pose.height_m"),
         ({"x_m": 0.5, "z_m": 1.2, "pitch_deg": "ten"}, "mount_pose.pitch_deg"),
     ],
@@ -112,11 +113,15 @@ def test_small_disagreement_is_accepted():
     assert calib.mount_pose.pitch_deg == 10.05
 
 
-def test_mount_pose_needs_the_camera_matrix():
+def test_attitude_needs_the_camera_matrix_beside_the_mount_pose():
     d = SynthConfig(seed=0).calibration().to_dict()
     del d["camera_matrix"]
-    with pytest.raises(ConfigError, match="mount_pose.*camera_matrix"):
-        calibration_from_dict(d, "x.yaml")
+    calib = calibration_from_dict(d, "x.yaml")  # a measured pose alone is fine (the camera's transform)
+    assert calib.mount_pose is not None and not calib.has_attitude_model
+    mapper = ConeMapper(calib)
+    assert attitude_estimator(mapper, "", None)[0] == "fixed"  # the default falls back to the fixed H
+    with pytest.raises(ConfigError, match="x.yaml: camera_matrix.*needs mount_pose and camera_matrix"):
+        attitude_estimator(mapper, "image", None)
 
 
 def test_attitude_rotation_is_the_synthetic_body_rotation():

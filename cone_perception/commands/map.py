@@ -46,7 +46,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--boxes", type=Path, metavar="FILE.csv", help="CSV of boxes u1,v1,u2,v2,score,class_id")
     p.add_argument("--attitude", choices=("fixed", "image"), default=None,
                    help="--boxes: fixed (the calibration's H) or image (the boxes are one frame: fit its pitch/roll "
-                        "first; needs mount_pose). Default: image when the calibration has mount_pose, else fixed")
+                        "first; needs mount_pose and camera_matrix). Default: image when the calibration has both, else fixed")
 
 
 def read_boxes_csv(path: Path) -> np.ndarray:

@@ -121,7 +121,7 @@ def _imu_source(args, calib):
     from ..bagio import bag_topics
     from ..errors import ConfigError
 
-    if args.attitude in ("fixed", "image") or calib.mount_pose is None and args.attitude is None:
+    if args.attitude in ("fixed", "image") or not calib.has_attitude_model and args.attitude is None:
         return None
     if args.imu_topic not in bag_topics(args.bag):
         if args.attitude in ("imu", "fused"):
