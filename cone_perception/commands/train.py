@@ -52,6 +52,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--threads", type=int, default=d.threads, help=f"torch threads for the model (default {d.threads})")
     p.add_argument("--seed", type=int, default=d.seed, help="random seed (default 0)")
     p.add_argument("--mosaic", type=float, default=d.augment.mosaic, help=f"mosaic probability (default {d.augment.mosaic})")
+    p.add_argument("--copy-paste", type=float, default=d.augment.copy_paste, metavar="P",
+                   help="probability that a training frame gets cones cut from other training frames pasted on its "
+                        "road, sized by the frame's row law, rare classes oversampled (default 0 = off; README "
+                        "'Copy-paste')")
     p.add_argument("--close-mosaic", type=int, default=d.close_mosaic, help=f"last N epochs without mosaic (default {d.close_mosaic})")
     p.add_argument("--precision", choices=PRECISIONS, default=None,
                    help="fp32, or bf16 (autocast with channels-last: about 2x the images/s on a CPU with native "
@@ -69,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
     from ..train.trainer import TrainConfig, train
 
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
-    aug = AugmentConfig.off() if args.no_augment else replace(AugmentConfig(), mosaic=args.mosaic)
+    aug = AugmentConfig.off() if args.no_augment else replace(AugmentConfig(), mosaic=args.mosaic, copy_paste=args.copy_paste)
     cfg = TrainConfig(
         data=args.data, out=args.out, model=args.model, epochs=args.epochs, batch=args.batch, imgsz=args.imgsz,
         optimizer=args.optimizer, lr0=args.lr0, patience=args.patience, workers=args.workers, threads=args.threads,
