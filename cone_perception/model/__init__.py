@@ -5,7 +5,7 @@ Read in this order: :mod:`.config` (named sizes), :mod:`.blocks`, :mod:`.backbon
 :mod:`.assign` and :mod:`.loss`; for inference :mod:`.decode`.
 """
 
-from .config import MODEL_SIZES, ModelConfig, model_config
+from .config import MODEL_SIZES, PRETRAINED_BACKBONES, ModelConfig, is_model_name, model_config, model_names
 from .yolo import ConeYOLO
 
-__all__ = ["MODEL_SIZES", "ModelConfig", "model_config", "ConeYOLO"]
+__all__ = ["MODEL_SIZES", "PRETRAINED_BACKBONES", "ModelConfig", "model_config", "model_names", "is_model_name", "ConeYOLO"]

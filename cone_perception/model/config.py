@@ -15,6 +15,11 @@ from dataclasses import asdict, dataclass, field, fields
 
 from ..classes import NUM_CLASSES
 
+#: ImageNet-pretrained backbone families (modules and weights: :mod:`.pretrained`)
+PRETRAINED_BACKBONES: tuple[str, ...] = ("efficientnet_lite0", "mobilenet_v2")
+#: neck and head size a pretrained family gets when the model name gives none (``mobilenet_v2`` = ``mobilenet_v2-p``)
+DEFAULT_NECK_SIZE = "p"
+
 
 @dataclass(frozen=True)
 class ModelConfig:
@@ -25,7 +30,11 @@ class ModelConfig:
     (the neck's blocks use ``neck_depth``). ``head_reg_ch``/``head_cls_ch``:
     width of the box and class branches of the head (0 = YOLOv8 rule).
     ``reg_max``: DFL bins per box side. ``head_dw``: depth-wise class branch
-    (YOLO11 style).
+    (YOLO11 style). ``backbone``: ``csp`` (the package's own, built from
+    ``channels`` and ``depths``) or an ImageNet-pretrained one of
+    :data:`~cone_perception.model.pretrained.BACKBONES`; with a pretrained
+    backbone only ``channels[2:]`` are used, as the neck's widths at strides
+    8/16/32 (``depths`` are unused).
     """
 
     name: str = "n"
@@ -38,6 +47,7 @@ class ModelConfig:
     reg_max: int = 16
     num_classes: int = NUM_CLASSES
     strides: tuple[int, ...] = field(default=(8, 16, 32))
+    backbone: str = "csp"
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -63,6 +73,8 @@ class ModelConfig:
             raise ValueError(f"strides must be (8, 16, 32), got {self.strides}")
         if not 1 <= self.reg_max <= 32:
             raise ValueError(f"reg_max must be 1..32, got {self.reg_max}")
+        if self.backbone != "csp" and self.backbone not in PRETRAINED_BACKBONES:
+            raise ValueError(f"unknown backbone {self.backbone!r}; known: csp, {', '.join(PRETRAINED_BACKBONES)}")
         if self.num_classes < 1:
             raise ValueError(f"num_classes must be >= 1, got {self.num_classes}")
 
@@ -76,10 +88,32 @@ MODEL_SIZES: dict[str, ModelConfig] = {
 }
 
 
+def model_names() -> list[str]:
+    """Every name :func:`model_config` takes: the sizes, each pretrained family, each family-size pair."""
+    return list(MODEL_SIZES) + [f"{b}{s}" for b in PRETRAINED_BACKBONES for s in [""] + [f"-{k}" for k in MODEL_SIZES]]
+
+
+def is_model_name(name: str) -> bool:
+    """Whether ``name`` is a model name (rather than a checkpoint path)."""
+    return name in model_names()
+
+
 def model_config(size: str, num_classes: int = NUM_CLASSES) -> ModelConfig:
-    """The named size ``size`` with ``num_classes`` classes; ``KeyError`` names the sizes."""
-    if size not in MODEL_SIZES:
-        raise KeyError(f"unknown model size {size!r}; known: {sorted(MODEL_SIZES)}")
-    d = MODEL_SIZES[size].to_dict()
+    """The named model with ``num_classes`` classes; ``KeyError`` names the known names.
+
+    ``size``: a size (``n``, ``t``, ``p``), a pretrained family (``mobilenet_v2``,
+    ``efficientnet_lite0``: neck and head of size :data:`DEFAULT_NECK_SIZE`) or
+    ``<family>-<size>`` (that size's neck and head on the pretrained backbone)."""
+    family, _, neck = size.partition("-")
+    if family in PRETRAINED_BACKBONES:
+        neck = neck or DEFAULT_NECK_SIZE
+        if neck not in MODEL_SIZES:
+            raise KeyError(f"unknown neck size {neck!r} in {size!r}; known: {sorted(MODEL_SIZES)}")
+        d = MODEL_SIZES[neck].to_dict()
+        d.update(name=f"{family}-{neck}", backbone=family)
+    elif size in MODEL_SIZES:
+        d = MODEL_SIZES[size].to_dict()
+    else:
+        raise KeyError(f"unknown model {size!r}; known: {', '.join(model_names())}")
     d["num_classes"] = int(num_classes)
     return ModelConfig.from_dict(d)

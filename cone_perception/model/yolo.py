@@ -11,6 +11,7 @@ from .config import ModelConfig
 from .decode import decode_outputs
 from .head import DecoupledHead
 from .neck import PAFPN
+from .pretrained import PretrainedBackbone
 
 
 class ConeYOLO(nn.Module):
@@ -26,7 +27,10 @@ class ConeYOLO(nn.Module):
         super().__init__()
         cfg.validate()
         self.cfg = cfg
-        self.backbone = CSPBackbone(cfg.channels, cfg.depths)
+        if cfg.backbone == "csp":
+            self.backbone = CSPBackbone(cfg.channels, cfg.depths)
+        else:  # ImageNet weights are loaded by the trainer (load_imagenet); a checkpoint brings its own
+            self.backbone = PretrainedBackbone(cfg.backbone, tuple(cfg.channels[2:]))
         self.neck = PAFPN(self.backbone.out_channels, cfg.neck_depth)
         self.head = DecoupledHead(
             self.backbone.out_channels, cfg.num_classes, cfg.reg_max, cfg.strides,
@@ -48,6 +52,8 @@ class ConeYOLO(nn.Module):
     @torch.no_grad()
     def fuse(self) -> "ConeYOLO":
         """Fold every batch-norm into its convolution (inference only; in place)."""
+        if isinstance(self.backbone, PretrainedBackbone):
+            self.backbone.fuse_bn()
         for m in self.modules():
             if isinstance(m, Conv) and hasattr(m, "bn"):
                 m.conv = fuse_conv_bn(m.conv, m.bn)

@@ -32,11 +32,13 @@ class AugmentConfig:
     cutout: float = 0.2
     min_visible: float = MIN_VISIBLE  # keep a clipped box if this fraction of it remains in the frame
     min_size_px: float = 2.0
+    copy_paste: float = 0.0  # probability of pasting cones cut from other frames (train/copy_paste.py; 0 = off)
 
     @classmethod
     def off(cls) -> "AugmentConfig":
         """No augmentation at all (plain width-fit + crop/pad)."""
-        return cls(mosaic=0.0, scale=(1.0, 1.0), hue=0.0, saturation=0.0, value=0.0, flip=0.0, blur=0.0, noise=0.0, cutout=0.0)
+        return cls(mosaic=0.0, scale=(1.0, 1.0), hue=0.0, saturation=0.0, value=0.0, flip=0.0, blur=0.0, noise=0.0, cutout=0.0,
+                   copy_paste=0.0)
 
 
 def fit_width(img: np.ndarray, boxes: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray]:

@@ -13,6 +13,7 @@ from torch.utils.data import Dataset, Sampler
 
 from ..detector import letterbox
 from .augment import AugmentConfig, cutout, fit_width, hflip, mosaic4, photometric, random_window
+from .copy_paste import CopyPasteConfig, RowLaw, build_bank, fit_row_law
 from .datasets import DatasetEntry, labels_to_xyxy, read_image
 
 
@@ -77,14 +78,29 @@ class TrainSet(Dataset):
         self.mosaic_enabled = True
         w = np.concatenate([np.full(len(e.image_paths), e.weight / len(e.image_paths)) for e in entries])
         self.pick_p = w / w.sum()
+        self.bank, self.entry_laws = None, {}
+        if aug.copy_paste > 0:  # cone patches of every training frame, and each entry's row law as a fallback
+            self.bank = build_bank(self.items, CopyPasteConfig(p=aug.copy_paste), seed, progress=True)
+            for e in entries:
+                lab = np.concatenate([l for l in e.labels if len(l)] or [np.zeros((0, 5))])
+                b = np.stack([lab[:, 1] - lab[:, 3] / 2, lab[:, 2] - lab[:, 4] / 2,
+                              lab[:, 1] + lab[:, 3] / 2, lab[:, 2] + lab[:, 4] / 2], 1)
+                self.entry_laws[id(e)] = fit_row_law(b, lab[:, 0].astype(np.int64))
 
     def __len__(self) -> int:
         return len(self.items)
 
-    def _fitted(self, k: int):
+    def _fitted(self, k: int, rng: np.random.Generator | None = None):
         img, b, c = self.items.load(k)
         img, b = fit_width(img, b, self.imgsz[0])
+        if self.bank is not None and rng is not None and rng.random() < self.aug.copy_paste:
+            img, b, c = self.bank.paste(rng, img, b, c, self.row_law(k, img.shape[1], img.shape[0], b, c))
         return img, b, c
+
+    def row_law(self, k: int, w: int, h: int, boxes: np.ndarray, cls: np.ndarray) -> RowLaw | None:
+        """Box height vs foot row of item ``k``: its own (fitted on its labels) or else its entry's."""
+        law = fit_row_law(boxes / np.array([w, h, w, h], np.float32), cls) if len(boxes) else None
+        return law or self.entry_laws.get(id(self.items.index[k][0]))
 
     def __getitem__(self, key):
         k, epoch, pos = key
@@ -92,11 +108,11 @@ class TrainSet(Dataset):
         cfg = self.aug
         if self.mosaic_enabled and cfg.mosaic and rng.random() < cfg.mosaic:
             others = rng.choice(len(self.items), 3, p=self.pick_p)
-            parts = [self._fitted(k)] + [self._fitted(int(o)) for o in others]
+            parts = [self._fitted(k, rng)] + [self._fitted(int(o), rng) for o in others]
             canvas, b, c, centre = mosaic4(parts, self.imgsz, rng)
             img, b, c = random_window(rng, canvas, b, c, self.imgsz, cfg.scale, cfg, centre=centre)
         else:
-            img, b, c = self._fitted(k)
+            img, b, c = self._fitted(k, rng)
             img, b, c = random_window(rng, img, b, c, self.imgsz, cfg.scale, cfg)
         img = photometric(rng, img, cfg)
         if cfg.flip and rng.random() < cfg.flip:

