@@ -31,6 +31,7 @@ from typing import Sequence
 
 import cv2
 import numpy as np
+import yaml
 
 from .camera import MountPose, PinholeCamera
 from .errors import ConfigError
@@ -39,19 +40,6 @@ from .geometry import GroundMapper, apply_homography, distort_pixels, fix_homogr
 REPORT_DISTANCES_M = (5.0, 10.0, 15.0, 20.0)
 DEFAULT_RANSAC_PX = 3.0
 _SB_FLAGS = cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY
-
-
-# -- small parsers -------------------------------------------------------------------------------
-def parse_size(text: str, option: str = "--board") -> tuple[int, int]:
-    """``"9x6"`` -> ``(9, 6)``. Raises :class:`ConfigError` naming ``option``."""
-    parts = str(text).lower().replace("*", "x").split("x")
-    try:
-        a, b = (int(p) for p in parts)
-    except ValueError:
-        raise ConfigError(option, None, f"must look like COLSxROWS (e.g. 9x6), got {text!r}") from None
-    if a <= 0 or b <= 0:
-        raise ConfigError(option, None, f"both numbers must be > 0, got {text!r}")
-    return a, b
 
 
 def planar_transform(x_m: float = 0.0, y_m: float = 0.0, yaw_deg: float = 0.0) -> np.ndarray:
@@ -731,3 +719,43 @@ def _format_points_summary(L: list[str], rep: dict) -> None:
         f"their hull covers {100 * c['hull_fraction_of_usable']:.0f} % of the usable image; "
         f"farthest point {c['max_x_m']:.1f} m ahead"
     )
+
+
+def read_intrinsics_file(path: Path) -> Intrinsics:
+    """camera_matrix + dist_coeffs from our calibration YAML or a ROS camera_calibration ``ost.yaml``."""
+    src = str(path)
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except OSError as e:
+        raise ConfigError(src, None, f"cannot read: {e.strerror}") from None
+    except yaml.YAMLError as e:
+        raise ConfigError(src, None, f"not valid YAML: {e}") from None
+    if not isinstance(data, dict):
+        raise ConfigError(src, None, "must be a YAML mapping with camera_matrix and dist_coeffs")
+
+    def values(key_names: tuple[str, ...], n: int | None) -> np.ndarray | None:
+        for k in key_names:
+            if k in data and data[k] is not None:
+                v = data[k]
+                v = v.get("data") if isinstance(v, dict) else v
+                try:
+                    a = np.asarray(v, dtype=np.float64).ravel()
+                except (TypeError, ValueError):
+                    raise ConfigError(src, k, "must be numbers (a list, rows, or a mapping with data:)") from None
+                if (n is not None and a.size != n) or not np.all(np.isfinite(a)):
+                    raise ConfigError(src, k, f"must be {n or 'some'} finite numbers, got {a.size}")
+                return a
+        return None
+
+    K = values(("camera_matrix",), 9)
+    if K is None:
+        raise ConfigError(src, "camera_matrix", "missing")
+    d = values(("dist_coeffs", "distortion_coefficients"), None)
+    d = np.zeros(0) if d is None else d
+    if d.size not in (0, 4, 5, 8, 12, 14):
+        raise ConfigError(src, "dist_coeffs", f"must be 4, 5, 8, 12 or 14 numbers (OpenCV model), got {d.size}")
+    size = None
+    w, h = data.get("image_width"), data.get("image_height")
+    if isinstance(w, int) and isinstance(h, int):
+        size = (w, h)
+    return Intrinsics(K.reshape(3, 3), d, src, image_size=size)

@@ -514,3 +514,26 @@ def _onnx_input_size(sess, source: str) -> tuple[int, int]:
     if len(shape) != 4 or not all(isinstance(v, int) for v in shape[2:]):
         raise ConfigError(source, "imgsz", f"ONNX input shape {shape} is dynamic: give imgsz: [W, H] in the sidecar")
     return int(shape[3]), int(shape[2])
+
+
+def detect_one(det, img: np.ndarray, name: str, crop: tuple[int, ...] | None = None, downscale: int = 1,
+               imgsz: tuple[int, int] | None = None) -> tuple[np.ndarray, float]:
+    """Boxes (``BOX_DTYPE``, the image's px) of one full BGR image, as ``detect`` does it: with ``crop``
+    (V0,V1[,U0,U1]) the band is cut and downscaled as on the car, else letterboxed to ``imgsz`` or the
+    model input; and the model input px per image px (the prediction file's ``input_scale``).
+    Used by ``detect`` and ``bench table``."""
+    from .adapter import crop_bgr
+    from .crop import CropSpec
+
+    h, w = img.shape[:2]
+    if crop:
+        v0, v1, u0, u1 = crop if len(crop) == 4 else (*crop, 0, w)
+        spec = CropSpec(v0, v1, u0, u1, downscale)
+        spec.validate(w, h, f"--crop for {name}")
+        return det.detect(crop_bgr(img, spec), spec), 1.0 / downscale
+    if imgsz:
+        from .records import boxes_from_arrays
+
+        b, s, c = det.infer(img, in_size=imgsz)
+        return boxes_from_arrays(b, s, c), min(imgsz[0] / w, imgsz[1] / h)
+    return det.detect_image(img), min(det.imgsz[0] / w, det.imgsz[1] / h)

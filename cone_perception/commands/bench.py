@@ -41,7 +41,7 @@ from ..crop import INPUT_SETTINGS, CropSpec
 from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, RUNTIME_THREADS
 from ..errors import ConfigError
 from ..words import plural
-from .detect import parse_crop
+from ._args import parse_crop
 
 _BYTES_PER_PX = {"yuv422_yuy2": 2, "bgr8": 3, "rgb8": 3}
 

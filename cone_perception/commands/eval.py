@@ -25,7 +25,7 @@ def _unit(text: str) -> float:
 
 
 def _rows(text: str) -> tuple[int, int]:
-    from .detect import parse_crop
+    from ._args import parse_crop
 
     vals = parse_crop(text)
     if len(vals) != 2:

@@ -6,8 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .detect import parse_crop
-from .train import parse_size
+from ._args import parse_crop, size_arg
 
 TOLERANCE = 1e-3
 VERIFY_FRAMES = 8
@@ -26,7 +25,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--model", required=True, help="checkpoint (.pt) written by `cone-perception train`")
     p.add_argument("--format", choices=("torchscript", "onnx"), required=True, help="output format")
-    p.add_argument("--imgsz", type=parse_size, default=None, help="input WxH px (default: the checkpoint's)")
+    p.add_argument("--imgsz", type=size_arg, default=None, help="input WxH px (default: the checkpoint's)")
     p.add_argument("--out", default=None, help="output file (default: next to the checkpoint, .torchscript / .onnx)")
     p.add_argument("--force", action="store_true", help="overwrite existing output files (the model and its sidecar <file>.yaml; with --int8 those of the int8 file too)")
     q = p.add_argument_group("int8 (ONNX only)")
