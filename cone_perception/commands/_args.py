@@ -25,7 +25,7 @@ def parse_size(text: str, option: str = "--size", example: str = "WxH (e.g. 960x
 def size_arg(text: str) -> tuple[int, int]:
     """argparse type of a model input ``WxH`` (``--imgsz``); a single number means a square."""
     try:
-        return parse_size(text, "--imgsz", "WxH like 960x288", square=True)
+        return parse_size(text, "--imgsz", "WxH (e.g. 960x288)", square=True)
     except ConfigError as e:
         raise argparse.ArgumentTypeError(e.message) from None
 
