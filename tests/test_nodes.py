@@ -202,7 +202,7 @@ def test_detection_node_builds_a_fixed_size_network_for_the_band(ros: RosFixture
     eager torch's on the band as it is, not those of a letterboxed (half-resolution) band."""
     from std_msgs.msg import Header
 
-    from cone_perception.commands.bench import rendered_frames
+    from cone_perception.bench.frames import rendered_frames
     from cone_perception.detector import Detector, default_model_path
     from cone_perception.nodes.detection import DetectionNode
 

@@ -134,7 +134,7 @@ def test_detection_node_thresholds_and_descriptors(ros: RosFixture) -> None:
 def test_detection_node_debug_image_only_when_on_and_subscribed(ros: RosFixture) -> None:
     """Switched on at run time; no drawing while nobody subscribes; a frame without boxes still gives
     an image (the band, "0 boxes"); a frame with cones gives their boxes drawn."""
-    from cone_perception.commands.bench import rendered_frames
+    from cone_perception.bench.frames import rendered_frames
     from cone_perception.adapter import DriverAdapter
     from cone_perception.nodes.detection import DetectionNode
 
