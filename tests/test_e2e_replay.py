@@ -14,7 +14,7 @@ import pytest
 
 from cone_perception.calib import load_calibration
 from cone_perception.classes import NUM_CLASSES
-from cone_perception.commands.demo import expected_truth
+from cone_perception.mapping import expected_truth
 from cone_perception.detector import Detector, default_model_path
 from cone_perception.evaluation import LocalisationReport
 from cone_perception.nodes.live_replay import live_replay, write_result_bag
