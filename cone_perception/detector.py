@@ -43,6 +43,7 @@ from .checkpoint import RESTORE_HINT, Checkpoint, class_map_from_names, load_che
 from .crop import CropSpec
 from .errors import ConfigError
 from .model.decode import postprocess
+from .params import DEFAULT_BACKEND, DEFAULT_CONF, DEFAULT_IOU, DEFAULT_MAX_DET, RUNTIME_THREADS  # noqa: F401 - re-exported
 from .resources import models_dir
 
 log = logging.getLogger(__name__)
@@ -52,12 +53,6 @@ DEFAULT_MODEL_NAME = "cone_detector.pt"
 BACKENDS = ("torch", "torchscript", "onnx")
 #: What ``backend`` may be: a backend, or ``auto`` (:func:`resolve_backend`), the default everywhere.
 BACKEND_CHOICES = ("auto", *BACKENDS)
-DEFAULT_BACKEND = "auto"
-#: The network's CPU threads where the car runs it (the nodes, ``bench``, ``replay``): one. With
-#: every core busy, any other process that wakes (SLAM, planning, the OS) takes a core from one of
-#: the threads for a scheduler tick and the whole forward waits for it; one thread leaves a core
-#: free for them. Measured per backend and thread count: docs/benchmarks.md, "Backend and threads".
-RUNTIME_THREADS = 1
 PAD_VALUE = 114
 
 
@@ -277,9 +272,9 @@ class Detector:
         fixed_size: bool,
         backend: str,
         source: str,
-        conf: float = 0.25,
-        iou: float = 0.45,
-        max_det: int = 300,
+        conf: float = DEFAULT_CONF,
+        iou: float = DEFAULT_IOU,
+        max_det: int = DEFAULT_MAX_DET,
         checkpoint: Checkpoint | None = None,
     ):
         self._run = run
@@ -324,9 +319,9 @@ class Detector:
         backend: str = DEFAULT_BACKEND,
         device: str = "cpu",
         fp16: bool = False,
-        conf: float = 0.25,
-        iou: float = 0.45,
-        max_det: int = 300,
+        conf: float = DEFAULT_CONF,
+        iou: float = DEFAULT_IOU,
+        max_det: int = DEFAULT_MAX_DET,
         imgsz: tuple[int, int] | None = None,
         threads: int | None = None,
         bf16: bool = False,

@@ -28,6 +28,7 @@ from .classes import CLASS_NAMES, CLASS_RGBA
 from .evaluation import DISTANCE_GROUPS, LocalisationReport, PairDistanceReport, distance_group
 from .groundtruth import EvalImage
 from .metrics import RECALL_POINTS, ImageDetections, at_conf, coco_map, greedy_match, match_by_class, operating_point
+from .params import DEFAULT_CONF
 from .records import CONE_DTYPE, boxes_from_arrays
 
 FILES = {
@@ -137,7 +138,7 @@ def lowest_score_note(images: list[EvalImage]) -> str | None:
             f"as long as --conf >= {low:.3f})")
 
 
-def evaluate(images: list[EvalImage], calib: Calibration | None, conf: float = 0.25, iou: float = 0.5,
+def evaluate(images: list[EvalImage], calib: Calibration | None, conf: float = DEFAULT_CONF, iou: float = 0.5,
              has_positions: bool = False, progress: bool = False) -> EvalResult:
     """Every figure of the report for paired images; ``calib`` maps boxes to metres (optional)."""
     from tqdm import tqdm
@@ -632,7 +633,7 @@ def format_summary(res: EvalResult) -> str:
 
 
 def evaluate_predictions(pred: Path, gt_path: Path, gt_names: str | None = None, calib_arg: str | None = None,
-                         conf: float = 0.25, iou: float = 0.5, only_predicted: bool = False, progress: bool = True,
+                         conf: float = DEFAULT_CONF, iou: float = 0.5, only_predicted: bool = False, progress: bool = True,
                          verbose: bool = True, band: tuple[int, int] | None = None, min_height: float | None = None):
     """A prediction file against ground truth -> :class:`~cone_perception.eval_report.EvalResult`, as ``eval``
     computes it (``gt_names`` comma-separated; ``band``, ``min_height``: as ``eval --band``, ``--min-height``). Used by ``eval`` and ``bench table``."""

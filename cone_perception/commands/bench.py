@@ -37,6 +37,7 @@ from ..calib import DEFAULT_CAMERA, load_calibration
 from ..crop import INPUT_SETTINGS
 from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, RUNTIME_THREADS
 from ..errors import ConfigError
+from ..params import DEFAULT_CONF
 from ..words import plural
 from ._args import parse_crop
 
@@ -84,7 +85,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     t.add_argument("--settings", default=",".join(INPUT_SETTINGS),
                    help="table: input settings, comma-separated (default %(default)s)")
     t.add_argument("--det-conf", type=float, default=0.001, help="table: detector score threshold for the mAP run (default %(default)s)")
-    t.add_argument("--conf", type=float, default=0.25, help="table: operating score threshold for recall (default %(default)s)")
+    t.add_argument("--conf", type=float, default=DEFAULT_CONF, help="table: operating score threshold for recall (default %(default)s)")
 
 
 def _bench_pipeline(args: argparse.Namespace, calib) -> dict:

@@ -21,6 +21,7 @@ from tqdm import tqdm
 
 from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, Detector, default_model_path, detect_one, resolve_backend
 from ..errors import ConfigError
+from ..params import DEFAULT_CONF, DEFAULT_IOU
 from ..sources import iter_source
 from ._args import parse_crop, size_arg
 
@@ -38,8 +39,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--imgsz", type=size_arg, default=None, help="letterbox each image to this model input WxH")
     p.add_argument("--crop", type=parse_crop, default=None, help="band V0,V1[,U0,U1] in image px, cut before the model")
     p.add_argument("--downscale", type=int, default=1, choices=[1, 2, 4], help="with --crop: integer downscale")
-    p.add_argument("--conf", type=float, default=0.25, help="confidence threshold (default %(default)s)")
-    p.add_argument("--iou", type=float, default=0.45, help="NMS IoU threshold (default %(default)s)")
+    p.add_argument("--conf", type=float, default=DEFAULT_CONF, help="confidence threshold (default %(default)s)")
+    p.add_argument("--iou", type=float, default=DEFAULT_IOU, help="NMS IoU threshold (default %(default)s)")
     p.add_argument("--topic", default=None, help="rosbag: camera topic (default: the only image topic)")
     p.add_argument("--save-vis", type=Path, default=None, metavar="DIR",
                    help="write annotated images here (with --crop the band is drawn too)")

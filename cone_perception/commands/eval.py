@@ -13,6 +13,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from ..params import DEFAULT_CONF
+
 
 def _unit(text: str) -> float:
     try:
@@ -47,7 +49,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="calibration YAML (or shipped camera name) to map boxes to metres: distances for YOLO ground truth, "
                         "detections for localisation (default: calib.yaml / <bag>_calib.yaml beside the ground truth, if any)")
     p.add_argument("--out", type=Path, required=True, help="output folder for report.md, metrics.json and the PNGs")
-    p.add_argument("--conf", type=_unit, default=0.25, help="operating score threshold for P/R/F1, confusion and localisation (default %(default)s)")
+    p.add_argument("--conf", type=_unit, default=DEFAULT_CONF, help="operating score threshold for P/R/F1, confusion and localisation (default %(default)s)")
     p.add_argument("--iou", type=_unit, default=0.5, help="IoU for a detection to match a box at the operating point (default %(default)s)")
     p.add_argument("--gt-names", default=None,
                    help="YOLO folder without data.yaml: its class names in id order, comma-separated "

@@ -31,6 +31,7 @@ from ..calib import DEFAULT_CAMERA, load_calibration, resolve_calibration_path
 from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, RUNTIME_THREADS, Detector, default_model_path
 from ..evaluation import LocalisationReport, format_localisation
 from ..outfiles import print_written, refuse_existing, remove_bag
+from ..params import DEFAULT_CONF
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -40,7 +41,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", default=None, help="model file (default: the shipped default model)")
     p.add_argument("--backend", default=DEFAULT_BACKEND, choices=BACKEND_CHOICES,
                    help="inference backend (default %(default)s: ONNX Runtime on the CPU where installed, else torch)")
-    p.add_argument("--conf", type=float, default=0.25, help="confidence threshold (default %(default)s)")
+    p.add_argument("--conf", type=float, default=DEFAULT_CONF, help="confidence threshold (default %(default)s)")
     p.add_argument("--threads", type=int, default=RUNTIME_THREADS,
                    help="torch / ONNX Runtime threads of the network (default %(default)s, as the nodes; 0 = library default)")
     p.add_argument("--bf16", action="store_true", help="backend torch with bfloat16 autocast on the CPU")
