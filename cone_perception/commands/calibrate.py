@@ -20,8 +20,8 @@ import cv2
 import numpy as np
 
 from ..calib import RECOMMENDED_FOOT_OFFSET_M, RECOMMENDED_FOOT_POINTS, Calibration, calibration_from_dict, load_calibration, save_calibration
-from ..calib_vis import birdseye_picture, not_found_picture, points_picture
-from ..calibration import (
+from ..calibrate.pictures import birdseye_picture, not_found_picture, points_picture
+from ..calibrate import (
     Board,
     CalibrationResult,
     Intrinsics,
