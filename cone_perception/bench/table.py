@@ -8,7 +8,7 @@ For each model and each input setting (``full`` 1920x1080 -> 1920x1088, ``half``
    rendered 1920x1080 YUYV frames with the calibration's band;
 2. accuracy: the detector on real validation frames with the same crop and downscale, through
    :func:`cone_perception.detector.detect_one` (= ``detect --crop V0,V1 --downscale N``; the whole image for full /
-   half), then :func:`cone_perception.eval_report.evaluate_predictions` (= ``eval``): mAP@0.5 and recall at ``--conf``.
+   half), then :func:`cone_perception.evaluation.report.evaluate_predictions` (= ``eval``): mAP@0.5 and recall at ``--conf``.
 
 Writes ``table.md``, ``table.json`` and the prediction files (``preds/``) to ``--out``.
 """
@@ -122,8 +122,8 @@ def format_markdown(doc: dict) -> str:
 def run_table(args: argparse.Namespace, calib) -> int:
     from tqdm import tqdm
 
-    from ..eval_report import _json_safe, evaluate_predictions
-    from ..groundtruth import load_ground_truth
+    from ..evaluation.report import _json_safe, evaluate_predictions
+    from ..evaluation.groundtruth import load_ground_truth
     from ..predictions import write_prediction
 
     _need(args)

@@ -4,7 +4,7 @@
                        [--conf 0.25] [--iou 0.5] [--gt-names A,B,..] [--band V0,V1] [--min-height PX] [--worst N] [--only-predicted]
 
 Ground truth: a YOLO label folder (images/, labels/, data.yaml) or a synthetic gt.jsonl (with cone
-positions: localisation and the thesis's pair metric too). See ``cone_perception/eval_report.py``.
+positions: localisation and the thesis's pair metric too). See ``cone_perception/evaluation/report.py``.
 """
 
 from __future__ import annotations
@@ -73,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
     import logging
 
     from ..errors import ConfigError
-    from ..eval_report import evaluate_predictions, format_summary, write_report
+    from ..evaluation.report import evaluate_predictions, format_summary, write_report
 
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(message)s")
     if not args.pred.is_file():
@@ -82,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(str(args.out), None, "output exists and is not a directory")
     res = evaluate_predictions(args.pred, args.gt, args.gt_names, args.calib, args.conf, args.iou, args.only_predicted,
                                progress=not args.no_progress, band=args.band, min_height=args.min_height)
-    from ..eval_report import lowest_score_note
+    from ..evaluation.report import lowest_score_note
 
     low = lowest_score_note(res.images)
     if low:

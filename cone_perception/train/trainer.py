@@ -26,7 +26,7 @@ from tqdm import tqdm
 from ..checkpoint import load_checkpoint, save_checkpoint
 from ..classes import CLASS_NAMES
 from ..errors import ConfigError
-from ..metrics import ImageDetections, coco_map
+from ..evaluation.metrics import ImageDetections, coco_map
 from ..model import ConeYOLO, MODEL_SIZES, model_config
 from ..model.decode import postprocess
 from ..model.loss import DetectionLoss

@@ -20,8 +20,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .classes import CLASS_NAMES
-from .params import DEFAULT_CONF
+from ..classes import CLASS_NAMES
+from ..params import DEFAULT_CONF
 
 
 @dataclass
