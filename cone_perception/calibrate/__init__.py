@@ -14,18 +14,20 @@ from .fit import (
     Intrinsics,
     PoseEstimate,
     calibrate_intrinsics,
+    default_crop,
     estimate_homography,
     fit_calibration,
     from_pose,
     pose_from_homography,
     read_intrinsics_file,
+    result_from_pose,
 )
 from .points import Board, PointPairs, board_not_found_hint, board_pairs, detect_board, planar_transform, read_points_csv
 from .report import REPORT_DISTANCES_M, format_report, quality_report
 
 __all__ = [
     "DEFAULT_RANSAC_PX", "REPORT_DISTANCES_M", "Board", "CalibrationResult", "Intrinsics", "PointPairs", "PoseEstimate",
-    "board_not_found_hint", "board_pairs", "calibrate_intrinsics", "detect_board", "estimate_homography",
+    "board_not_found_hint", "board_pairs", "calibrate_intrinsics", "default_crop", "detect_board", "estimate_homography",
     "fit_calibration", "format_report", "from_pose", "planar_transform", "pose_from_homography", "quality_report",
-    "read_intrinsics_file", "read_points_csv",
+    "read_intrinsics_file", "read_points_csv", "result_from_pose",
 ]

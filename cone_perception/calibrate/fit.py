@@ -33,6 +33,7 @@ import numpy as np
 import yaml
 
 from ..camera import MountPose, PinholeCamera
+from ..crop import CropSpec
 from ..errors import ConfigError
 from ..geometry import apply_homography, distort_pixels, fix_homography_sign, undistort_pixels
 
@@ -345,3 +346,27 @@ def read_intrinsics_file(path: Path) -> Intrinsics:
     if isinstance(w, int) and isinstance(h, int):
         size = (w, h)
     return Intrinsics(K.reshape(3, 3), d, src, image_size=size)
+
+
+def result_from_pose(intr: Intrinsics, width: int, height: int, pose: MountPose, T_F_S: np.ndarray) -> CalibrationResult:
+    """The calibration of a camera with known K (``intr``) and mount pose: ``H_F_B`` from the pose, ``H_S_B``
+    through ``T_F_S``, no point pairs. :class:`ConfigError` naming ``--pitch`` when the bottom centre of the
+    image does not see the ground."""
+    H_F_B = from_pose(intr.K, width, height, pose)
+    _, w = apply_homography(H_F_B, np.array([[width / 2.0, height - 1.0]]))
+    if w[0] <= 0:
+        raise ConfigError("calibrate", "--pitch", "with this pose the bottom of the image does not see the ground")
+    H_S_B = np.linalg.inv(T_F_S) @ H_F_B
+    return CalibrationResult(H_S_B, T_F_S, H_F_B, width, height, PointPairs.empty(), np.zeros(0, bool),
+                             np.zeros((0, 2)), intr)
+
+
+def default_crop(res: CalibrationResult) -> CropSpec:
+    """A new camera's band: from a little above the horizon to the bottom, full width, half resolution."""
+    W, H = res.width, res.height
+    h = res.H_F_B[2]
+    v_h = -(h[0] * W / 2.0 + h[2]) / h[1] if abs(h[1]) > 1e-12 else 0.0
+    v0 = int(np.clip(v_h - 0.03 * H, 0, H - 4)) // 4 * 4
+    v1 = H - (H - v0) % 2
+    ds = 2 if W % 4 == 0 and (v1 - v0) % 2 == 0 else 1
+    return CropSpec(v0, v1, 0, W - W % 2, ds)

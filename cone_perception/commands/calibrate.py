@@ -20,7 +20,6 @@ import cv2
 import numpy as np
 
 from ..calib import RECOMMENDED_FOOT_OFFSET_M, RECOMMENDED_FOOT_POINTS, Calibration, calibration_from_dict, load_calibration, save_calibration
-from ..calibrate.pictures import birdseye_picture, not_found_picture, points_picture
 from ..calibrate import (
     Board,
     CalibrationResult,
@@ -29,21 +28,21 @@ from ..calibrate import (
     board_not_found_hint,
     board_pairs,
     calibrate_intrinsics,
+    default_crop,
     detect_board,
     fit_calibration,
     format_report,
-    from_pose,
-    read_intrinsics_file,
     planar_transform,
     quality_report,
+    read_intrinsics_file,
     read_points_csv,
+    result_from_pose,
 )
+from ..calibrate.pictures import birdseye_picture, not_found_picture, points_picture
 from ..attitude import MOUNT_POSE_CHECK_RANGE_M, MOUNT_POSE_TOLERANCE, mount_pose_disagreement
 from ..camera import MountPose, default_intrinsics
 from ..classes import CLASS_NAMES
-from ..crop import CropSpec
 from ..errors import ConfigError
-from ..geometry import apply_homography
 from ..outfiles import print_written, refuse_existing
 from ..sources import read_bag_image, read_image
 from ._args import parse_size
@@ -392,27 +391,11 @@ def _from_pose(args: argparse.Namespace, intr: Intrinsics | None, W: int, H: int
     if args.height <= 0:
         raise ConfigError("calibrate", "--height", f"must be > 0 (camera above the ground), got {args.height}")
     pose = MountPose(args.cam_x, args.cam_y, args.height, args.pitch, args.roll, args.cam_yaw)
-    H_F_B = from_pose(intr.K, W, H, pose)
-    _, w = apply_homography(H_F_B, np.array([[W / 2.0, H - 1.0]]))
-    if w[0] <= 0:
-        raise ConfigError("calibrate", "--pitch", "with this pose the bottom of the image does not see the ground")
-    H_S_B = np.linalg.inv(T_F_S) @ H_F_B
-    res = CalibrationResult(H_S_B, T_F_S, H_F_B, W, H, PointPairs.empty(), np.zeros(0, bool), np.zeros((0, 2)), intr)
+    res = result_from_pose(intr, W, H, pose, T_F_S)
     mount = dataclasses.asdict(pose)
     if args.hfov is not None:
         mount["hfov_deg"] = args.hfov
     return res, {"mount": mount, "calibration": {"method": "from_pose", "date": datetime.date.today().isoformat()}}
-
-
-def _default_crop(res: CalibrationResult) -> CropSpec:
-    """A new camera's band: from a little above the horizon to the bottom, full width, half resolution."""
-    W, H = res.width, res.height
-    h = res.H_F_B[2]
-    v_h = -(h[0] * W / 2.0 + h[2]) / h[1] if abs(h[1]) > 1e-12 else 0.0
-    v0 = int(np.clip(v_h - 0.03 * H, 0, H - 4)) // 4 * 4
-    v1 = H - (H - v0) % 2
-    ds = 2 if W % 4 == 0 and (v1 - v0) % 2 == 0 else 1
-    return CropSpec(v0, v1, 0, W - W % 2, ds)
 
 
 def _mount_pose(args: argparse.Namespace, rep: dict, calib: Calibration) -> MountPose | None:
@@ -465,7 +448,7 @@ def _build_calibration(
             image_height=res.height,
             H_S_B=res.H_S_B,
             T_F_S=res.T_F_S,
-            crop=_default_crop(res),
+            crop=default_crop(res),
             foot_points=tuple(RECOMMENDED_FOOT_POINTS[n] for n in CLASS_NAMES),
             foot_offset_m=tuple(RECOMMENDED_FOOT_OFFSET_M[n] for n in CLASS_NAMES),
             camera_matrix=K,

@@ -26,7 +26,7 @@ def run(args: argparse.Namespace) -> int:
 
     from ..detector import Detector
     from ..model import ConeYOLO, model_config
-    from ..speed import gflops, time_forward
+    from ..bench.forward import gflops, time_forward
 
     torch.set_num_threads(args.threads)
     rows = []
