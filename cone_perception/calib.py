@@ -113,7 +113,7 @@ class Calibration:
         if self.mount_pose is not None:
             return np.array([self.mount_pose.x_m, self.mount_pose.y_m])
         if self.camera_matrix is not None:
-            from .calibration import pose_from_homography
+            from .calibrate.fit import pose_from_homography
 
             pose = pose_from_homography(self.H_F_B, self.camera_matrix).pose
             return np.array([pose.x_m, pose.y_m])

@@ -18,6 +18,8 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from .geometry import fix_homography_sign
+
 # Optical axes expressed in a vehicle-aligned frame: z_opt = x_veh, x_opt = -y_veh, y_opt = -z_veh.
 _R_OPT_FROM_BODY = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
 
@@ -130,9 +132,15 @@ class PinholeCamera:
         return self.K @ np.column_stack([R[:, 0], R[:, 1], t])
 
     def H_F_B(self) -> np.ndarray:
-        """Homography undistorted pixels -> ground (m), h33 = 1 and w > 0 on the ground."""
-        H = np.linalg.inv(self.H_B_F())
-        return H / H[2, 2] * np.sign(H[2, 2])  # keep the sign; normalise the scale
+        """Homography undistorted pixels -> ground (m), |h33| = 1 and w > 0 on the ground, by the package's
+        one sign rule (:func:`~cone_perception.geometry.fix_homography_sign`) at the pixel of a ground point
+        10 m ahead of the camera (along its heading)."""
+        H_B_F = self.H_B_F()
+        yaw = np.radians(self.pose.yaw_deg)
+        ahead = H_B_F @ np.array([self.pose.x_m + 10.0 * np.cos(yaw), self.pose.y_m + 10.0 * np.sin(yaw), 1.0])
+        if ahead[2] <= 0:  # its depth: the camera looks away from the ground ahead
+            raise ValueError(f"camera mount {self.pose} does not see the ground ahead of it")
+        return fix_homography_sign(np.linalg.inv(H_B_F), ahead[:2] / ahead[2])
 
     def horizon_v(self, u: float | None = None) -> float:
         """Row of the horizon (vanishing line of the ground) at column ``u`` (default centre)."""

@@ -43,6 +43,7 @@ from .checkpoint import RESTORE_HINT, Checkpoint, class_map_from_names, load_che
 from .crop import CropSpec
 from .errors import ConfigError
 from .model.decode import postprocess
+from .params import DEFAULT_BACKEND, DEFAULT_CONF, DEFAULT_IOU, DEFAULT_MAX_DET, RUNTIME_THREADS  # noqa: F401 - re-exported
 from .resources import models_dir
 
 log = logging.getLogger(__name__)
@@ -52,12 +53,6 @@ DEFAULT_MODEL_NAME = "cone_detector.pt"
 BACKENDS = ("torch", "torchscript", "onnx")
 #: What ``backend`` may be: a backend, or ``auto`` (:func:`resolve_backend`), the default everywhere.
 BACKEND_CHOICES = ("auto", *BACKENDS)
-DEFAULT_BACKEND = "auto"
-#: The network's CPU threads where the car runs it (the nodes, ``bench``, ``replay``): one. With
-#: every core busy, any other process that wakes (SLAM, planning, the OS) takes a core from one of
-#: the threads for a scheduler tick and the whole forward waits for it; one thread leaves a core
-#: free for them. Measured per backend and thread count: docs/benchmarks.md, "Backend and threads".
-RUNTIME_THREADS = 1
 PAD_VALUE = 114
 
 
@@ -277,9 +272,9 @@ class Detector:
         fixed_size: bool,
         backend: str,
         source: str,
-        conf: float = 0.25,
-        iou: float = 0.45,
-        max_det: int = 300,
+        conf: float = DEFAULT_CONF,
+        iou: float = DEFAULT_IOU,
+        max_det: int = DEFAULT_MAX_DET,
         checkpoint: Checkpoint | None = None,
     ):
         self._run = run
@@ -324,9 +319,9 @@ class Detector:
         backend: str = DEFAULT_BACKEND,
         device: str = "cpu",
         fp16: bool = False,
-        conf: float = 0.25,
-        iou: float = 0.45,
-        max_det: int = 300,
+        conf: float = DEFAULT_CONF,
+        iou: float = DEFAULT_IOU,
+        max_det: int = DEFAULT_MAX_DET,
         imgsz: tuple[int, int] | None = None,
         threads: int | None = None,
         bf16: bool = False,
@@ -514,3 +509,26 @@ def _onnx_input_size(sess, source: str) -> tuple[int, int]:
     if len(shape) != 4 or not all(isinstance(v, int) for v in shape[2:]):
         raise ConfigError(source, "imgsz", f"ONNX input shape {shape} is dynamic: give imgsz: [W, H] in the sidecar")
     return int(shape[3]), int(shape[2])
+
+
+def detect_one(det, img: np.ndarray, name: str, crop: tuple[int, ...] | None = None, downscale: int = 1,
+               imgsz: tuple[int, int] | None = None) -> tuple[np.ndarray, float]:
+    """Boxes (``BOX_DTYPE``, the image's px) of one full BGR image, as ``detect`` does it: with ``crop``
+    (V0,V1[,U0,U1]) the band is cut and downscaled as on the car, else letterboxed to ``imgsz`` or the
+    model input; and the model input px per image px (the prediction file's ``input_scale``).
+    Used by ``detect`` and ``bench table``."""
+    from .adapter import crop_bgr
+    from .crop import CropSpec
+
+    h, w = img.shape[:2]
+    if crop:
+        v0, v1, u0, u1 = crop if len(crop) == 4 else (*crop, 0, w)
+        spec = CropSpec(v0, v1, u0, u1, downscale)
+        spec.validate(w, h, f"--crop for {name}")
+        return det.detect(crop_bgr(img, spec), spec), 1.0 / downscale
+    if imgsz:
+        from .records import boxes_from_arrays
+
+        b, s, c = det.infer(img, in_size=imgsz)
+        return boxes_from_arrays(b, s, c), min(imgsz[0] / w, imgsz[1] / h)
+    return det.detect_image(img), min(det.imgsz[0] / w, det.imgsz[1] / h)

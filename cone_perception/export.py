@@ -114,3 +114,15 @@ def export_model(model: ConeYOLO, imgsz: tuple[int, int], fmt: str, out: Path, m
 
 def max_abs_diff(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.max(np.abs(np.asarray(a, np.float64) - np.asarray(b, np.float64)))) if a.size else 0.0
+
+
+def worst_diff_to_eager(exported, eager, imgsz: tuple[int, int]) -> float:
+    """Largest ``|exported - eager|`` of the raw network output (two :class:`~cone_perception.detector.Detector`
+    objects) on a random and a grey ``(1, 3, H, W)`` input of ``imgsz`` (W, H): ``export``'s check."""
+    rng = np.random.default_rng(0)
+    w, h = imgsz
+    worst = 0.0
+    for blob in (rng.random((1, 3, h, w), dtype=np.float32), np.full((1, 3, h, w), 114 / 255, np.float32)):
+        worst = max(worst, max_abs_diff(exported.raw(blob), eager.raw(blob)))
+    return worst
+

@@ -157,3 +157,14 @@ class ConeMapper:
             xa, xb = self._ground_for(a).map_pixels(uv)[0], self._ground_for(b).map_pixels(uv)[0]
             J[:, :, k] = np.nan_to_num((xa - xb) / (2 * eps))
         return J @ att.covariance_deg2() @ np.transpose(J, (0, 2, 1))
+
+
+def expected_truth(truth: np.ndarray, calib, mapper=None) -> np.ndarray:
+    """True cones a detector is expected to find: at least half visible (``score`` of ``/cones_gt``
+    holds the visible fraction) and standing inside the camera's band and range.
+    ``mapper``: the calibration's :class:`~cone_perception.mapping.ConeMapper`, if already built."""
+    keep = truth["score"] >= 0.5
+    uv = (mapper or ConeMapper(calib)).ground_to_pixels(np.c_[truth["x"], truth["y"]])
+    c = calib.crop
+    inside = (uv[:, 0] >= c.u0) & (uv[:, 0] < c.u1) & (uv[:, 1] >= c.v0) & (uv[:, 1] < c.v1)
+    return truth[keep & inside & (np.hypot(truth["x"], truth["y"]) <= calib.max_range_m)]

@@ -26,3 +26,13 @@ def print_written(paths: Iterable[str | Path], command: str) -> None:
     """One line per file written: ``<command>: wrote <path>``."""
     for p in paths:
         print(f"{command}: wrote {p}")
+
+
+def remove_bag(path: Path) -> None:
+    """Remove a rosbag2 directory for ``--force``; anything else is left alone and refused."""
+    import shutil
+
+    if not (path.is_dir() and (path / "metadata.yaml").is_file()):
+        raise ConfigError(str(path), None, "--force replaces only a rosbag2 directory (with metadata.yaml); "
+                                           "this is something else: remove it yourself")
+    shutil.rmtree(path)

@@ -15,10 +15,24 @@ from typing import Union
 
 from .calib import DEFAULT_CAMERA
 
-# detector.DEFAULT_BACKEND and detector.RUNTIME_THREADS (not imported: that module loads torch, which
-# the mapping node does not need; tests/test_params.py holds them equal)
+# -- the detector's defaults: one home. The nodes' parameters below, the API (``detector.Detector``,
+# which imports them from here: this module loads no torch, the mapping node imports it) and the CLI
+# (``detect``, ``replay``, ``eval``, ``bench table``) all read these.
+#: What ``backend`` is unless chosen: ONNX Runtime on the CPU where installed, else torch.
 DEFAULT_BACKEND = "auto"
+#: The network's CPU threads where the car runs it (the nodes, ``bench``, ``replay``): one. With
+#: every core busy, any other process that wakes (SLAM, planning, the OS) takes a core from one of
+#: the threads for a scheduler tick and the whole forward waits for it; one thread leaves a core
+#: free for them. Measured per backend and thread count: docs/benchmarks.md, "Backend and threads".
 RUNTIME_THREADS = 1
+#: Score threshold: boxes scoring at most this are dropped (also the operating point of ``eval``).
+DEFAULT_CONF = 0.25
+#: NMS IoU threshold (class-aware).
+DEFAULT_IOU = 0.45
+#: Most boxes per frame, best first. 300 (COCO's maxDets, what ``eval``'s mAP counts) for the nodes too:
+#: a frame never holds that many cones above ``conf``, so on the car it only bounds NMS's output, and a
+#: lower cap (the nodes' 100 before) would drop cones silently in a crowded frame (a start area, skidpad).
+DEFAULT_MAX_DET = 300
 
 Value = Union[bool, int, float, str]
 
@@ -87,11 +101,11 @@ _SPECS = (
     ParamSpec("fp16", False, "half precision (CUDA only)"),
     ParamSpec("bf16", False, "bfloat16 autocast on the CPU (backend torch)"),
     ParamSpec("threads", RUNTIME_THREADS, "CPU threads of the network; 0 = the library's default", min=0, max=256),
-    ParamSpec("conf", 0.25, "confidence threshold: boxes scoring at most this are dropped", min=0.0, max=1.0,
+    ParamSpec("conf", DEFAULT_CONF, "confidence threshold: boxes scoring at most this are dropped", min=0.0, max=1.0,
               dynamic=True),
-    ParamSpec("iou", 0.45, "NMS IoU threshold: a box overlapping a better one of its class by more is dropped",
+    ParamSpec("iou", DEFAULT_IOU, "NMS IoU threshold: a box overlapping a better one of its class by more is dropped",
               min=0.0, max=1.0, dynamic=True),
-    ParamSpec("max_det", 100, "most boxes per frame (best first)", min=1, max=1000, dynamic=True),
+    ParamSpec("max_det", DEFAULT_MAX_DET, "most boxes per frame (best first)", min=1, max=1000, dynamic=True),
     ParamSpec("debug_image", False, "publish image_cropped/debug (bgr8): the band with boxes, classes, scores "
               "and each cone's distance; drawn only while someone subscribes", dynamic=True),
     ParamSpec("debug_image_hz", 5.0, "most debug images per second", min=0.1, max=100.0, dynamic=True),

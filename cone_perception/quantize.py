@@ -269,7 +269,7 @@ def compare_detections(pairs: Iterable[tuple[tuple, tuple]]) -> dict:
     :func:`~.model.decode.postprocess` returns them (x1 y1 x2 y2, best first). Returns the counts,
     the share of reference boxes matched, the mean / min IoU of the pairs, the largest corner
     deviation (px) and score difference of a pair, and ``ok`` (the check above)."""
-    from .metrics import greedy_match
+    from .evaluation.metrics import greedy_match
 
     n_ref = n_test = 0
     ious, dev, sdiff = [], 0.0, 0.0

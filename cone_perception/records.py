@@ -17,11 +17,12 @@ module imports neither.
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .errors import FrameError
+from .errors import ConfigError, FrameError
 
 BOX_DTYPE = np.dtype(
     {
@@ -160,3 +161,27 @@ def from_pointcloud2(msg: Any, dtype: np.dtype) -> np.ndarray:
     for name in dtype.names:
         out[name] = src[name]
     return out
+
+
+def read_boxes_csv(path: Path) -> np.ndarray:
+    """CSV ``u1,v1,u2,v2,score,class_id`` -> BOX_DTYPE records; errors name file and line."""
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+    except OSError as e:
+        raise ConfigError(str(path), None, f"cannot read: {e.strerror}") from None
+    rows = []
+    for i, line in enumerate(lines, 1):
+        line = line.strip()
+        if not line or line.startswith("#") or (i == 1 and line.replace(" ", "").startswith("u1,")):
+            continue
+        parts = line.split(",")
+        if len(parts) != 6:
+            raise ConfigError(str(path), f"line {i}", f"needs 6 columns u1,v1,u2,v2,score,class_id, got {len(parts)}")
+        try:
+            rows.append([float(x) for x in parts])
+        except ValueError:
+            raise ConfigError(str(path), f"line {i}", f"not numbers: {line!r}") from None
+    a = np.asarray(rows, dtype=np.float64).reshape(-1, 6)
+    if np.any(a[:, 5] != np.round(a[:, 5])) or np.any(a[:, 5] < 0):
+        raise ConfigError(str(path), "class_id", "must be a non-negative integer")
+    return boxes_from_arrays(a[:, :4], a[:, 4], a[:, 5].astype(np.int64))

@@ -20,7 +20,7 @@ from .errors import ConfigError
 def mount_pose_of(calib: Calibration) -> tuple[MountPose, str]:
     """The camera's mount pose in ``calib.frame_id`` and where it came from, in this order:
     ``mount_pose`` (measured), ``mount`` (written by ``calibrate --from-pose``), or decomposed from
-    ``H_F_B`` and ``camera_matrix`` (:func:`~cone_perception.calibration.pose_from_homography`).
+    ``H_F_B`` and ``camera_matrix`` (:func:`~cone_perception.calibrate.fit.pose_from_homography`).
     Without any of them: a :class:`ConfigError` naming the fields to add."""
     if calib.mount_pose is not None:
         return calib.mount_pose, "mount_pose"
@@ -32,7 +32,7 @@ def mount_pose_of(calib: Calibration) -> tuple[MountPose, str]:
         except (TypeError, ValueError):
             raise ConfigError(calib.source, "mount", "must hold numbers") from None
     if calib.camera_matrix is not None:
-        from .calibration import pose_from_homography
+        from .calibrate.fit import pose_from_homography
 
         return pose_from_homography(calib.H_F_B, calib.camera_matrix).pose, "H_F_B + camera_matrix"
     raise ConfigError(calib.source, "mount_pose",

@@ -12,7 +12,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from cone_perception.calibration import planar_transform
+from cone_perception.calibrate import planar_transform
 from cone_perception.camera import PinholeCamera
 from cone_perception.geometry import undistort_pixels
 

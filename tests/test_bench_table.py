@@ -80,7 +80,8 @@ def test_whole_frame_runs_through_the_pipeline(setting, net_input, scale, v_off)
 
 
 def test_bench_pipeline_reports_the_setting() -> None:
-    from cone_perception.commands.bench import bench_pipeline, synthetic_frames
+    from cone_perception.bench.frames import synthetic_frames
+    from cone_perception.bench.pipeline import bench_pipeline
 
     calib = load_calibration("example_mainhoop")
     calib = replace(calib, crop=calib.crop.for_setting("full", 1920, 1080))
@@ -96,7 +97,8 @@ def test_table_applies_each_setting_to_the_val_frames(tmp_path, monkeypatch) -> 
     """Ground truth = the stub's box as the FULL setting maps it: full matches it; half (box x2) and
     crop (box + 96 rows) must not. A second box centred below the band counts as outside it, a third
     one reaching across the band's bottom edge as cut."""
-    from cone_perception.commands import _table, bench
+    from cone_perception.bench import table as _table
+    from cone_perception.bench.frames import synthetic_frames
 
     val = tmp_path / "val"
     (val / "images").mkdir(parents=True)
@@ -116,8 +118,8 @@ def test_table_applies_each_setting_to_the_val_frames(tmp_path, monkeypatch) -> 
         made.append((crop, net))
         return det
 
-    monkeypatch.setattr(bench, "load_for_crop", fake_load)
-    monkeypatch.setattr(bench, "rendered_frames", lambda calib, n: bench.synthetic_frames(1920, 1080, "yuv422_yuy2", 1))
+    monkeypatch.setattr(_table, "load_for_crop", fake_load)
+    monkeypatch.setattr(_table, "rendered_frames", lambda calib, n: synthetic_frames(1920, 1080, "yuv422_yuy2", 1))
     out = tmp_path / "out"
     args = argparse.Namespace(models=None, val=val, gt_names="blue_cone", band=(96, 672), out=out,
                               settings=",".join(INPUT_SETTINGS), det_conf=0.001, conf=0.25, frames=2, warmup=0,
@@ -156,7 +158,7 @@ def test_table_needs_its_inputs(tmp_path) -> None:
 
 def test_fixed_size_backends_are_built_for_the_setting() -> None:
     """ONNX is built for the padded input of the setting (960x540 -> 960x544), not the checkpoint's 960x288."""
-    from cone_perception.commands.bench import load_for_crop
+    from cone_perception.bench.pipeline import load_for_crop
 
     det = load_for_crop(None, "onnx", CropSpec(0, 1080, 0, 1920, 2), threads=1)
     assert det.imgsz == (960, 544) and det.input_size_for(960, 540) == (960, 544)

@@ -141,7 +141,7 @@ def test_valid_images_still_decode_exactly() -> None:
 
 
 def test_detect_on_a_folder_with_a_bomb_processes_the_good_images(tmp_path: Path, capsys) -> None:
-    from cone_perception.commands.detect import iter_source
+    from cone_perception.sources import iter_source
 
     (tmp_path / "a_bomb.png").write_bytes(png_bomb())
     (tmp_path / "b_bomb.jpg").write_bytes(jpeg_bomb())

@@ -14,7 +14,7 @@ import pytest
 
 from cone_perception.calib import load_calibration
 from cone_perception.classes import NUM_CLASSES
-from cone_perception.commands.demo import expected_truth
+from cone_perception.mapping import expected_truth
 from cone_perception.detector import Detector, default_model_path
 from cone_perception.evaluation import LocalisationReport
 from cone_perception.nodes.live_replay import live_replay, write_result_bag
@@ -119,7 +119,7 @@ def test_live_replay_names_a_node_that_died(drive, tmp_path, capsys, monkeypatch
     import os
     import signal
 
-    from cone_perception.commands import replay as replay_cmd
+    from cone_perception.cli import main
 
     real = live_replay
 
@@ -135,17 +135,11 @@ def test_live_replay_names_a_node_that_died(drive, tmp_path, capsys, monkeypatch
         return real(*a, **k)
 
     monkeypatch.setattr("cone_perception.nodes.live_replay.live_replay", live_with_a_kill)
-    rc = replay_cmd.run(replay_cmd_args(drive))
+    rc = main(replay_cmd_args(drive))
     err = capsys.readouterr().err
     assert rc == 1 and "node pipeline died during the replay (exit code -9)" in err
 
 
-def replay_cmd_args(bag):
-    import argparse
-
-    from cone_perception.commands import replay as replay_cmd
-
-    p = argparse.ArgumentParser()
-    replay_cmd.add_arguments(p)
-    return p.parse_args([str(bag), "--live", "fused", "--no-progress",
-                         "--model", str(default_model_path())])
+def replay_cmd_args(bag) -> list[str]:
+    """The ``cone-perception`` command line of a live fused replay of ``bag``."""
+    return ["replay", str(bag), "--live", "fused", "--no-progress", "--model", str(default_model_path())]

@@ -15,8 +15,8 @@ from cone_perception.cli import main
 from cone_perception.errors import ConfigError
 from cone_perception.evaluation import PairDistanceReport, blue_yellow_pairs
 from cone_perception.geometry import apply_homography
-from cone_perception.groundtruth import load_ground_truth, pair_with_predictions
-from cone_perception.metrics import ImageDetections, coco_map, operating_point
+from cone_perception.evaluation.groundtruth import load_ground_truth, pair_with_predictions
+from cone_perception.evaluation.metrics import ImageDetections, coco_map, operating_point
 from cone_perception.predictions import read_predictions
 from cone_perception.mapping import ConeMapper
 from cone_perception.records import CONE_DTYPE, boxes_from_arrays
@@ -381,8 +381,8 @@ def test_yolo_folder_with_split_subfolders(tmp_path, scene, capsys):
 
 
 def test_recall_by_box_height_at_the_model_input():
-    from cone_perception.eval_report import recall_by_box_height
-    from cone_perception.groundtruth import EvalImage
+    from cone_perception.evaluation.report import recall_by_box_height
+    from cone_perception.evaluation.groundtruth import EvalImage
 
     hs = np.array([12.0, 20.0, 40.0, 60.0, 120.0])  # image px; at input_scale 0.5: 6, 10, 20, 30, 60 px
     gt = np.column_stack([np.arange(5) * 200.0, np.full(5, 100.0), np.arange(5) * 200.0 + 40, 100.0 + hs])
@@ -416,7 +416,7 @@ def test_prediction_input_scale_round_trip_and_bad_value(tmp_path):
 
 def test_eval_band_clips_cut_cones_and_ignores_those_outside(tmp_path, capsys):
     """`eval --band`: a detector that sees only the band, boxes clipped there as training clips them."""
-    from cone_perception.groundtruth import EvalImage, restrict_to_band
+    from cone_perception.evaluation.groundtruth import EvalImage, restrict_to_band
 
     band = (300, 700)
     gt = np.array([
@@ -460,7 +460,7 @@ def test_eval_band_clips_cut_cones_and_ignores_those_outside(tmp_path, capsys):
 
 
 def test_min_height_scores_cones_as_coco_scores_an_area_range():
-    from cone_perception.groundtruth import EvalImage, restrict_to_min_height
+    from cone_perception.evaluation.groundtruth import EvalImage, restrict_to_min_height
 
     # image px; input_scale 0.5 -> heights at the model input 30, 10, 25 px
     gt = np.array([[0, 0, 40, 60], [100, 0, 110, 20], [200, 0, 230, 50]], float)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cone_perception.metrics import ImageDetections, coco_map
+from cone_perception.evaluation.metrics import ImageDetections, coco_map
 
 GT = np.array([[10, 10, 30, 50], [100, 20, 120, 60], [200, 20, 215, 50]], float)
 GT_CLS = np.array([0, 1, 1])

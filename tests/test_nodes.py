@@ -23,6 +23,7 @@ from cone_perception.camera import MountPose, PinholeCamera, default_intrinsics
 from cone_perception.classes import BLUE, YELLOW
 from cone_perception.crop import CropSpec
 from cone_perception.mapping import ConeMapper
+from cone_perception.params import PARAMS
 from cone_perception.nodes import _msgs
 from cone_perception.nodes.driver_adapter import DriverAdapterNode
 from cone_perception.nodes.mapping import MappingNode
@@ -202,7 +203,7 @@ def test_detection_node_builds_a_fixed_size_network_for_the_band(ros: RosFixture
     eager torch's on the band as it is, not those of a letterboxed (half-resolution) band."""
     from std_msgs.msg import Header
 
-    from cone_perception.commands.bench import rendered_frames
+    from cone_perception.bench.frames import rendered_frames
     from cone_perception.detector import Detector, default_model_path
     from cone_perception.nodes.detection import DetectionNode
 
@@ -223,6 +224,6 @@ def test_detection_node_builds_a_fixed_size_network_for_the_band(ros: RosFixture
     assert ros.spin_until(lambda: (pub_info.publish(info) or pub_img.publish(img) or True) and len(boxes.msgs) > 0, 30)
     assert node.detector.backend == "onnx" and node.detector.imgsz == (1920, 576)
     got = _msgs.boxes_from_msg(boxes.msgs[0])
-    want = Detector.load(default_model_path(), backend="torch", max_det=100).detect(band, crop)
+    want = Detector.load(default_model_path(), backend="torch", max_det=PARAMS["max_det"].default).detect(band, crop)
     assert len(got) == len(want) > 0
     np.testing.assert_allclose(np.sort(got["u1"]), np.sort(want["u1"]), atol=0.05)

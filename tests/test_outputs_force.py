@@ -41,7 +41,7 @@ def test_synth_preview_refuses_then_overwrites_with_force(tmp_path: Path, capsys
 
 
 def test_replay_refuses_existing_outputs_and_force_replaces_only_a_bag(tmp_path: Path, capsys) -> None:
-    from cone_perception.commands.replay import _remove_bag
+    from cone_perception.outfiles import remove_bag
 
     js = tmp_path / "s.json"
     js.write_text("keep me")
@@ -51,10 +51,10 @@ def test_replay_refuses_existing_outputs_and_force_replaces_only_a_bag(tmp_path:
     folder.mkdir()
     (folder / "precious.txt").write_text("x")
     with pytest.raises(ConfigError, match="only a rosbag2"):
-        _remove_bag(folder)
+        remove_bag(folder)
     assert (folder / "precious.txt").exists()
     bag = tmp_path / "bag"
     bag.mkdir()
     (bag / "metadata.yaml").write_text("rosbag2_bagfile_information: {}")
-    _remove_bag(bag)
+    remove_bag(bag)
     assert not bag.exists()

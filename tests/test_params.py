@@ -33,6 +33,24 @@ def test_param_table_defaults_match_the_code_they_configure():
         assert spec.description
 
 
+def test_detector_defaults_have_one_home(capsys):
+    """Issue 19: the nodes' conf / iou / max_det, the API's (Detector, Detector.load) and the CLI's are one set."""
+    import inspect
+
+    from cone_perception.cli import main
+
+    for fn in (detector.Detector.__init__, detector.Detector.load):
+        sig = inspect.signature(fn).parameters
+        assert {k: sig[k].default for k in ("conf", "iou", "max_det")} == \
+            {k: PARAMS[k].default for k in ("conf", "iou", "max_det")}, fn.__qualname__
+    for argv, texts in ((["detect"], ("confidence threshold", "NMS IoU threshold")), (["replay"], ("confidence threshold",))):
+        with pytest.raises(SystemExit):
+            main([*argv, "--help"])
+        out = " ".join(capsys.readouterr().out.split())
+        for text, key in zip(texts, ("conf", "iou")):
+            assert f"{text} (default {PARAMS[key].default})" in out, (argv, text)
+
+
 @pytest.mark.parametrize(
     ("name", "value", "words"),
     [
@@ -134,7 +152,7 @@ def test_detection_node_thresholds_and_descriptors(ros: RosFixture) -> None:
 def test_detection_node_debug_image_only_when_on_and_subscribed(ros: RosFixture) -> None:
     """Switched on at run time; no drawing while nobody subscribes; a frame without boxes still gives
     an image (the band, "0 boxes"); a frame with cones gives their boxes drawn."""
-    from cone_perception.commands.bench import rendered_frames
+    from cone_perception.bench.frames import rendered_frames
     from cone_perception.adapter import DriverAdapter
     from cone_perception.nodes.detection import DetectionNode
 

@@ -9,7 +9,7 @@ import pytest
 import yaml
 
 from cone_perception.calib import calibration_from_dict, load_calibration, resolve_calibration_path
-from cone_perception.calibration import from_pose
+from cone_perception.calibrate import from_pose
 from cone_perception.camera import MountPose, PinholeCamera, default_intrinsics
 from cone_perception.errors import ConfigError
 from cone_perception.transforms import (

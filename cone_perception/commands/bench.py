@@ -28,22 +28,19 @@ import argparse
 import json
 import sys
 from dataclasses import replace
-
 from pathlib import Path
 
-import cv2
-import numpy as np
-
-from ..adapter import DriverAdapter, bgr_to_yuyv
-from ..benchmark import StageTimer, format_table, peak_rss_mb
+from ..bench.frames import rendered_frames
+from ..bench.pipeline import BYTES_PER_PX, bench_adapter, bench_pipeline, bench_tracker, load_for_crop
+from ..benchmark import format_table
 from ..calib import DEFAULT_CAMERA, load_calibration
-from ..crop import INPUT_SETTINGS, CropSpec
+from ..crop import INPUT_SETTINGS
 from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, RUNTIME_THREADS
 from ..errors import ConfigError
+from ..params import DEFAULT_CONF
 from ..words import plural
-from .detect import parse_crop
+from ._args import parse_crop
 
-_BYTES_PER_PX = {"yuv422_yuy2": 2, "bgr8": 3, "rgb8": 3}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -55,7 +52,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--frames", type=int, default=300, help="timed frames (>= 200 recommended; default %(default)s)")
     p.add_argument("--warmup", type=int, default=20, help="untimed warm-up frames (default %(default)s)")
     p.add_argument("--calib", default=DEFAULT_CAMERA, help="calibration (crop, downscale, image size); default %(default)s")
-    p.add_argument("--encoding", default="yuv422_yuy2", choices=sorted(_BYTES_PER_PX), help="input encoding")
+    p.add_argument("--encoding", default="yuv422_yuy2", choices=sorted(BYTES_PER_PX), help="input encoding")
     p.add_argument("--threads", type=int, default=RUNTIME_THREADS,
                    help="torch and ONNX Runtime threads of the network (default %(default)s, as the nodes; "
                         "OpenCV runs on one, see adapter.OPENCV_THREADS)")
@@ -88,101 +85,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     t.add_argument("--settings", default=",".join(INPUT_SETTINGS),
                    help="table: input settings, comma-separated (default %(default)s)")
     t.add_argument("--det-conf", type=float, default=0.001, help="table: detector score threshold for the mAP run (default %(default)s)")
-    t.add_argument("--conf", type=float, default=0.25, help="table: operating score threshold for recall (default %(default)s)")
-
-
-def synthetic_frames(width: int, height: int, encoding: str, n: int, seed: int = 0) -> list[bytes]:
-    """``n`` distinct raw frames of a smooth random scene in ``encoding`` (bytes, tight step)."""
-    rng = np.random.default_rng(seed)
-    out = []
-    base = cv2.resize(rng.integers(0, 255, (height // 16, width // 16, 3), dtype=np.uint8), (width, height))
-    for i in range(n):
-        bgr = np.roll(base, 7 * i, axis=1)
-        if encoding == "yuv422_yuy2":
-            out.append(bgr_to_yuyv(bgr).tobytes())
-        elif encoding == "rgb8":
-            out.append(bgr[:, :, ::-1].tobytes())
-        else:
-            out.append(bgr.tobytes())
-    return out
-
-
-def rendered_frames(calib, n: int, seed: int = 4242) -> list[bytes]:
-    """``n`` YUYV frames of rendered scenes with cones, at the calibration's image size."""
-    from ..synth.outputs import SynthConfig
-    from ..synth.scene import random_pose
-
-    cfg = SynthConfig(width=calib.image_width, height=calib.image_height, seed=seed, jitter=False)
-    renderer, rng = cfg.renderer(), np.random.default_rng(seed)
-    out = []
-    for i in range(n):
-        if i % 8 == 0:
-            track, look = cfg.track(i, rng), renderer.new_look(rng)
-        img, _ = renderer.render(track, random_pose(track, rng, False), look, rng)
-        out.append(bgr_to_yuyv(img).tobytes())
-    return out
-
-
-def bench_pipeline(calib, det, frames: list[bytes], n_frames: int, warmup: int = 20) -> dict:
-    """Time ``det`` in the fused pipeline of ``calib`` (its crop and downscale) on raw YUYV ``frames``
-    (cycled): per stage, end to end with the packing of ``cone_boxes`` and ``/cones``. The result
-    of ``bench pipeline`` (and one row of ``bench table``)."""
-    import time
-
-    from .. import bagio
-    from ..debug_image import DebugImage
-    from ..pipeline import Pipeline
-    from ..records import to_pointcloud2
-
-    pipe = Pipeline(calib, det)
-    debug = DebugImage(pipe.mapper)
-    w, h = calib.image_width, calib.image_height
-    crop = calib.crop
-    timer = StageTimer()
-    n_boxes = 0
-    for i in range(warmup + n_frames):
-        data = frames[i % len(frames)]
-        t0 = time.perf_counter()
-        res = pipe.process_raw("yuv422_yuy2", w, h, 2 * w, data)
-        t1 = time.perf_counter()
-        hdr = bagio.header(i, "camera")
-        to_pointcloud2(res.boxes, hdr, bagio.PointCloud2, bagio.PointField)
-        to_pointcloud2(res.cones, bagio.header(i, calib.frame_id), bagio.PointCloud2, bagio.PointField)
-        t2 = time.perf_counter()
-        np.ascontiguousarray(debug.render(res.band, res.boxes, crop)).tobytes()  # + its Image message's copy
-        t3 = time.perf_counter()
-        if i < warmup:
-            continue
-        for k, v in res.timing_ms.items():
-            timer.add(k, v / 1e3)
-        timer.add("packing", t2 - t1)
-        timer.add("end_to_end", t2 - t0)
-        timer.add("debug_image", t3 - t2)  # not in end_to_end: opt-in, at most debug_image_hz per second
-        n_boxes += len(res.boxes)
-    s = timer.summary()
-    in_w, in_h = det.input_size_for(crop.out_width, crop.out_height)
-    return {
-        "target": "pipeline",
-        "input": f"{w}x{h} yuv422_yuy2 (rendered scenes)",
-        "output": f"band {crop.out_width}x{crop.out_height}, boxes + cones",
-        "crop": {"v0": crop.v0, "v1": crop.v1, "u0": crop.u0, "u1": crop.u1, "downscale": crop.downscale},
-        "model_input": [in_w, in_h],
-        "model": det.source,
-        "backend": det.backend,
-        "fps": 1000.0 / s["end_to_end"]["median_ms"],
-        "boxes_per_frame": n_boxes / n_frames,
-        "non_forward_median_ms": s["end_to_end"]["median_ms"] - s["forward"]["median_ms"],
-        "stages": s,
-        "peak_rss_mb": peak_rss_mb(),
-    }
-
-
-def load_for_crop(model: str | None, backend: str, crop: CropSpec, threads: int, **kw):
-    """The detector for a band (:meth:`Detector.load_for_band`): no setting is letterboxed into another size."""
-    from ..detector import Detector, default_model_path
-
-    return Detector.load_for_band(model or default_model_path(), (crop.out_width, crop.out_height),
-                                  backend=backend, threads=threads, **kw)
+    t.add_argument("--conf", type=float, default=DEFAULT_CONF, help="table: operating score threshold for recall (default %(default)s)")
 
 
 def _bench_pipeline(args: argparse.Namespace, calib) -> dict:
@@ -237,7 +140,7 @@ def run(args: argparse.Namespace) -> int:
     if args.target == "tracker":
         return _bench_tracker(args, calib)
     if args.target == "table":
-        from ._table import run_table
+        from ..bench.table import run_table
 
         return run_table(args, calib)
     if args.target == "pipeline" and args.repeat > 1:
@@ -256,26 +159,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"frames/s (median end to end): {result['fps']:.1f}   everything but the forward: "
               f"{result['non_forward_median_ms']:.2f} ms   peak RSS: {result['peak_rss_mb']:.0f} MiB")
         return 0
-    adapter = DriverAdapter(calib.crop, calib.image_width, calib.image_height)
-    w, h = calib.image_width, calib.image_height
-    step = w * _BYTES_PER_PX[args.encoding]
-    frames = synthetic_frames(w, h, args.encoding, 16)
-    timer = StageTimer()
-    for i in range(args.warmup):
-        adapter.from_raw(args.encoding, w, h, step, frames[i % len(frames)])
-    for i in range(args.frames):
-        with timer("adapter"):
-            adapter.from_raw(args.encoding, w, h, step, frames[i % len(frames)])
-    s = timer.summary()
-    result = {
-        "target": args.target,
-        "input": f"{w}x{h} {args.encoding}",
-        "output": f"{calib.crop.out_width}x{calib.crop.out_height} bgr8",
-        "threads": args.threads,
-        "fps": 1000.0 / s["adapter"]["median_ms"],
-        "stages": s,
-        "peak_rss_mb": peak_rss_mb(),
-    }
+    result = bench_adapter(calib, args.encoding, args.frames, args.warmup)
+    result["threads"] = args.threads
+    s = result["stages"]
     if args.json:
         json.dump(result, sys.stdout, indent=1)
         print()
@@ -289,27 +175,10 @@ def run(args: argparse.Namespace) -> int:
 def _bench_tracker(args: argparse.Namespace, calib) -> int:
     """``bench tracker``: :meth:`ConeTracker.update` (motion from the cones: registration, association,
     Kalman update) per frame of a simulated drive through rows of cones, seen through the calibration's band."""
-    from ..track_eval import simulated_drive
-    from ..tracker import ConeTracker, FieldOfView, TrackerConfig
-
     if args.rows < 1:
         raise ConfigError("bench", "--rows", f"must be >= 1, got {args.rows}")
-    fov = FieldOfView.from_calibration(calib)
-    rows = tuple(float(s * (1.75 + 3.5 * (k // 2))) for k, s in zip(range(args.rows), [1, -1] * args.rows))
-    trk = ConeTracker(TrackerConfig(), fov)
-    timer, n_tracks, n_cones = StageTimer(), [], []
-    frames = list(simulated_drive(args.warmup + args.frames, fov, rows_m=rows, spacing_m=1.5))
-    for k, (_, cones) in enumerate(frames):
-        if k < args.warmup:
-            trk.update(k * 50_000_000, cones)
-            continue
-        with timer("tracker"):
-            trk.update(k * 50_000_000, cones)
-        n_tracks.append(len(trk))
-        n_cones.append(len(cones))
-    s = timer.summary()
-    result = {"target": "tracker", "frames": args.frames, "tracks_mean": float(np.mean(n_tracks)),
-              "cones_per_frame": float(np.mean(n_cones)), "stages": s, "events": dict(trk.events)}
+    result = bench_tracker(calib, args.rows, args.frames, args.warmup)
+    s = result["stages"]
     if args.json:
         json.dump(result, sys.stdout, indent=1)
         print()

@@ -18,11 +18,9 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-import yaml
 
 from ..calib import RECOMMENDED_FOOT_OFFSET_M, RECOMMENDED_FOOT_POINTS, Calibration, calibration_from_dict, load_calibration, save_calibration
-from ..calib_vis import birdseye_picture, not_found_picture, points_picture
-from ..calibration import (
+from ..calibrate import (
     Board,
     CalibrationResult,
     Intrinsics,
@@ -30,22 +28,26 @@ from ..calibration import (
     board_not_found_hint,
     board_pairs,
     calibrate_intrinsics,
+    default_crop,
     detect_board,
     fit_calibration,
     format_report,
-    from_pose,
-    parse_size,
     planar_transform,
     quality_report,
+    read_intrinsics_file,
     read_points_csv,
+    result_from_pose,
 )
+from ..calibrate.pictures import birdseye_picture, not_found_picture, points_picture
 from ..attitude import MOUNT_POSE_CHECK_RANGE_M, MOUNT_POSE_TOLERANCE, mount_pose_disagreement
 from ..camera import MountPose, default_intrinsics
 from ..classes import CLASS_NAMES
-from ..crop import CropSpec
 from ..errors import ConfigError
-from ..geometry import apply_homography
 from ..outfiles import print_written, refuse_existing
+from ..sources import read_bag_image, read_image
+from ._args import parse_size
+
+BOARD_SIZE = "COLSxROWS (e.g. 9x6)"
 
 # keys of the YAML's free part that this command owns (rewritten on every run)
 _OWNED_EXTRA = ("mount", "mount_estimate", "calibration")
@@ -179,7 +181,7 @@ def run(args: argparse.Namespace) -> int:
     refuse_existing([out, *(Path(f"{stem}{s}") for s in (".report.txt", ".report.json", ".points.png", ".birdseye.png"))],
                     args.force, "calibrate")
     existing = load_calibration(out) if out.is_file() else None
-    size = parse_size(args.size, "--size") if args.size else None
+    size = parse_size(args.size, "--size", "WxH (e.g. 1920x1080)") if args.size else None
 
     image, image_name = _read_input_image(args)
     if image is not None:
@@ -284,126 +286,15 @@ def _names(args: argparse.Namespace) -> tuple[str, Path]:
     return (args.camera or out.stem), out
 
 
-def _read_image(path: Path) -> np.ndarray:
-    if not path.is_file():
-        raise ConfigError(str(path), None, "image file not found")
-    from ..adapter import decode_compressed
-    from ..errors import FrameError
-
-    try:  # the nodes' decoding: the header's size is checked before the decoder runs
-        return decode_compressed(path.read_bytes())
-    except FrameError as e:
-        raise ConfigError(str(path), None, f"cannot decode the image ({e.reason}): {e}") from None
-
-
 def _read_input_image(args: argparse.Namespace) -> tuple[np.ndarray | None, str]:
     if args.image is not None and args.bag is not None:
         raise ConfigError("calibrate", "--image/--bag", "give one of --image and --bag, not both")
     if args.image is not None:
-        return _read_image(args.image), str(args.image)
+        return read_image(args.image), str(args.image)
     if args.bag is not None:
         img, where = read_bag_image(args.bag, args.frame, args.topic)
         return img, where
     return None, ""
-
-
-def read_bag_image(bag: Path, index: int, topic: str | None = None) -> tuple[np.ndarray, str]:
-    """The ``index``-th image message of a rosbag2 as a full BGR image, and a description.
-
-    Minimal reader for this command (``rosbags`` AnyReader; ``Image`` in the
-    adapter's encodings or ``CompressedImage``). To be replaced by the
-    package's general bag reader (``bagio``) when it lands: only this function
-    touches the bag.
-    """
-    from rosbags.highlevel import AnyReader
-    from rosbags.typesys import Stores, get_typestore
-
-    from ..adapter import crop_raw_to_bgr, decode_compressed, raw_frame_view
-    from ..errors import FrameError
-
-    if not bag.exists():
-        raise ConfigError(str(bag), None, "bag not found")
-    types = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
-    try:
-        reader = AnyReader([bag], default_typestore=get_typestore(Stores.ROS2_JAZZY))
-        reader.open()
-    except Exception as e:  # noqa: BLE001 - rosbags raises several types; all mean "cannot read"
-        raise ConfigError(str(bag), None, f"cannot open as a rosbag2: {e}") from None
-    try:
-        conns = [c for c in reader.connections if c.msgtype in types]
-        topics = sorted({c.topic for c in conns})
-        if topic is not None:
-            conns = [c for c in conns if c.topic == topic]
-            if not conns:
-                raise ConfigError(
-                    str(bag), "--topic", f"no image topic {topic!r}; image topics: {', '.join(topics) or 'none'}"
-                )
-        elif len(topics) != 1:
-            raise ConfigError(
-                str(bag), "--topic", f"bag has {len(topics)} image topics ({', '.join(topics) or 'none'}): choose one"
-            )
-        if index < 0:
-            raise ConfigError(str(bag), "--frame", f"must be >= 0, got {index}")
-        count = 0
-        for k, (conn, _, raw) in enumerate(reader.messages(connections=conns)):
-            count = k + 1
-            if k < index:
-                continue
-            msg = reader.deserialize(raw, conn.msgtype)
-            try:
-                if conn.msgtype.endswith("CompressedImage"):
-                    img = decode_compressed(msg.data)
-                else:
-                    name, view = raw_frame_view(msg.encoding, msg.width, msg.height, msg.step, msg.data)
-                    img = crop_raw_to_bgr(name, view, CropSpec.full_image(msg.width, msg.height))
-            except FrameError as e:
-                raise ConfigError(str(bag), "--frame", f"image message {index} on {conn.topic}: {e}") from None
-            return img, f"{bag}#{conn.topic}[{index}]"
-        raise ConfigError(
-            str(bag), "--frame", f"frame {index} not in the bag: it has {count} image messages on {', '.join(topics)}"
-        )
-    finally:
-        reader.close()
-
-
-def _read_intrinsics_file(path: Path) -> Intrinsics:
-    """camera_matrix + dist_coeffs from our calibration YAML or a ROS camera_calibration ``ost.yaml``."""
-    src = str(path)
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except OSError as e:
-        raise ConfigError(src, None, f"cannot read: {e.strerror}") from None
-    except yaml.YAMLError as e:
-        raise ConfigError(src, None, f"not valid YAML: {e}") from None
-    if not isinstance(data, dict):
-        raise ConfigError(src, None, "must be a YAML mapping with camera_matrix and dist_coeffs")
-
-    def values(key_names: tuple[str, ...], n: int | None) -> np.ndarray | None:
-        for k in key_names:
-            if k in data and data[k] is not None:
-                v = data[k]
-                v = v.get("data") if isinstance(v, dict) else v
-                try:
-                    a = np.asarray(v, dtype=np.float64).ravel()
-                except (TypeError, ValueError):
-                    raise ConfigError(src, k, "must be numbers (a list, rows, or a mapping with data:)") from None
-                if (n is not None and a.size != n) or not np.all(np.isfinite(a)):
-                    raise ConfigError(src, k, f"must be {n or 'some'} finite numbers, got {a.size}")
-                return a
-        return None
-
-    K = values(("camera_matrix",), 9)
-    if K is None:
-        raise ConfigError(src, "camera_matrix", "missing")
-    d = values(("dist_coeffs", "distortion_coefficients"), None)
-    d = np.zeros(0) if d is None else d
-    if d.size not in (0, 4, 5, 8, 12, 14):
-        raise ConfigError(src, "dist_coeffs", f"must be 4, 5, 8, 12 or 14 numbers (OpenCV model), got {d.size}")
-    size = None
-    w, h = data.get("image_width"), data.get("image_height")
-    if isinstance(w, int) and isinstance(h, int):
-        size = (w, h)
-    return Intrinsics(K.reshape(3, 3), d, src, image_size=size)
 
 
 def _intrinsics(
@@ -446,15 +337,15 @@ def _intrinsics_source(
         from tqdm import tqdm
 
         views = [
-            (str(v), _read_image(v))
+            (str(v), read_image(v))
             for v in tqdm(args.views, desc="reading views", unit="img", disable=len(args.views) < 4 or args.no_progress)
         ]
-        intr, missed = calibrate_intrinsics(views, parse_size(board, "--views-board"), square)
+        intr, missed = calibrate_intrinsics(views, parse_size(board, "--views-board", BOARD_SIZE), square)
         if missed:
             print(f"board not found in {len(missed)} view(s), not used: {', '.join(missed)}", file=sys.stderr)
         return intr
     if args.intrinsics:
-        return _read_intrinsics_file(args.intrinsics)
+        return read_intrinsics_file(args.intrinsics)
     if existing is not None and existing.camera_matrix is not None and not args.no_intrinsics:
         d = existing.dist_coeffs if existing.dist_coeffs is not None else np.zeros(0)
         return Intrinsics(existing.camera_matrix, d, f"kept from {out}")
@@ -468,7 +359,7 @@ def _collect_pairs(
     if args.board:
         if not args.square or args.square <= 0:
             raise ConfigError("calibrate", "--square", "give the board's square size in metres (> 0) with --board")
-        size = parse_size(args.board)
+        size = parse_size(args.board, "--board", BOARD_SIZE)
         try:
             bx, by, byaw = (float(v) for v in args.board_pose.split(","))
         except ValueError:
@@ -500,27 +391,11 @@ def _from_pose(args: argparse.Namespace, intr: Intrinsics | None, W: int, H: int
     if args.height <= 0:
         raise ConfigError("calibrate", "--height", f"must be > 0 (camera above the ground), got {args.height}")
     pose = MountPose(args.cam_x, args.cam_y, args.height, args.pitch, args.roll, args.cam_yaw)
-    H_F_B = from_pose(intr.K, W, H, pose)
-    _, w = apply_homography(H_F_B, np.array([[W / 2.0, H - 1.0]]))
-    if w[0] <= 0:
-        raise ConfigError("calibrate", "--pitch", "with this pose the bottom of the image does not see the ground")
-    H_S_B = np.linalg.inv(T_F_S) @ H_F_B
-    res = CalibrationResult(H_S_B, T_F_S, H_F_B, W, H, PointPairs.empty(), np.zeros(0, bool), np.zeros((0, 2)), intr)
+    res = result_from_pose(intr, W, H, pose, T_F_S)
     mount = dataclasses.asdict(pose)
     if args.hfov is not None:
         mount["hfov_deg"] = args.hfov
     return res, {"mount": mount, "calibration": {"method": "from_pose", "date": datetime.date.today().isoformat()}}
-
-
-def _default_crop(res: CalibrationResult) -> CropSpec:
-    """A new camera's band: from a little above the horizon to the bottom, full width, half resolution."""
-    W, H = res.width, res.height
-    h = res.H_F_B[2]
-    v_h = -(h[0] * W / 2.0 + h[2]) / h[1] if abs(h[1]) > 1e-12 else 0.0
-    v0 = int(np.clip(v_h - 0.03 * H, 0, H - 4)) // 4 * 4
-    v1 = H - (H - v0) % 2
-    ds = 2 if W % 4 == 0 and (v1 - v0) % 2 == 0 else 1
-    return CropSpec(v0, v1, 0, W - W % 2, ds)
 
 
 def _mount_pose(args: argparse.Namespace, rep: dict, calib: Calibration) -> MountPose | None:
@@ -573,7 +448,7 @@ def _build_calibration(
             image_height=res.height,
             H_S_B=res.H_S_B,
             T_F_S=res.T_F_S,
-            crop=_default_crop(res),
+            crop=default_crop(res),
             foot_points=tuple(RECOMMENDED_FOOT_POINTS[n] for n in CLASS_NAMES),
             foot_offset_m=tuple(RECOMMENDED_FOOT_OFFSET_M[n] for n in CLASS_NAMES),
             camera_matrix=K,

@@ -22,6 +22,7 @@ import numpy as np
 from ..benchmark import format_table, summarize
 from ..calib import DEFAULT_CAMERA, load_calibration, resolve_calibration_path
 from ..evaluation import LocalisationReport, format_localisation
+from ..mapping import expected_truth
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -64,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from ..detector import default_model_path
-    from ..replay import find_image_topic, read_ground_truth
+    from ..replay import read_ground_truth
 
     calib = load_calibration(args.calib)
     model = Path(args.model) if args.model else default_model_path()
@@ -119,13 +120,13 @@ def run(args: argparse.Namespace) -> int:
     print(format_table({"latency": latency}))
     print(format_localisation(loc))
 
-    from ..vis import birdseye_plot
+    from ..vis import bag_frames_picture, birdseye_plot
 
     stamps = sorted(cones)
     picks = [stamps[int(i)] for i in np.linspace(0, len(stamps) - 1, 4)] if stamps else []
     panels = [(f"t = {(s - stamps[0]) / 1e9:.2f} s", cones[s], truth.get(s)) for s in picks]
     be = birdseye_plot(panels, args.out / "birdseye.png", x_max_m=calib.max_range_m)
-    fr = _frames_png(bag, boxes, picks, calib, args.out / "frames.png", truth, stamps[0] if stamps else None)
+    fr = bag_frames_picture(bag, boxes, picks, calib, args.out / "frames.png", truth, stamps[0] if stamps else None)
     summary = {"drive": {"seed": args.seed, "seconds": args.seconds, "fps": args.fps, "jitter": args.jitter},
                "mode": how, "model": str(model), "calibration": calib.source, "frames_sent": sent,
                "frames_with_cones": n, "lost": lost, "fps": n / wall if wall else 0.0, "latency_ms": latency,
@@ -136,66 +137,3 @@ def run(args: argparse.Namespace) -> int:
         f"{format_localisation(loc)}\n```\n\n![bird's-eye]({be.name})\n\n![frames]({fr.name})\n")
     print(f"  wrote {be}, {fr}, {args.out / 'summary.json'}, {args.out / 'summary.md'}")
     return 0
-
-
-def expected_truth(truth: np.ndarray, calib, mapper=None) -> np.ndarray:
-    """True cones a detector is expected to find: at least half visible (``score`` of ``/cones_gt``
-    holds the visible fraction) and standing inside the camera's band and range.
-    ``mapper``: the calibration's :class:`~cone_perception.mapping.ConeMapper`, if already built."""
-    from ..mapping import ConeMapper
-
-    keep = truth["score"] >= 0.5
-    uv = (mapper or ConeMapper(calib)).ground_to_pixels(np.c_[truth["x"], truth["y"]])
-    c = calib.crop
-    inside = (uv[:, 0] >= c.u0) & (uv[:, 0] < c.u1) & (uv[:, 1] >= c.v0) & (uv[:, 1] < c.v1)
-    return truth[keep & inside & (np.hypot(truth["x"], truth["y"]) <= calib.max_range_m)]
-
-
-def _frames_png(bag: Path, boxes: dict, stamps: list[int], calib, path: Path, truth: dict | None = None,
-                t0_ns: int | None = None) -> Path:
-    """The picked frames in a 2-column grid: detections (class colour, score), the true cones' foot points
-    (class-coloured rings, from ``/cones_gt`` through the calibration), the band, a time stamp per tile and
-    a legend strip below."""
-    import cv2
-
-    from ..classes import CLASS_BGR
-    from ..mapping import ConeMapper
-    from ..replay import find_image_topic, frame_bgr, iter_frames
-    from ..vis import draw_boxes, frame_strip, legend_strip, outlined_text
-
-    topic, _ = find_image_topic(bag)
-    mapper = ConeMapper(calib)
-    want, imgs = set(stamps), []
-    t0 = stamps[0] if t0_ns is None and stamps else t0_ns
-    for f in iter_frames(bag, topic):
-        if f.stamp_ns in want and f.msg is not None:
-            bgr = frame_bgr(f)
-            k = max(1, bgr.shape[1] // 960)  # line and font size for a tile shown at 960 px
-            img = draw_boxes(bgr, boxes.get(f.stamp_ns, np.zeros(0)), thickness=k + 1, font_scale=0.45 * k,
-                             min_label_height=14 * k)
-            t = (truth or {}).get(f.stamp_ns)
-            if t is not None and len(t):
-                t = t[t["score"] >= 0.5]  # at least half visible (score of /cones_gt: the visible fraction)
-                uv = mapper.ground_to_pixels(np.c_[t["x"], t["y"]])
-                for (u, v), c in zip(uv, t["class_id"]):
-                    if np.isfinite(u) and np.isfinite(v) and 0 <= u < img.shape[1] and 0 <= v < img.shape[0]:
-                        cv2.circle(img, (int(round(u)), int(round(v))), 5 * k, (0, 0, 0), 3 * k, cv2.LINE_AA)
-                        cv2.circle(img, (int(round(u)), int(round(v))), 5 * k, CLASS_BGR[int(c)], k, cv2.LINE_AA)
-            c = calib.crop
-            cv2.rectangle(img, (c.u0, c.v0), (c.u1 - 1, c.v1 - 1), (255, 255, 255), k)
-            n = len(boxes.get(f.stamp_ns, ()))
-            outlined_text(img, f"t = {(f.stamp_ns - t0) / 1e9:.2f} s   {n} detection{'s' if n != 1 else ''}",
-                          (12 * k, 34 * k), (255, 255, 255), 0.9 * k, 2 * k)
-            imgs.append(img)
-    if not imgs:
-        cv2.imwrite(str(path), np.zeros((8, 8, 3), np.uint8))
-        return path
-    grid = frame_strip(imgs, width=960, cols=2)
-    legend = legend_strip(grid.shape[1], [
-        ("box + class score: detection (score shown on boxes >= 14 px tall at 960 px)", (230, 230, 230)),
-        ("ring: foot point of a true cone at least half visible (/cones_gt)", (230, 230, 230)),
-        ("white frame: the band fed to the detector", (255, 255, 255)),
-        *[(name.replace("_", " "), CLASS_BGR[i]) for i, name in enumerate(("blue", "yellow", "orange", "large_orange"))],
-    ])
-    cv2.imwrite(str(path), np.vstack([grid, legend]))
-    return path

@@ -15,30 +15,15 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from typing import Iterator
 
 import cv2
-import numpy as np
 from tqdm import tqdm
 
-from ..crop import CropSpec
-from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, Detector, default_model_path, resolve_backend
-from ..errors import ConfigError, FrameError
-from .train import parse_size
-
-IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp")
-#: Files read with OpenCV's VideoCapture.
-VIDEO_SUFFIXES = (".mp4", ".avi", ".mkv", ".mov", ".m4v", ".webm")
-
-
-def parse_crop(text: str) -> tuple[int, ...]:
-    try:
-        vals = tuple(int(x) for x in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"crop must be V0,V1 or V0,V1,U0,U1 (integers), got {text!r}") from None
-    if len(vals) not in (2, 4):
-        raise argparse.ArgumentTypeError(f"crop must be V0,V1 or V0,V1,U0,U1, got {text!r}")
-    return vals
+from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, Detector, default_model_path, detect_one, resolve_backend
+from ..errors import ConfigError
+from ..params import DEFAULT_CONF, DEFAULT_IOU
+from ..sources import iter_source
+from ._args import parse_crop, size_arg
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -51,106 +36,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="inference backend (default %(default)s: ONNX Runtime on the CPU where installed, else torch)")
     p.add_argument("--bf16", action="store_true",
                    help="backend torch on the CPU: bfloat16 autocast (about 1.5-2x faster where the CPU has native bf16)")
-    p.add_argument("--imgsz", type=parse_size, default=None, help="letterbox each image to this model input WxH")
+    p.add_argument("--imgsz", type=size_arg, default=None, help="letterbox each image to this model input WxH")
     p.add_argument("--crop", type=parse_crop, default=None, help="band V0,V1[,U0,U1] in image px, cut before the model")
     p.add_argument("--downscale", type=int, default=1, choices=[1, 2, 4], help="with --crop: integer downscale")
-    p.add_argument("--conf", type=float, default=0.25, help="confidence threshold (default %(default)s)")
-    p.add_argument("--iou", type=float, default=0.45, help="NMS IoU threshold (default %(default)s)")
+    p.add_argument("--conf", type=float, default=DEFAULT_CONF, help="confidence threshold (default %(default)s)")
+    p.add_argument("--iou", type=float, default=DEFAULT_IOU, help="NMS IoU threshold (default %(default)s)")
     p.add_argument("--topic", default=None, help="rosbag: camera topic (default: the only image topic)")
     p.add_argument("--save-vis", type=Path, default=None, metavar="DIR",
                    help="write annotated images here (with --crop the band is drawn too)")
     p.add_argument("--every", type=int, default=1, metavar="N",
                    help="video or bag: every N-th frame only (default 1: all); frame indices stay those of the source")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
-
-
-def iter_source(source: Path, topic: str | None = None, every: int = 1
-                ) -> Iterator[tuple[str, np.ndarray | None, str | None]]:
-    """``(name, bgr full image or None, error or None)`` for an image, a folder, a video or a bag;
-    of a video or a bag every ``every``-th frame only."""
-    if every < 1:
-        raise ConfigError("--every", None, f"must be >= 1, got {every}")
-    if not source.exists():
-        raise ConfigError(str(source), None, "source does not exist")
-    if source.is_dir() and (source / "metadata.yaml").is_file():
-        for k, item in enumerate(_iter_bag(source, topic)):
-            if k % every == 0:
-                yield item
-        return
-    if source.is_file() and source.suffix.lower() in VIDEO_SUFFIXES:
-        yield from iter_video(source, every)
-        return
-    files = [source] if source.is_file() else sorted(p for p in source.rglob("*") if p.suffix.lower() in IMAGE_SUFFIXES)
-    if not files:
-        raise ConfigError(str(source), None, f"no images ({', '.join(IMAGE_SUFFIXES)}) found")
-    from ..adapter import decode_compressed
-
-    for f in files:
-        name = str(f.relative_to(source)) if source.is_dir() else f.name
-        try:  # the nodes' decoding: the header's size is checked before the decoder runs
-            yield name, decode_compressed(f.read_bytes()), None
-        except FrameError as e:
-            yield name, None, f"{e.reason}: {e}"
-        except OSError as e:
-            yield name, None, f"unreadable: {e.strerror}"
-
-
-def iter_video(path: Path, every: int = 1) -> Iterator[tuple[str, np.ndarray | None, str | None]]:
-    """``(<stem>_<frame index 000000>, bgr frame, None)`` of every ``every``-th frame of a video file.
-    A file OpenCV cannot open, or one that yields no frame, is a :class:`ConfigError` naming it."""
-    cap = cv2.VideoCapture(str(path))
-    try:
-        if not cap.isOpened():
-            raise ConfigError(str(path), None, "cannot open the video (OpenCV VideoCapture; is it a video file "
-                                               "of a codec this OpenCV build reads?)")
-        k, read = 0, 0
-        while True:
-            if k % every == 0:
-                ok, frame = cap.read()
-                if not ok:
-                    break
-                read += 1
-                yield f"{path.stem}_{k:06d}", frame, None
-            elif not cap.grab():
-                break
-            k += 1
-        if read == 0:
-            raise ConfigError(str(path), None, "the video holds no readable frame")
-    finally:
-        cap.release()
-
-
-def _iter_bag(bag: Path, topic: str | None):
-    from ..replay import find_image_topic, frame_bgr, iter_frames
-
-    topic, _ = find_image_topic(bag, topic)
-    for fr in iter_frames(bag, topic):
-        try:
-            yield str(fr.stamp_ns), frame_bgr(fr), None
-        except FrameError as e:
-            yield str(fr.stamp_ns), None, str(e)
-
-
-def detect_one(det, img: np.ndarray, name: str, crop: tuple[int, ...] | None = None, downscale: int = 1,
-               imgsz: tuple[int, int] | None = None) -> tuple[np.ndarray, float]:
-    """Boxes (``BOX_DTYPE``, the image's px) of one full BGR image, as ``detect`` does it: with ``crop``
-    (V0,V1[,U0,U1]) the band is cut and downscaled as on the car, else letterboxed to ``imgsz`` or the
-    model input; and the model input px per image px (the prediction file's ``input_scale``).
-    Also used by ``bench table``."""
-    from ..adapter import crop_bgr
-
-    h, w = img.shape[:2]
-    if crop:
-        v0, v1, u0, u1 = crop if len(crop) == 4 else (*crop, 0, w)
-        spec = CropSpec(v0, v1, u0, u1, downscale)
-        spec.validate(w, h, f"--crop for {name}")
-        return det.detect(crop_bgr(img, spec), spec), 1.0 / downscale
-    if imgsz:
-        from ..records import boxes_from_arrays
-
-        b, s, c = det.infer(img, in_size=imgsz)
-        return boxes_from_arrays(b, s, c), min(imgsz[0] / w, imgsz[1] / h)
-    return det.detect_image(img), min(det.imgsz[0] / w, det.imgsz[1] / h)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -4,7 +4,7 @@
                        [--conf 0.25] [--iou 0.5] [--gt-names A,B,..] [--band V0,V1] [--min-height PX] [--worst N] [--only-predicted]
 
 Ground truth: a YOLO label folder (images/, labels/, data.yaml) or a synthetic gt.jsonl (with cone
-positions: localisation and the thesis's pair metric too). See ``cone_perception/eval_report.py``.
+positions: localisation and the thesis's pair metric too). See ``cone_perception/evaluation/report.py``.
 """
 
 from __future__ import annotations
@@ -12,6 +12,8 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+
+from ..params import DEFAULT_CONF
 
 
 def _unit(text: str) -> float:
@@ -25,7 +27,7 @@ def _unit(text: str) -> float:
 
 
 def _rows(text: str) -> tuple[int, int]:
-    from .detect import parse_crop
+    from ._args import parse_crop
 
     vals = parse_crop(text)
     if len(vals) != 2:
@@ -47,7 +49,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="calibration YAML (or shipped camera name) to map boxes to metres: distances for YOLO ground truth, "
                         "detections for localisation (default: calib.yaml / <bag>_calib.yaml beside the ground truth, if any)")
     p.add_argument("--out", type=Path, required=True, help="output folder for report.md, metrics.json and the PNGs")
-    p.add_argument("--conf", type=_unit, default=0.25, help="operating score threshold for P/R/F1, confusion and localisation (default %(default)s)")
+    p.add_argument("--conf", type=_unit, default=DEFAULT_CONF, help="operating score threshold for P/R/F1, confusion and localisation (default %(default)s)")
     p.add_argument("--iou", type=_unit, default=0.5, help="IoU for a detection to match a box at the operating point (default %(default)s)")
     p.add_argument("--gt-names", default=None,
                    help="YOLO folder without data.yaml: its class names in id order, comma-separated "
@@ -67,46 +69,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
-def evaluate_predictions(pred: Path, gt_path: Path, gt_names: str | None = None, calib_arg: str | None = None,
-                         conf: float = 0.25, iou: float = 0.5, only_predicted: bool = False, progress: bool = True,
-                         verbose: bool = True, band: tuple[int, int] | None = None, min_height: float | None = None):
-    """A prediction file against ground truth -> :class:`~cone_perception.eval_report.EvalResult`, as ``eval``
-    computes it (``gt_names`` comma-separated; ``band``, ``min_height``: as ``eval --band``, ``--min-height``). Also used by ``bench table``."""
-    from ..calib import load_calibration
-    from ..errors import ConfigError
-    from ..eval_report import evaluate
-    from ..groundtruth import load_ground_truth, pair_with_predictions, restrict_to_band, restrict_to_min_height
-    from ..predictions import read_predictions
-
-    names = [n.strip() for n in gt_names.split(",") if n.strip()] if gt_names else None
-    gt = load_ground_truth(gt_path, names)
-    preds = list(read_predictions(pred))
-    images, counts = pair_with_predictions(gt, preds, str(pred), only_predicted)
-    if band is not None:
-        images, n_out = restrict_to_band(images, band)
-        counts = {**counts, "band_rows": list(band), "ignored_outside_band": n_out}
-    if min_height is not None:
-        try:
-            images, n_gt, n_pred = restrict_to_min_height(images, min_height, iou)
-        except ValueError as e:
-            raise ConfigError("eval", "--min-height", str(e)) from None
-        counts = {**counts, "min_height_px": min_height, "ignored_below_min_height": n_gt, "detections_dropped_below_min_height": n_pred}
-    calib_path = calib_arg if calib_arg is not None else gt.calib_path
-    calib = load_calibration(calib_path) if calib_path is not None else None
-    if verbose and calib is not None and calib_arg is None:
-        print(f"calibration: {calib_path} (found beside the ground truth)")
-    if verbose and gt_path.is_dir() and (gt_path / "gt.jsonl").is_file():
-        print(f"note: {gt_path / 'gt.jsonl'} exists; pass it as --gt for localisation and distances from true positions")
-    res = evaluate(images, calib, conf, iou, gt.has_positions, progress=progress)
-    res.metrics["ground_truth"] = {"format": gt.kind, **gt.info, **counts}
-    return res
-
-
 def run(args: argparse.Namespace) -> int:
     import logging
 
     from ..errors import ConfigError
-    from ..eval_report import format_summary, write_report
+    from ..evaluation.report import evaluate_predictions, format_summary, write_report
 
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(message)s")
     if not args.pred.is_file():
@@ -115,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(str(args.out), None, "output exists and is not a directory")
     res = evaluate_predictions(args.pred, args.gt, args.gt_names, args.calib, args.conf, args.iou, args.only_predicted,
                                progress=not args.no_progress, band=args.band, min_height=args.min_height)
-    from ..eval_report import lowest_score_note
+    from ..evaluation.report import lowest_score_note
 
     low = lowest_score_note(res.images)
     if low:

@@ -6,8 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .detect import parse_crop
-from .train import parse_size
+from ._args import parse_crop, size_arg
 
 TOLERANCE = 1e-3
 VERIFY_FRAMES = 8
@@ -26,7 +25,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--model", required=True, help="checkpoint (.pt) written by `cone-perception train`")
     p.add_argument("--format", choices=("torchscript", "onnx"), required=True, help="output format")
-    p.add_argument("--imgsz", type=parse_size, default=None, help="input WxH px (default: the checkpoint's)")
+    p.add_argument("--imgsz", type=size_arg, default=None, help="input WxH px (default: the checkpoint's)")
     p.add_argument("--out", default=None, help="output file (default: next to the checkpoint, .torchscript / .onnx)")
     p.add_argument("--force", action="store_true", help="overwrite existing output files (the model and its sidecar <file>.yaml; with --int8 those of the int8 file too)")
     q = p.add_argument_group("int8 (ONNX only)")
@@ -56,13 +55,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import numpy as np
-
     from ..checkpoint import load_checkpoint
     from ..detector import Detector, sidecar_path, write_sidecar
     from ..errors import ConfigError
     from ..outfiles import refuse_existing
-    from ..export import export_metadata, export_model, max_abs_diff
+    from ..export import export_metadata, export_model, worst_diff_to_eager
     from ..train.trainer import round_imgsz
 
     int8_flags = [f"--{k.replace('_', '-')}" for k in ("calib_images", "calib_clips", "calib_crop") if getattr(args, k) is not None]
@@ -97,11 +94,8 @@ def run(args: argparse.Namespace) -> int:
     # verify: the exported file, loaded the way users load it, against eager on random and grey inputs
     exported = Detector.load(out, backend=args.format)
     eager = Detector.load(args.model, backend="torch", imgsz=imgsz)
-    rng = np.random.default_rng(0)
     w, h = imgsz
-    worst = 0.0
-    for blob in (rng.random((1, 3, h, w), dtype=np.float32), np.full((1, 3, h, w), 114 / 255, np.float32)):
-        worst = max(worst, max_abs_diff(exported.raw(blob), eager.raw(blob)))
+    worst = worst_diff_to_eager(exported, eager, imgsz)
     if worst > TOLERANCE:
         out.unlink(missing_ok=True)
         raise ConfigError(str(out), None, f"exported model differs from eager by {worst:.3g} (> {TOLERANCE}); file removed")

@@ -22,7 +22,7 @@ from ..attitude import attitude_estimator
 from ..calib import DEFAULT_CAMERA, load_calibration
 from ..errors import ConfigError, FrameError
 from ..mapping import ConeMapper, validate_boxes
-from ..records import boxes_from_arrays
+from ..records import read_boxes_csv
 
 
 def _pixel(text: str) -> tuple[float, float]:
@@ -47,30 +47,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--attitude", choices=("fixed", "image"), default=None,
                    help="--boxes: fixed (the calibration's H) or image (the boxes are one frame: fit its pitch/roll "
                         "first; needs mount_pose and camera_matrix). Default: image when the calibration has both, else fixed")
-
-
-def read_boxes_csv(path: Path) -> np.ndarray:
-    """CSV ``u1,v1,u2,v2,score,class_id`` -> BOX_DTYPE records; errors name file and line."""
-    try:
-        lines = path.read_text(encoding="utf-8").splitlines()
-    except OSError as e:
-        raise ConfigError(str(path), None, f"cannot read: {e.strerror}") from None
-    rows = []
-    for i, line in enumerate(lines, 1):
-        line = line.strip()
-        if not line or line.startswith("#") or (i == 1 and line.replace(" ", "").startswith("u1,")):
-            continue
-        parts = line.split(",")
-        if len(parts) != 6:
-            raise ConfigError(str(path), f"line {i}", f"needs 6 columns u1,v1,u2,v2,score,class_id, got {len(parts)}")
-        try:
-            rows.append([float(x) for x in parts])
-        except ValueError:
-            raise ConfigError(str(path), f"line {i}", f"not numbers: {line!r}") from None
-    a = np.asarray(rows, dtype=np.float64).reshape(-1, 6)
-    if np.any(a[:, 5] != np.round(a[:, 5])) or np.any(a[:, 5] < 0):
-        raise ConfigError(str(path), "class_id", "must be a non-negative integer")
-    return boxes_from_arrays(a[:, :4], a[:, 4], a[:, 5].astype(np.int64))
 
 
 def run(args: argparse.Namespace) -> int:

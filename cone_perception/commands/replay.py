@@ -30,7 +30,8 @@ from ..benchmark import format_table, summarize
 from ..calib import DEFAULT_CAMERA, load_calibration, resolve_calibration_path
 from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, RUNTIME_THREADS, Detector, default_model_path
 from ..evaluation import LocalisationReport, format_localisation
-from ..outfiles import print_written, refuse_existing
+from ..outfiles import print_written, refuse_existing, remove_bag
+from ..params import DEFAULT_CONF
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -40,7 +41,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", default=None, help="model file (default: the shipped default model)")
     p.add_argument("--backend", default=DEFAULT_BACKEND, choices=BACKEND_CHOICES,
                    help="inference backend (default %(default)s: ONNX Runtime on the CPU where installed, else torch)")
-    p.add_argument("--conf", type=float, default=0.25, help="confidence threshold (default %(default)s)")
+    p.add_argument("--conf", type=float, default=DEFAULT_CONF, help="confidence threshold (default %(default)s)")
     p.add_argument("--threads", type=int, default=RUNTIME_THREADS,
                    help="torch / ONNX Runtime threads of the network (default %(default)s, as the nodes; 0 = library default)")
     p.add_argument("--bf16", action="store_true", help="backend torch with bfloat16 autocast on the CPU")
@@ -91,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
         from ..bagio import check_new_output
 
         if args.force and args.out.exists():
-            _remove_bag(args.out)
+            remove_bag(args.out)
         check_new_output(args.out, "replay")
     if args.live:
         summary = _run_live(args, calib)
@@ -101,18 +102,6 @@ def run(args: argparse.Namespace) -> int:
         args.json.write_text(json.dumps(summary, indent=1))
         print_written([args.json], "replay")
     return 1 if summary.get("died") else 0
-
-
-def _remove_bag(path: Path) -> None:
-    """Remove a rosbag2 directory for ``--force``; anything else is left alone and refused."""
-    import shutil
-
-    from ..errors import ConfigError
-
-    if not (path.is_dir() and (path / "metadata.yaml").is_file()):
-        raise ConfigError(str(path), None, "--force replaces only a rosbag2 directory (with metadata.yaml); "
-                                           "this is something else: remove it yourself")
-    shutil.rmtree(path)
 
 
 def _imu_source(args, calib):

@@ -6,7 +6,7 @@ import argparse
 import json
 
 from ..model import MODEL_SIZES
-from .train import parse_size
+from ._args import size_arg
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -14,7 +14,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", default=None, help="time this checkpoint / exported model instead of --sizes")
     p.add_argument("--backends", nargs="+", default=["torch", "onnx"], choices=("torch", "torchscript", "onnx"), help="backends (default torch onnx)")
     p.add_argument("--bf16", action="store_true", help="also time backend torch with bfloat16 autocast (row 'torch-bf16')")
-    p.add_argument("--imgsz", type=parse_size, default=(960, 288), help="input WxH px (default 960x288)")
+    p.add_argument("--imgsz", type=size_arg, default=(960, 288), help="input WxH px (default 960x288)")
     p.add_argument("--threads", type=int, default=1,
                    help="intra-op threads of the network (default 1, as the nodes and every other command)")
     p.add_argument("--frames", type=int, default=50, help="timed forwards per case (default 50)")
@@ -26,7 +26,7 @@ def run(args: argparse.Namespace) -> int:
 
     from ..detector import Detector
     from ..model import ConeYOLO, model_config
-    from ..speed import gflops, time_forward
+    from ..bench.forward import gflops, time_forward
 
     torch.set_num_threads(args.threads)
     rows = []

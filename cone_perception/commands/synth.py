@@ -81,9 +81,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def config_from_args(args: argparse.Namespace):
     from ..camera import MountPose
-    from ..synth.outputs import SynthConfig, parse_size
+    from ..synth.outputs import SynthConfig
+    from ._args import parse_size
 
-    w, h = parse_size(args.size)
+    w, h = parse_size(args.size, "--size", "1920x1080")
     return SynthConfig(
         width=w,
         height=h,

@@ -14,19 +14,7 @@ import logging
 import sys
 
 from ..model import MODEL_SIZES, PRETRAINED_BACKBONES
-
-
-def parse_size(text: str) -> tuple[int, int]:
-    """``"960x288"`` -> (960, 288); a single number means a square."""
-    try:
-        parts = [int(v) for v in text.lower().split("x")]
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(f"expected WxH like 960x288, got {text!r}") from e
-    if len(parts) == 1:
-        parts *= 2
-    if len(parts) != 2 or min(parts) <= 0:
-        raise argparse.ArgumentTypeError(f"expected WxH like 960x288, got {text!r}")
-    return parts[0], parts[1]
+from ._args import size_arg
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -50,7 +38,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--freeze-bn", action="store_true",
                    help="keep the pretrained backbone's batch-norm statistics and affine parameters fixed")
     p.add_argument("--epochs", type=int, default=d.epochs, help=f"epochs (default {d.epochs}; with --resume: new total)")
-    p.add_argument("--imgsz", type=parse_size, default=d.imgsz, help="input WxH px, multiples of 32 (default 960x288)")
+    p.add_argument("--imgsz", type=size_arg, default=d.imgsz, help="input WxH px, multiples of 32 (default 960x288)")
     p.add_argument("--batch", type=int, default=d.batch, help=f"images per batch (default {d.batch})")
     p.add_argument("--out", default=None,
                    help="output folder: last.pt, best.pt, results.csv, results.png (default runs/train/NAME, "

@@ -202,15 +202,6 @@ def _kind_weights(kinds: tuple[str, ...]) -> np.ndarray:
     return w / w.sum()
 
 
-def parse_size(text: str) -> tuple[int, int]:
-    """``"1920x1080"`` -> (1920, 1080); :class:`ConfigError` naming ``--size`` otherwise."""
-    try:
-        w, h = (int(x) for x in str(text).lower().split("x"))
-    except ValueError:
-        raise ConfigError("--size", None, f"must look like 1920x1080, got {text!r}") from None
-    return w, h
-
-
 def check_writable_dir(path: Path, what: str) -> None:
     """Raise :class:`ConfigError` unless ``path`` is (or can be made) an empty writable directory."""
     if path.exists() and not path.is_dir():

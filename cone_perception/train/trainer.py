@@ -26,7 +26,7 @@ from tqdm import tqdm
 from ..checkpoint import load_checkpoint, save_checkpoint
 from ..classes import CLASS_NAMES
 from ..errors import ConfigError
-from ..metrics import ImageDetections, coco_map
+from ..evaluation.metrics import ImageDetections, coco_map
 from ..model import PRETRAINED_BACKBONES, ConeYOLO, is_model_name, model_config, model_names
 from ..model.pretrained import PretrainedBackbone, load_imagenet
 from ..model.decode import postprocess

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from _board_scene import board_texture, render_on_ground, render_views
 
-from cone_perception.calibration import (
+from cone_perception.calibrate import (
     Board,
     Intrinsics,
     PointPairs,

@@ -1,14 +1,14 @@
-"""``cone-perception bench table``: the thesis's runtime table, redone.
+"""``cone-perception bench table``: the thesis's runtime table, redone (the command: ``commands/bench.py``).
 
 For each model and each input setting (``full`` 1920x1080 -> 1920x1088, ``half`` 960x544,
 ``crop`` the band at full resolution, ``crop_half`` the band halved, see
 :meth:`~cone_perception.crop.CropSpec.for_setting`):
 
-1. speed: :func:`bench.bench_pipeline` (the code of ``bench pipeline --input SETTING``) on
+1. speed: :func:`.pipeline.bench_pipeline` (the code of ``bench pipeline --input SETTING``) on
    rendered 1920x1080 YUYV frames with the calibration's band;
 2. accuracy: the detector on real validation frames with the same crop and downscale, through
-   :func:`detect.detect_one` (= ``detect --crop V0,V1 --downscale N``; the whole image for full /
-   half), then :func:`eval.evaluate_predictions` (= ``eval``): mAP@0.5 and recall at ``--conf``.
+   :func:`cone_perception.detector.detect_one` (= ``detect --crop V0,V1 --downscale N``; the whole image for full /
+   half), then :func:`cone_perception.evaluation.report.evaluate_predictions` (= ``eval``): mAP@0.5 and recall at ``--conf``.
 
 Writes ``table.md``, ``table.json`` and the prediction files (``preds/``) to ``--out``.
 """
@@ -28,7 +28,11 @@ import numpy as np
 
 from ..crop import INPUT_SETTINGS, CropSpec
 from ..errors import ConfigError
+from ..detector import detect_one
+from ..sources import iter_source
 from ..words import plural
+from .frames import rendered_frames
+from .pipeline import bench_pipeline, load_for_crop
 
 SRC = "bench table"
 
@@ -118,12 +122,9 @@ def format_markdown(doc: dict) -> str:
 def run_table(args: argparse.Namespace, calib) -> int:
     from tqdm import tqdm
 
-    from ..eval_report import _json_safe
-    from ..groundtruth import load_ground_truth
+    from ..evaluation.report import _json_safe, evaluate_predictions
+    from ..evaluation.groundtruth import load_ground_truth
     from ..predictions import write_prediction
-    from .bench import bench_pipeline, load_for_crop, rendered_frames
-    from .detect import detect_one, iter_source
-    from .eval import evaluate_predictions
 
     _need(args)
     settings = parse_settings(args.settings)

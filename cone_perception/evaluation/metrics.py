@@ -20,7 +20,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .classes import CLASS_NAMES
+from ..classes import CLASS_NAMES
+from ..params import DEFAULT_CONF
 
 
 @dataclass
@@ -212,7 +213,7 @@ def at_conf(scores: np.ndarray, conf: float) -> np.ndarray:
     return keep[np.argsort(-ps[keep], kind="stable")]
 
 
-def operating_point(images: list[ImageDetections], conf: float = 0.25, iou: float = 0.5,
+def operating_point(images: list[ImageDetections], conf: float = DEFAULT_CONF, iou: float = 0.5,
                     class_names: tuple[str, ...] = CLASS_NAMES) -> OperatingPoint:
     """Precision / recall / F1 counts and the confusion matrix of detections with score >= ``conf``."""
     C = len(class_names)

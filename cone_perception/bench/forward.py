@@ -10,8 +10,8 @@ import time
 
 import numpy as np
 
-from .detector import Detector
-from .model import ConeYOLO
+from ..detector import Detector
+from ..model import ConeYOLO
 
 
 def time_forward(det: Detector, frames: int = 50, warmup: int = 5) -> dict:

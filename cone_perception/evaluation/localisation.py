@@ -155,7 +155,7 @@ MAX_PAIR_M = 6.0
 
 def blue_yellow_pairs(truth: np.ndarray, max_pair_m: float = MAX_PAIR_M) -> list[tuple[int, int, float]]:
     """Each blue cone with its nearest yellow cone: ``(blue_index, yellow_index, distance_m)``, within ``max_pair_m``."""
-    from .classes import BLUE, YELLOW
+    from ..classes import BLUE, YELLOW
 
     xy = np.c_[truth["x"], truth["y"]].astype(np.float64)
     blue, yellow = np.flatnonzero(truth["class_id"] == BLUE), np.flatnonzero(truth["class_id"] == YELLOW)

@@ -23,12 +23,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .calib import Calibration
-from .classes import CLASS_NAMES, CLASS_RGBA
-from .evaluation import DISTANCE_GROUPS, LocalisationReport, PairDistanceReport, distance_group
+from ..calib import Calibration
+from ..classes import CLASS_NAMES, CLASS_RGBA
+from .localisation import DISTANCE_GROUPS, LocalisationReport, PairDistanceReport, distance_group
 from .groundtruth import EvalImage
 from .metrics import RECALL_POINTS, ImageDetections, at_conf, coco_map, greedy_match, match_by_class, operating_point
-from .records import CONE_DTYPE, boxes_from_arrays
+from ..params import DEFAULT_CONF
+from ..records import CONE_DTYPE, boxes_from_arrays
 
 FILES = {
     "report": "report.md",
@@ -137,12 +138,12 @@ def lowest_score_note(images: list[EvalImage]) -> str | None:
             f"as long as --conf >= {low:.3f})")
 
 
-def evaluate(images: list[EvalImage], calib: Calibration | None, conf: float = 0.25, iou: float = 0.5,
+def evaluate(images: list[EvalImage], calib: Calibration | None, conf: float = DEFAULT_CONF, iou: float = 0.5,
              has_positions: bool = False, progress: bool = False) -> EvalResult:
     """Every figure of the report for paired images; ``calib`` maps boxes to metres (optional)."""
     from tqdm import tqdm
 
-    from .mapping import ConeMapper
+    from ..mapping import ConeMapper
 
     notes: list[str] = []
     range_mapper = ConeMapper(replace(calib, max_range_m=math.inf)) if calib is not None else None
@@ -418,8 +419,8 @@ def _frame_images(images: list[EvalImage], ks: list[int]) -> dict[int, np.ndarra
             if img is not None:
                 out[k] = img
     if by_bag:
-        from .errors import ConePerceptionError
-        from .replay import read_bag_images
+        from ..errors import ConePerceptionError
+        from ..replay import read_bag_images
 
         for bag, stamp_to_k in by_bag.items():
             try:
@@ -434,7 +435,7 @@ def _fit_text(img: np.ndarray, text: str, org: tuple[int, int], scale: float, co
     """Outlined text at ``org``, its font made smaller until it fits the image's width."""
     import cv2
 
-    from .vis import outlined_text
+    from ..vis import outlined_text
 
     while scale > 0.3 and org[0] + cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, 1)[0][0] > img.shape[1] - 4:
         scale *= 0.9
@@ -452,7 +453,7 @@ def plot_worst_frames(images: list[EvalImage], conf: float, iou: float, path: Pa
     image can't be read are skipped. -> (file or None, the frames' counts)."""
     import cv2
 
-    from .vis import frame_strip, outlined_text
+    from ..vis import frame_strip, outlined_text
 
     scored = []
     for k, im in enumerate(images):
@@ -505,7 +506,7 @@ def plot_worst_frames(images: list[EvalImage], conf: float, iou: float, path: Pa
 def write_report(res: EvalResult, out: Path, pred_source: str, gt_source: str, worst: int = 6) -> dict[str, Path]:
     """``metrics.json``, ``report.md`` and the PNGs into ``out`` (with ``worst`` > 0 also a picture of the
     frames with most errors); returns the written files by key."""
-    from .words import plural
+    from ..words import plural
 
     out.mkdir(parents=True, exist_ok=True)
     m = res.metrics
@@ -629,3 +630,37 @@ def format_summary(res: EvalResult) -> str:
         lines.append("errors in m; pair err = median |measured - true| blue-yellow distance (thesis metric)")
     lines += [f"note: {n}" for n in res.notes]
     return "\n".join(lines)
+
+
+def evaluate_predictions(pred: Path, gt_path: Path, gt_names: str | None = None, calib_arg: str | None = None,
+                         conf: float = DEFAULT_CONF, iou: float = 0.5, only_predicted: bool = False, progress: bool = True,
+                         verbose: bool = True, band: tuple[int, int] | None = None, min_height: float | None = None):
+    """A prediction file against ground truth -> :class:`~cone_perception.evaluation.report.EvalResult`, as ``eval``
+    computes it (``gt_names`` comma-separated; ``band``, ``min_height``: as ``eval --band``, ``--min-height``). Used by ``eval`` and ``bench table``."""
+    from ..calib import load_calibration
+    from ..errors import ConfigError
+    from .groundtruth import load_ground_truth, pair_with_predictions, restrict_to_band, restrict_to_min_height
+    from ..predictions import read_predictions
+
+    names = [n.strip() for n in gt_names.split(",") if n.strip()] if gt_names else None
+    gt = load_ground_truth(gt_path, names)
+    preds = list(read_predictions(pred))
+    images, counts = pair_with_predictions(gt, preds, str(pred), only_predicted)
+    if band is not None:
+        images, n_out = restrict_to_band(images, band)
+        counts = {**counts, "band_rows": list(band), "ignored_outside_band": n_out}
+    if min_height is not None:
+        try:
+            images, n_gt, n_pred = restrict_to_min_height(images, min_height, iou)
+        except ValueError as e:
+            raise ConfigError("eval", "--min-height", str(e)) from None
+        counts = {**counts, "min_height_px": min_height, "ignored_below_min_height": n_gt, "detections_dropped_below_min_height": n_pred}
+    calib_path = calib_arg if calib_arg is not None else gt.calib_path
+    calib = load_calibration(calib_path) if calib_path is not None else None
+    if verbose and calib is not None and calib_arg is None:
+        print(f"calibration: {calib_path} (found beside the ground truth)")
+    if verbose and gt_path.is_dir() and (gt_path / "gt.jsonl").is_file():
+        print(f"note: {gt_path / 'gt.jsonl'} exists; pass it as --gt for localisation and distances from true positions")
+    res = evaluate(images, calib, conf, iou, gt.has_positions, progress=progress)
+    res.metrics["ground_truth"] = {"format": gt.kind, **gt.info, **counts}
+    return res

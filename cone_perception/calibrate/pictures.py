@@ -10,7 +10,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .calibration import CalibrationResult
+from .fit import CalibrationResult
 
 GRID_BGR = (255, 220, 0)
 AXIS_BGR = (0, 200, 255)

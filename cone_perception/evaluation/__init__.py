@@ -1,0 +1,26 @@
+"""Evaluation of the detector and the whole chain against ground truth (``cone-perception eval``, ``replay --gt-topic``).
+
+* :mod:`.metrics`: box metrics: COCO mAP (pycocotools), the operating point (P/R/F1), matching;
+* :mod:`.groundtruth`: ground truth (YOLO labels, ``gt.jsonl``) paired with a prediction file;
+* :mod:`.localisation`: cones in metres: matching, recall and error by distance, blue-yellow pairs;
+* :mod:`.report`: ``eval``'s evaluation, plots and report writer.
+
+The names below are the face of the former module ``cone_perception.evaluation`` (now :mod:`.localisation`):
+``from cone_perception.evaluation import LocalisationReport`` keeps working.
+"""
+
+from .localisation import (
+    DISTANCE_GROUPS,
+    MAX_PAIR_M,
+    LocalisationReport,
+    PairDistanceReport,
+    blue_yellow_pairs,
+    distance_group,
+    format_localisation,
+    match_cones,
+)
+
+__all__ = [
+    "DISTANCE_GROUPS", "MAX_PAIR_M", "LocalisationReport", "PairDistanceReport", "blue_yellow_pairs",
+    "distance_group", "format_localisation", "match_cones",
+]
