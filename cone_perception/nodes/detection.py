@@ -4,7 +4,7 @@ Parameters
   model (str, "" = the shipped default model), backend ("auto" | "torch" | "torchscript" | "onnx";
   auto: ONNX Runtime on the CPU where installed, else torch), device ("cpu" | "cuda" | "cuda:N"),
   fp16 (bool, CUDA only), bf16 (bool, CPU autocast, backend torch), conf (0.25), iou (0.45),
-  max_det (100), threads (1, see detector.RUNTIME_THREADS; 0 = library default), calibration
+  max_det (300), threads (1, see detector.RUNTIME_THREADS; 0 = library default), calibration
   (for the debug image's distances), debug_image (false), debug_image_hz (5).
   Changeable at run time (``ros2 param set``): conf, iou, max_det, debug_image, debug_image_hz.
   Descriptions and ranges: ``cone_perception/params.py`` (``ros2 param describe``).
