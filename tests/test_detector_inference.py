@@ -17,7 +17,7 @@ from cone_perception.cli import main as cli_main
 from cone_perception.crop import CropSpec
 from cone_perception.detector import Detector, default_model_path, resolve_backend, write_sidecar
 from cone_perception.errors import ConfigError
-from cone_perception.export import export_model, onnx_bytes
+from cone_perception.detector.export import export_model, onnx_bytes
 from cone_perception.model import ConeYOLO, model_config
 from synthetic_cones import SMOKE_SIZE, trained_smoke_model
 

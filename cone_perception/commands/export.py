@@ -13,7 +13,7 @@ VERIFY_FRAMES = 8
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from ..quantize import ACTIVATION_TYPES, CALIB_METHODS, DEFAULT_CALIB_FRAMES, MIN_MATCHED, MIN_MEAN_IOU
+    from ..detector.quantize import ACTIVATION_TYPES, CALIB_METHODS, DEFAULT_CALIB_FRAMES, MIN_MATCHED, MIN_MEAN_IOU
 
     p.description = (
         "Export a detector checkpoint to TorchScript or ONNX, verified against eager (max |diff| <= "
@@ -59,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
     from ..detector import Detector, sidecar_path, write_sidecar
     from ..errors import ConfigError
     from ..outfiles import refuse_existing
-    from ..export import export_metadata, export_model, worst_diff_to_eager
+    from ..detector.export import export_metadata, export_model, worst_diff_to_eager
     from ..train.trainer import round_imgsz
 
     int8_flags = [f"--{k.replace('_', '-')}" for k in ("calib_images", "calib_clips", "calib_crop") if getattr(args, k) is not None]
@@ -72,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError("--int8", "calib-images", "give a folder of real frames to calibrate on (--calib-images DIR)")
         if args.calib_frames < 1:
             raise ConfigError("--calib-frames", None, f"must be >= 1, got {args.calib_frames}")
-        from ..quantize import calibration_pool
+        from ..detector.quantize import calibration_pool
 
         # the calibration frames are checked before anything is exported
         pool, dropped = calibration_pool(args.calib_images, args.calib_clips.split(",") if args.calib_clips else None)
@@ -111,7 +111,7 @@ def _int8(args, ck, fp32_path: Path, imgsz: tuple[int, int], eager, pool: list[P
     from ..detector import Detector, write_sidecar
     from ..errors import ConfigError
     from ..model.decode import postprocess
-    from ..quantize import MIN_MATCHED, MIN_MEAN_IOU, QuantOptions, calibration_blobs, compare_detections, quantize_onnx, spread
+    from ..detector.quantize import MIN_MATCHED, MIN_MEAN_IOU, QuantOptions, calibration_blobs, compare_detections, quantize_onnx, spread
 
     files = spread(pool, args.calib_frames)
     opts = QuantOptions(activation=args.int8_activations, per_channel=not args.per_tensor,
@@ -121,7 +121,7 @@ def _int8(args, ck, fp32_path: Path, imgsz: tuple[int, int], eager, pool: list[P
           + (f" ({dropped} frames of validation clips left out)" if dropped else "") + f"; {opts.describe()}")
     summary = quantize_onnx(fp32_path, out, calibration_blobs(files, imgsz, args.calib_crop, args.calib_downscale),
                             opts, total=len(files), progress=not args.no_progress)
-    from ..export import export_metadata, with_onnx_metadata
+    from ..detector.export import export_metadata, with_onnx_metadata
 
     meta = export_metadata(ck.class_names, imgsz, max(ck.cfg.strides), str(args.model), {
         "quantisation": opts.describe(), "calibration": f"{len(files)} frames of {args.calib_images}"})

@@ -36,15 +36,15 @@ import numpy as np
 import torch
 import yaml
 
-from . import records
-from .adapter import pin_opencv_threads
-from .classes import CLASS_NAMES
-from .checkpoint import RESTORE_HINT, Checkpoint, class_map_from_names, load_checkpoint
-from .crop import CropSpec
-from .errors import ConfigError
-from .model.decode import postprocess
-from .params import DEFAULT_BACKEND, DEFAULT_CONF, DEFAULT_IOU, DEFAULT_MAX_DET, RUNTIME_THREADS  # noqa: F401 - re-exported
-from .resources import models_dir
+from .. import records
+from ..adapter import pin_opencv_threads
+from ..classes import CLASS_NAMES
+from ..checkpoint import RESTORE_HINT, Checkpoint, class_map_from_names, load_checkpoint
+from ..crop import CropSpec
+from ..errors import ConfigError
+from ..model.decode import postprocess
+from ..params import DEFAULT_BACKEND, DEFAULT_CONF, DEFAULT_IOU, DEFAULT_MAX_DET, RUNTIME_THREADS  # noqa: F401 - re-exported
+from ..resources import models_dir
 
 log = logging.getLogger(__name__)
 
@@ -517,8 +517,8 @@ def detect_one(det, img: np.ndarray, name: str, crop: tuple[int, ...] | None = N
     (V0,V1[,U0,U1]) the band is cut and downscaled as on the car, else letterboxed to ``imgsz`` or the
     model input; and the model input px per image px (the prediction file's ``input_scale``).
     Used by ``detect`` and ``bench table``."""
-    from .adapter import crop_bgr
-    from .crop import CropSpec
+    from ..adapter import crop_bgr
+    from ..crop import CropSpec
 
     h, w = img.shape[:2]
     if crop:
@@ -527,7 +527,7 @@ def detect_one(det, img: np.ndarray, name: str, crop: tuple[int, ...] | None = N
         spec.validate(w, h, f"--crop for {name}")
         return det.detect(crop_bgr(img, spec), spec), 1.0 / downscale
     if imgsz:
-        from .records import boxes_from_arrays
+        from ..records import boxes_from_arrays
 
         b, s, c = det.infer(img, in_size=imgsz)
         return boxes_from_arrays(b, s, c), min(imgsz[0] / w, imgsz[1] / h)

@@ -22,8 +22,8 @@ from typing import Iterable, Iterator
 import cv2
 import numpy as np
 
-from .crop import CropSpec
-from .errors import ConfigError
+from ..crop import CropSpec
+from ..errors import ConfigError
 
 DEFAULT_CALIB_FRAMES = 64
 ACTIVATION_TYPES = ("uint8", "int8")
@@ -59,7 +59,7 @@ def calibration_pool(folder: str | Path, clips: Iterable[str] | None = None) -> 
     many were dropped because they belong to the validation clips
     (:data:`~.train.datasets.VALIDATION_CLIPS`, never used; naming one in ``clips`` is an error).
     ``clips`` keeps only frames of these clips (file name before the first '-')."""
-    from .train.datasets import IMAGE_SUFFIXES, VALIDATION_CLIPS, in_clips
+    from ..train.datasets import IMAGE_SUFFIXES, VALIDATION_CLIPS, in_clips
 
     folder = Path(folder)
     src = str(folder)
@@ -102,7 +102,7 @@ def calibration_blobs(files: list[Path], imgsz: tuple[int, int], crop: tuple[int
     With ``crop`` (V0, V1[, U0, U1] in each frame's px; without U0, U1 the full width) the band is
     cut and downscaled like the car's adapter does (:func:`~.adapter.crop_bgr`); then
     :func:`~.detector.preprocess` fits it to the model input ``imgsz`` (W, H)."""
-    from .adapter import crop_bgr
+    from ..adapter import crop_bgr
     from .detector import preprocess
 
     for f in files:
@@ -269,7 +269,7 @@ def compare_detections(pairs: Iterable[tuple[tuple, tuple]]) -> dict:
     :func:`~.model.decode.postprocess` returns them (x1 y1 x2 y2, best first). Returns the counts,
     the share of reference boxes matched, the mean / min IoU of the pairs, the largest corner
     deviation (px) and score difference of a pair, and ``ok`` (the check above)."""
-    from .evaluation.metrics import greedy_match
+    from ..evaluation.metrics import greedy_match
 
     n_ref = n_test = 0
     ious, dev, sdiff = [], 0.0, 0.0

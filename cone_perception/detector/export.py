@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from .errors import ConfigError
-from .model import ConeYOLO
+from ..errors import ConfigError
+from ..model import ConeYOLO
 
 ONNX_OPSET = 17
 
@@ -62,8 +62,8 @@ def export_metadata(class_names: list[str], imgsz: tuple[int, int], stride: int,
     """What an exported file carries about itself, as strings: ``names`` ("{0: 'blue', ...}"), ``imgsz``
     ("[H, W]", Ultralytics' order), ``stride``, ``model_version`` (checkpoint format and version),
     ``exporter`` (this package's version), ``source`` (the checkpoint), ``layout``, ``task``."""
-    from . import __version__
-    from .checkpoint import FORMAT, VERSION
+    from .. import __version__
+    from ..checkpoint import FORMAT, VERSION
 
     meta = {
         "names": repr({i: str(n) for i, n in enumerate(class_names)}),

@@ -1,0 +1,42 @@
+"""The cone detector: a model file in, boxes out.
+
+* :mod:`.detector`: :class:`Detector` (load a model file for a backend, run it on a band or an image) and
+  :func:`detect_one` (one full image as ``detect`` runs it);
+* :mod:`.export`: export to TorchScript / ONNX with the description embedded, and the check against eager;
+* :mod:`.quantize`: static int8 quantisation of an exported ONNX model.
+
+The names below are the face of the former module ``cone_perception.detector``:
+``from cone_perception.detector import Detector, default_model_path`` keeps working.
+"""
+
+from .detector import (
+    BACKEND_CHOICES,
+    BACKENDS,
+    DEFAULT_BACKEND,
+    DEFAULT_CONF,
+    DEFAULT_IOU,
+    DEFAULT_MAX_DET,
+    DEFAULT_MODEL_NAME,
+    PAD_VALUE,
+    RUNTIME_THREADS,
+    Detector,
+    Letterbox,
+    band_input_size,
+    default_model_path,
+    detect_one,
+    find_sidecar,
+    letterbox,
+    preprocess,
+    read_sidecar,
+    resolve_backend,
+    round_up32,
+    sidecar_path,
+    write_sidecar,
+)
+
+__all__ = [
+    "BACKEND_CHOICES", "BACKENDS", "DEFAULT_BACKEND", "DEFAULT_CONF", "DEFAULT_IOU", "DEFAULT_MAX_DET",
+    "DEFAULT_MODEL_NAME", "PAD_VALUE", "RUNTIME_THREADS", "Detector", "Letterbox", "band_input_size",
+    "default_model_path", "detect_one", "find_sidecar", "letterbox", "preprocess", "read_sidecar",
+    "resolve_backend", "round_up32", "sidecar_path", "write_sidecar",
+]
