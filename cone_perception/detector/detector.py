@@ -23,18 +23,14 @@ size backends (TorchScript, ONNX) letterbox other sizes to their input size.
 
 from __future__ import annotations
 
-import ast
 import json
 import logging
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-import cv2
 import numpy as np
 import torch
-import yaml
 
 from .. import records
 from ..adapter import pin_opencv_threads
@@ -43,222 +39,12 @@ from ..checkpoint import RESTORE_HINT, Checkpoint, class_map_from_names, load_ch
 from ..crop import CropSpec
 from ..errors import ConfigError
 from ..model.decode import postprocess
-from ..params import DEFAULT_BACKEND, DEFAULT_CONF, DEFAULT_IOU, DEFAULT_MAX_DET, RUNTIME_THREADS  # noqa: F401 - re-exported
-from ..resources import models_dir
+from ..params import DEFAULT_BACKEND, DEFAULT_CONF, DEFAULT_IOU, DEFAULT_MAX_DET
+from .backends import BACKEND_CHOICES, OrtRunner, TorchRunner, onnx_input_size, ort_session, resolve_backend
+from .model_files import external_names, find_sidecar, sidecar_path
+from .preprocess import band_input_size, preprocess
 
 log = logging.getLogger(__name__)
-
-#: File name of the shipped default model under ``models/``.
-DEFAULT_MODEL_NAME = "cone_detector.pt"
-BACKENDS = ("torch", "torchscript", "onnx")
-#: What ``backend`` may be: a backend, or ``auto`` (:func:`resolve_backend`), the default everywhere.
-BACKEND_CHOICES = ("auto", *BACKENDS)
-PAD_VALUE = 114
-
-
-def resolve_backend(backend: str, path: str | Path | None = None, device: str = "cpu", bf16: bool = False,
-                    fp16: bool = False) -> str:
-    """The backend ``backend`` stands for: itself, or for ``auto`` the fastest one the model can run
-    with here: an exported file's own (``.onnx`` -> onnx, ``.torchscript`` / ``.ts`` -> torchscript);
-    for a checkpoint (``path`` ``.pt``, or None = in memory) ONNX Runtime on the CPU when it and
-    ``onnx`` are installed (a faster forward than eager torch's, the same boxes), else eager torch
-    (a GPU, ``bf16`` / ``fp16``). The loaded detector's :attr:`Detector.backend` says which."""
-    if backend != "auto":
-        return backend
-    suffix = Path(path).suffix.lower() if path is not None else ".pt"
-    if suffix == ".onnx":
-        return "onnx"
-    if suffix in (".torchscript", ".ts"):
-        return "torchscript"
-    if device != "cpu" or bf16 or fp16:
-        return "torch"
-    try:  # ONNX Runtime runs it; torch's exporter needs the onnx package to build it
-        import onnx  # noqa: F401
-        import onnxruntime  # noqa: F401
-    except ImportError:
-        return "torch"
-    return "onnx"
-
-
-def default_model_path() -> Path:
-    """``models/cone_detector.pt`` of the installed package (may not exist yet)."""
-    return models_dir() / DEFAULT_MODEL_NAME
-
-
-def round_up32(n: int) -> int:
-    return int(-(-int(n) // 32) * 32)
-
-
-def band_input_size(band_wh: tuple[int, int]) -> tuple[int, int]:
-    """The network input (W, H) a checkpoint is built for to run a band of ``band_wh`` as it is:
-    each side rounded up to a multiple of 32 (the band is padded, never scaled)."""
-    return round_up32(band_wh[0]), round_up32(band_wh[1])
-
-
-@dataclass(frozen=True)
-class Letterbox:
-    """How an image was fitted into the network input: scale, then pad right / bottom."""
-
-    scale: float
-    in_w: int
-    in_h: int
-
-    def boxes_to_image(self, boxes_in_px: np.ndarray, image_w: int, image_h: int) -> np.ndarray:
-        """(N, 4) boxes in network-input px -> image px, clipped to the image (float32)."""
-        b = np.asarray(boxes_in_px, dtype=np.float32).reshape(-1, 4) / np.float32(self.scale)
-        b[:, 0::2] = b[:, 0::2].clip(0, image_w)
-        b[:, 1::2] = b[:, 1::2].clip(0, image_h)
-        return b
-
-
-def letterbox(img: np.ndarray, in_w: int, in_h: int) -> tuple[np.ndarray, Letterbox]:
-    """Fit ``img`` (h, w, 3) into (in_h, in_w, 3): scale to fit, pad right / bottom with grey."""
-    h, w = img.shape[:2]
-    r = min(in_w / w, in_h / h)
-    if abs(r - 1.0) > 1e-9:
-        nw, nh = min(in_w, round(w * r)), min(in_h, round(h * r))
-        img = cv2.resize(img, (nw, nh), interpolation=cv2.INTER_LINEAR if r > 1 else cv2.INTER_AREA)
-    else:
-        r = 1.0
-    h2, w2 = img.shape[:2]
-    if (h2, w2) != (in_h, in_w):
-        img = cv2.copyMakeBorder(img, 0, in_h - h2, 0, in_w - w2, cv2.BORDER_CONSTANT, value=(PAD_VALUE,) * 3)
-    return img, Letterbox(r, in_w, in_h)
-
-
-def preprocess(bgr: np.ndarray, in_w: int, in_h: int) -> tuple[np.ndarray, Letterbox]:
-    """BGR uint8 image -> the network input: letterboxed to (in_w, in_h), (1, 3, H, W) float32 RGB 0..1.
-
-    The one preprocessing of every backend (and of int8 calibration, :mod:`.quantize`)."""
-    img, lb = letterbox(bgr, in_w, in_h)
-    return cv2.dnn.blobFromImage(img, 1.0 / 255.0, swapRB=True), lb
-
-
-# -- backends: (1, 3, H, W) float32 RGB 0..1 -> (4 + nc, N) float32 numpy --------------------------
-
-
-class _TorchRunner:
-    def __init__(self, module: Callable, device: str, fp16: bool, channels_last: bool, bf16: bool = False):
-        self.module, self.device, self.fp16, self.channels_last = module, torch.device(device), fp16, channels_last
-        self.bf16 = bf16  # CPU bfloat16 autocast (weights stay fp32)
-
-    def __call__(self, blob: np.ndarray) -> np.ndarray:
-        x = torch.from_numpy(blob).to(self.device)
-        if self.channels_last:
-            x = x.contiguous(memory_format=torch.channels_last)
-        if self.fp16:
-            x = x.half()
-        with torch.inference_mode(), torch.autocast("cpu", dtype=torch.bfloat16, enabled=self.bf16):
-            y = self.module(x)
-        if isinstance(y, (list, tuple)):
-            y = y[0]
-        return y[0].float().cpu().numpy()
-
-
-class _OrtRunner:
-    def __init__(self, session):
-        self.session = session
-        self.input_name = session.get_inputs()[0].name
-        self.fp16 = session.get_inputs()[0].type == "tensor(float16)"
-
-    def __call__(self, blob: np.ndarray) -> np.ndarray:
-        x = blob.astype(np.float16) if self.fp16 else blob
-        return np.asarray(self.session.run(None, {self.input_name: x})[0][0], dtype=np.float32)
-
-
-def _ort_session(model_bytes_or_path, device: str, threads: int | None, source: str):
-    try:
-        import onnxruntime as ort
-    except ImportError as e:  # optional dependency
-        raise ConfigError(source, "backend", "backend 'onnx' needs the onnxruntime package (pip install onnxruntime)") from e
-    so = ort.SessionOptions()
-    if threads:
-        so.intra_op_num_threads = int(threads)
-        so.inter_op_num_threads = 1
-    so.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
-    providers = ["CPUExecutionProvider"]
-    if device.startswith("cuda") and "CUDAExecutionProvider" in ort.get_available_providers():
-        providers.insert(0, "CUDAExecutionProvider")
-    try:
-        return ort.InferenceSession(model_bytes_or_path, sess_options=so, providers=providers)
-    except Exception as e:  # noqa: BLE001 - onnxruntime raises its own exception types
-        raise ConfigError(source, None, f"ONNX Runtime cannot load the model: {e}") from e
-
-
-def sidecar_path(model_path: str | Path) -> Path:
-    """The YAML sidecar ``export`` writes for one exported file: ``<file name>.yaml`` (``m.onnx`` ->
-    ``m.onnx.yaml``), so a TorchScript and an ONNX export to one stem keep one sidecar each."""
-    model_path = Path(model_path)
-    return model_path.with_name(model_path.name + ".yaml")
-
-
-def find_sidecar(model_path: Path) -> Path | None:
-    """The sidecar of an exported model: ``<file name>.yaml``, else ``<stem>.yaml`` (other YOLO tools, older
-    exports); None when neither exists."""
-    for side in (sidecar_path(model_path), model_path.with_suffix(".yaml")):
-        if side.is_file():
-            return side
-    return None
-
-
-def read_sidecar(model_path: Path) -> tuple[list[str], tuple[int, int] | None]:
-    """Class names and optional input size from the sidecar of an exported model (:func:`find_sidecar`)."""
-    side = find_sidecar(model_path)
-    if side is None:
-        raise ConfigError(str(sidecar_path(model_path)), None,
-                          f"class names of {model_path.name} not found: neither embedded in the file nor in a sidecar "
-                          f"{sidecar_path(model_path).name} or {model_path.with_suffix('.yaml').name} "
-                          "(write `names: [blue_cone, ...]`, or export again: export embeds them)")
-    try:
-        doc = yaml.safe_load(side.read_text()) or {}
-    except yaml.YAMLError as e:
-        raise ConfigError(str(side), None, f"not valid YAML: {e}") from e
-    names = doc.get("names") if isinstance(doc, dict) else None
-    if isinstance(names, dict):
-        try:
-            names = [names[k] for k in sorted(names, key=int)]
-        except (ValueError, TypeError) as e:
-            raise ConfigError(str(side), "names", f"dict keys must be class indices 0..n-1: {e}") from e
-    if not isinstance(names, list) or not names:
-        raise ConfigError(str(side), "names", "must be a non-empty list of class names (or {index: name})")
-    imgsz = doc.get("imgsz")
-    if imgsz is not None:
-        if not (isinstance(imgsz, (list, tuple)) and len(imgsz) == 2 and all(int(v) > 0 and int(v) % 32 == 0 for v in imgsz)):
-            raise ConfigError(str(side), "imgsz", f"must be [W, H], positive multiples of 32, got {imgsz}")
-        imgsz = (int(imgsz[0]), int(imgsz[1]))
-    return [str(n) for n in names], imgsz
-
-
-def _external_names(model_path: Path, embedded: dict) -> tuple[list[str], tuple[int, int] | None, str]:
-    """Class names and input size of an exported model: the YAML sidecar if there is one, else the
-    metadata ``export`` and other YOLO tools embed (``names`` as "{0: 'blue_cone', ...}", ``imgsz`` as [h, w])."""
-    side = find_sidecar(model_path)
-    if side is not None or "names" not in embedded:
-        names, imgsz = read_sidecar(model_path)
-        return names, imgsz, str(side)
-    side = sidecar_path(model_path)
-    src = f"{model_path}: embedded metadata"
-    try:
-        names = embedded["names"]
-        names = ast.literal_eval(names) if isinstance(names, str) else names
-        if isinstance(names, dict):
-            names = [names[k] for k in sorted(names, key=int)]
-        imgsz = embedded.get("imgsz")
-        imgsz = ast.literal_eval(imgsz) if isinstance(imgsz, str) else imgsz
-    except (ValueError, SyntaxError, KeyError, TypeError) as e:
-        raise ConfigError(src, "names", f"cannot read the embedded class names ({e}); write a sidecar {side.name}") from e
-    if not isinstance(names, (list, tuple)) or not names:
-        raise ConfigError(src, "names", f"embedded class names are not a list or dict; write a sidecar {side.name}")
-    size = (int(imgsz[1]), int(imgsz[0])) if isinstance(imgsz, (list, tuple)) and len(imgsz) == 2 else None  # [h, w]
-    return [str(n) for n in names], size, src
-
-
-def write_sidecar(model_path: Path, class_names: list[str], imgsz: tuple[int, int], extra: dict | None = None) -> Path:
-    """Write ``<file name>.yaml`` (:func:`sidecar_path`) with the class names, ``imgsz: [W, H]`` and ``extra``."""
-    side = sidecar_path(model_path)
-    doc = {"names": list(class_names), "imgsz": [int(imgsz[0]), int(imgsz[1])], **(extra or {})}
-    side.write_text(yaml.safe_dump(doc, sort_keys=False))
-    return side
 
 
 class Detector:
@@ -353,11 +139,11 @@ class Detector:
             if suffix == ".onnx":
                 if backend != "onnx":
                     raise ConfigError(src, "backend", f"an ONNX file runs with backend 'onnx', not {backend!r}")
-                sess = _ort_session(str(path), device, threads, src)
+                sess = ort_session(str(path), device, threads, src)
                 embedded = dict(sess.get_modelmeta().custom_metadata_map)
-                names, side_imgsz, names_src = _external_names(path, embedded)
-                size = imgsz or side_imgsz or _onnx_input_size(sess, src)
-                det = cls(_OrtRunner(sess), class_map_from_names(names, names_src), size, True, "onnx", src, **kw)
+                names, side_imgsz, names_src = external_names(path, embedded)
+                size = imgsz or side_imgsz or onnx_input_size(sess, src)
+                det = cls(OrtRunner(sess), class_map_from_names(names, names_src), size, True, "onnx", src, **kw)
             else:
                 if backend != "torchscript":
                     raise ConfigError(src, "backend", f"a TorchScript file runs with backend 'torchscript', not {backend!r}")
@@ -370,13 +156,13 @@ class Detector:
                     embedded = json.loads(extra["config.txt"]) if extra["config.txt"] else {}
                 except (json.JSONDecodeError, UnicodeDecodeError):
                     embedded = {}
-                names, side_imgsz, names_src = _external_names(path, embedded)
+                names, side_imgsz, names_src = external_names(path, embedded)
                 if fp16:
                     module = module.half()
                 size = imgsz or side_imgsz
                 if size is None:
                     raise ConfigError(str(side), "imgsz", "TorchScript models need imgsz: [W, H] in the sidecar")
-                det = cls(_TorchRunner(module, device, fp16, False), class_map_from_names(names, names_src), size, True,
+                det = cls(TorchRunner(module, device, fp16, False), class_map_from_names(names, names_src), size, True,
                           "torchscript", src, **kw)
             det._check_output_shape()
             return det
@@ -406,8 +192,8 @@ class Detector:
         if backend == "onnx":
             from .export import onnx_bytes
 
-            sess = _ort_session(onnx_bytes(model, size), device, threads, ck.path)
-            return cls(_OrtRunner(sess), class_map, size, True, "onnx", ck.path, checkpoint=ck, **kw)
+            sess = ort_session(onnx_bytes(model, size), device, threads, ck.path)
+            return cls(OrtRunner(sess), class_map, size, True, "onnx", ck.path, checkpoint=ck, **kw)
         model = model.fuse().to(device)
         if fp16:
             model = model.half()
@@ -415,11 +201,11 @@ class Detector:
             from .export import trace
 
             module = trace(model, size, device=device, fp16=fp16)
-            return cls(_TorchRunner(module, device, fp16, False), class_map, size, True, "torchscript", ck.path, checkpoint=ck, **kw)
+            return cls(TorchRunner(module, device, fp16, False), class_map, size, True, "torchscript", ck.path, checkpoint=ck, **kw)
         if backend != "torch":
             raise ConfigError(ck.path, "backend", f"unknown backend {backend!r}; choose one of {', '.join(BACKEND_CHOICES)}")
         model = model.to(memory_format=torch.channels_last)
-        return cls(_TorchRunner(model, device, fp16, True, bf16=bf16), class_map, size, False, "torch", ck.path, checkpoint=ck, **kw)
+        return cls(TorchRunner(model, device, fp16, True, bf16=bf16), class_map, size, False, "torch", ck.path, checkpoint=ck, **kw)
 
     @classmethod
     def from_model(cls, model, imgsz: tuple[int, int], backend: str = DEFAULT_BACKEND, **kw) -> "Detector":
@@ -502,13 +288,6 @@ class Detector:
     def raw(self, blob: np.ndarray) -> np.ndarray:
         """(1, 3, H, W) float32 RGB 0..1 -> (4 + nc, N) network output (for tests and export checks)."""
         return self._run(np.ascontiguousarray(blob, dtype=np.float32))
-
-
-def _onnx_input_size(sess, source: str) -> tuple[int, int]:
-    shape = sess.get_inputs()[0].shape
-    if len(shape) != 4 or not all(isinstance(v, int) for v in shape[2:]):
-        raise ConfigError(source, "imgsz", f"ONNX input shape {shape} is dynamic: give imgsz: [W, H] in the sidecar")
-    return int(shape[3]), int(shape[2])
 
 
 def detect_one(det, img: np.ndarray, name: str, crop: tuple[int, ...] | None = None, downscale: int = 1,

@@ -103,7 +103,7 @@ def calibration_blobs(files: list[Path], imgsz: tuple[int, int], crop: tuple[int
     cut and downscaled like the car's adapter does (:func:`~.adapter.crop_bgr`); then
     :func:`~.detector.preprocess` fits it to the model input ``imgsz`` (W, H)."""
     from ..adapter import crop_bgr
-    from .detector import preprocess
+    from .preprocess import preprocess
 
     for f in files:
         img = cv2.imread(str(f), cv2.IMREAD_COLOR)

@@ -1,0 +1,102 @@
+"""The backends a :class:`~cone_perception.detector.Detector` runs on: eager torch, TorchScript, ONNX Runtime.
+Each runner takes (1, 3, H, W) float32 RGB 0..1 and returns (4 + nc, N) float32 numpy."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import torch
+
+from ..errors import ConfigError
+
+BACKENDS = ("torch", "torchscript", "onnx")
+#: What ``backend`` may be: a backend, or ``auto`` (:func:`resolve_backend`), the default everywhere.
+BACKEND_CHOICES = ("auto", *BACKENDS)
+
+
+def resolve_backend(backend: str, path: str | Path | None = None, device: str = "cpu", bf16: bool = False,
+                    fp16: bool = False) -> str:
+    """The backend ``backend`` stands for: itself, or for ``auto`` the fastest one the model can run
+    with here: an exported file's own (``.onnx`` -> onnx, ``.torchscript`` / ``.ts`` -> torchscript);
+    for a checkpoint (``path`` ``.pt``, or None = in memory) ONNX Runtime on the CPU when it and
+    ``onnx`` are installed (a faster forward than eager torch's, the same boxes), else eager torch
+    (a GPU, ``bf16`` / ``fp16``). The loaded detector's :attr:`Detector.backend` says which."""
+    if backend != "auto":
+        return backend
+    suffix = Path(path).suffix.lower() if path is not None else ".pt"
+    if suffix == ".onnx":
+        return "onnx"
+    if suffix in (".torchscript", ".ts"):
+        return "torchscript"
+    if device != "cpu" or bf16 or fp16:
+        return "torch"
+    try:  # ONNX Runtime runs it; torch's exporter needs the onnx package to build it
+        import onnx  # noqa: F401
+        import onnxruntime  # noqa: F401
+    except ImportError:
+        return "torch"
+    return "onnx"
+
+
+class TorchRunner:
+    """Eager torch or TorchScript: (1, 3, H, W) float32 RGB 0..1 -> (4 + nc, N) float32 numpy."""
+
+    def __init__(self, module: Callable, device: str, fp16: bool, channels_last: bool, bf16: bool = False):
+        self.module, self.device, self.fp16, self.channels_last = module, torch.device(device), fp16, channels_last
+        self.bf16 = bf16  # CPU bfloat16 autocast (weights stay fp32)
+
+    def __call__(self, blob: np.ndarray) -> np.ndarray:
+        x = torch.from_numpy(blob).to(self.device)
+        if self.channels_last:
+            x = x.contiguous(memory_format=torch.channels_last)
+        if self.fp16:
+            x = x.half()
+        with torch.inference_mode(), torch.autocast("cpu", dtype=torch.bfloat16, enabled=self.bf16):
+            y = self.module(x)
+        if isinstance(y, (list, tuple)):
+            y = y[0]
+        return y[0].float().cpu().numpy()
+
+
+class OrtRunner:
+    """An ONNX Runtime session: (1, 3, H, W) float32 RGB 0..1 -> (4 + nc, N) float32 numpy (fp16 inputs cast)."""
+
+    def __init__(self, session):
+        self.session = session
+        self.input_name = session.get_inputs()[0].name
+        self.fp16 = session.get_inputs()[0].type == "tensor(float16)"
+
+    def __call__(self, blob: np.ndarray) -> np.ndarray:
+        x = blob.astype(np.float16) if self.fp16 else blob
+        return np.asarray(self.session.run(None, {self.input_name: x})[0][0], dtype=np.float32)
+
+
+def ort_session(model_bytes_or_path, device: str, threads: int | None, source: str):
+    """An ONNX Runtime session (CUDA first when asked for and available); a :class:`ConfigError` naming
+    ``source`` when onnxruntime is missing or cannot load the model."""
+    try:
+        import onnxruntime as ort
+    except ImportError as e:  # optional dependency
+        raise ConfigError(source, "backend", "backend 'onnx' needs the onnxruntime package (pip install onnxruntime)") from e
+    so = ort.SessionOptions()
+    if threads:
+        so.intra_op_num_threads = int(threads)
+        so.inter_op_num_threads = 1
+    so.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
+    providers = ["CPUExecutionProvider"]
+    if device.startswith("cuda") and "CUDAExecutionProvider" in ort.get_available_providers():
+        providers.insert(0, "CUDAExecutionProvider")
+    try:
+        return ort.InferenceSession(model_bytes_or_path, sess_options=so, providers=providers)
+    except Exception as e:  # noqa: BLE001 - onnxruntime raises its own exception types
+        raise ConfigError(source, None, f"ONNX Runtime cannot load the model: {e}") from e
+
+
+def onnx_input_size(sess, source: str) -> tuple[int, int]:
+    """(W, H) of a session's fixed input; a :class:`ConfigError` for a dynamic one."""
+    shape = sess.get_inputs()[0].shape
+    if len(shape) != 4 or not all(isinstance(v, int) for v in shape[2:]):
+        raise ConfigError(source, "imgsz", f"ONNX input shape {shape} is dynamic: give imgsz: [W, H] in the sidecar")
+    return int(shape[3]), int(shape[2])
