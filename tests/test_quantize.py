@@ -15,7 +15,7 @@ from cone_perception.cli import main as cli_main
 from cone_perception.crop import CropSpec
 from cone_perception.detector import Detector
 from cone_perception.errors import ConfigError
-from cone_perception.detector.quantize import calibration_blobs, calibration_pool, compare_detections, head_output_convs, qdq_summary, spread
+from cone_perception.detector.quantize import calibration_blobs, int8_frame_pool, compare_detections, head_output_convs, qdq_summary, spread
 from synthetic_cones import SMOKE_SIZE, make_image, trained_smoke_model
 
 
@@ -128,16 +128,16 @@ def test_validation_clips_are_never_calibration_frames(tmp_path):
              "skidpad_1_jpg_f"]
     for n in names:
         cv2.imwrite(str(tmp_path / f"{n}.jpg"), img)
-    pool, dropped = calibration_pool(tmp_path)
+    pool, dropped = int8_frame_pool(tmp_path)
     assert [p.stem for p in pool] == ["autox3_mp4-4_jpg_d", "autox6_mp4-5_jpg_e", "skidpad_1_jpg_f"] and dropped == 3
-    assert [p.stem for p in calibration_pool(tmp_path, ["autox6"])[0]] == ["autox6_mp4-5_jpg_e"]
+    assert [p.stem for p in int8_frame_pool(tmp_path, ["autox6"])[0]] == ["autox6_mp4-5_jpg_e"]
     with pytest.raises(ConfigError, match="calib-clips.*autox2.*validation"):
-        calibration_pool(tmp_path, ["autox3", "autox2"])
+        int8_frame_pool(tmp_path, ["autox3", "autox2"])
     only_val = tmp_path / "val"
     only_val.mkdir()
     cv2.imwrite(str(only_val / "accel_mp4-9_jpg_z.jpg"), img)
     with pytest.raises(ConfigError, match="validation clips"):
-        calibration_pool(only_val)
+        int8_frame_pool(only_val)
     assert [p.stem for p in spread(pool, 2)] == ["autox3_mp4-4_jpg_d", "skidpad_1_jpg_f"]
     assert len(spread(pool, 99)) == 3
 

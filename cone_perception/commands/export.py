@@ -72,10 +72,10 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError("--int8", "calib-images", "give a folder of real frames to calibrate on (--calib-images DIR)")
         if args.calib_frames < 1:
             raise ConfigError("--calib-frames", None, f"must be >= 1, got {args.calib_frames}")
-        from ..detector.quantize import calibration_pool
+        from ..detector.quantize import int8_frame_pool
 
         # the calibration frames are checked before anything is exported
-        pool, dropped = calibration_pool(args.calib_images, args.calib_clips.split(",") if args.calib_clips else None)
+        pool, dropped = int8_frame_pool(args.calib_images, args.calib_clips.split(",") if args.calib_clips else None)
 
     ck = load_checkpoint(args.model)
     imgsz = round_imgsz(args.imgsz) if args.imgsz else ck.imgsz

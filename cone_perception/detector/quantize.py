@@ -1,6 +1,6 @@
 """Static int8 quantisation of an exported ONNX detector (ONNX Runtime, QDQ format).
 
-    pool, dropped = calibration_pool(folder)                   # real frames, validation clips left out
+    pool, dropped = int8_frame_pool(folder)                    # real frames, validation clips left out
     blobs = calibration_blobs(spread(pool, 64), imgsz, crop=(32, 224))  # exactly the detector's preprocessing
     quantize_onnx(fp32_path, int8_path, blobs, QuantOptions())  # -> <stem>.int8.onnx
 
@@ -54,10 +54,10 @@ class QuantOptions:
                 f"last head convs {'float' if self.exclude_head else 'int8'}")
 
 
-def calibration_pool(folder: str | Path, clips: Iterable[str] | None = None) -> tuple[list[Path], int]:
-    """The images of ``folder`` (searched recursively, sorted) that calibration may use, and how
+def int8_frame_pool(folder: str | Path, clips: Iterable[str] | None = None) -> tuple[list[Path], int]:
+    """The images of ``folder`` (searched recursively, sorted) that int8 calibration may use, and how
     many were dropped because they belong to the validation clips
-    (:data:`~.train.datasets.VALIDATION_CLIPS`, never used; naming one in ``clips`` is an error).
+    (:data:`~cone_perception.train.datasets.VALIDATION_CLIPS`, never used; naming one in ``clips`` is an error).
     ``clips`` keeps only frames of these clips (file name before the first '-')."""
     from ..train.datasets import IMAGE_SUFFIXES, VALIDATION_CLIPS, in_clips
 
