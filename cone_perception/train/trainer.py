@@ -182,7 +182,7 @@ def lr_at(it: int, iters_per_epoch: int, cfg: TrainConfig) -> float:
 
 
 @torch.no_grad()
-def evaluate(model: ConeYOLO, loader: DataLoader, conf: float, iou: float, max_det: int = 300,
+def validate(model: ConeYOLO, loader: DataLoader, conf: float, iou: float, max_det: int = 300,
              device: torch.device | str = "cpu") -> dict:
     """mAP of ``model`` on a validation loader (boxes compared in the letterboxed input px)."""
     model.eval()
@@ -411,7 +411,7 @@ def _train(cfg: TrainConfig, info: "distributed.DistInfo", resume: bool, progres
                "images_per_s": steady_n / max(steady_s, 1e-9),
                "epoch_train_s": t_end - t0, "lr": lr}
         if val_entries:  # rank 0 validates; the others take its fitness (early stop, best epoch)
-            m = evaluate(ema.ema, val_loader, cfg.val_conf, cfg.val_iou, device=device) if main else {}
+            m = validate(ema.ema, val_loader, cfg.val_conf, cfg.val_iou, device=device) if main else {}
             m = distributed.from_main(m, info)
             row.update(map50=m["map50"], map50_95=m["map50_95"])
             fitness = 0.1 * m["map50"] + 0.9 * m["map50_95"]
