@@ -18,9 +18,6 @@ from .errors import ConfigError
 
 ALLOWED_DOWNSCALE = (1, 2, 4)
 
-#: The thesis's runtime-table inputs: whole image or the band, each at full or half resolution.
-INPUT_SETTINGS = ("full", "half", "crop", "crop_half")
-
 #: A cone cut by the edge of a band or a training window still counts when at least this
 #: fraction of its box area remains inside (training keeps such boxes clipped; ``eval --band``
 #: scores them clipped and ignores the rest).
@@ -79,17 +76,6 @@ class CropSpec:
     @classmethod
     def full_image(cls, width: int, height: int, downscale: int = 1) -> "CropSpec":
         return cls(0, height, 0, width, downscale)
-
-    def for_setting(self, setting: str, image_width: int, image_height: int) -> "CropSpec":
-        """The crop of a runtime-table input ``setting`` (:data:`INPUT_SETTINGS`), ``self`` being the band:
-        ``full`` all rows and columns, downscale 1; ``half`` the same, downscale 2; ``crop`` this band
-        (rows and columns), downscale 1; ``crop_half`` this band, downscale 2."""
-        if setting not in INPUT_SETTINGS:
-            raise ConfigError("input", None, f"unknown input setting {setting!r}; choose one of {', '.join(INPUT_SETTINGS)}")
-        downscale = 2 if setting in ("half", "crop_half") else 1
-        if setting in ("full", "half"):
-            return CropSpec.full_image(image_width, image_height, downscale)
-        return CropSpec(self.v0, self.v1, self.u0, self.u1, downscale)
 
     # -- coordinates --------------------------------------------------------------
     def to_full(self, uv_cropped_px: np.ndarray) -> np.ndarray:

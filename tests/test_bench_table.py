@@ -13,8 +13,9 @@ import numpy as np
 import pytest
 
 from cone_perception.adapter import bgr_to_yuyv
+from cone_perception.bench.table import INPUT_SETTINGS, crop_for_setting
 from cone_perception.calib import load_calibration
-from cone_perception.crop import INPUT_SETTINGS, CropSpec
+from cone_perception.crop import CropSpec
 from cone_perception.detector import Detector
 from cone_perception.errors import ConfigError
 from cone_perception.pipeline import Pipeline
@@ -45,16 +46,16 @@ def stub_detector(source: str = "stub.pt") -> tuple[Detector, StubNet]:
 
 def test_each_setting_gives_its_crop() -> None:
     band = CropSpec(384, 960, 0, 1920, 2)
-    got = {s: band.for_setting(s, 1920, 1080) for s in INPUT_SETTINGS}
+    got = {s: crop_for_setting(band, s, 1920, 1080) for s in INPUT_SETTINGS}
     assert got["full"] == CropSpec(0, 1080, 0, 1920, 1)
     assert got["half"] == CropSpec(0, 1080, 0, 1920, 2)
     assert got["crop"] == CropSpec(384, 960, 0, 1920, 1)
     assert got["crop_half"] == CropSpec(384, 960, 0, 1920, 2)
     assert [(c.out_width, c.out_height) for c in got.values()] == [(1920, 1080), (960, 540), (1920, 576), (960, 288)]
     # the band's columns are kept too
-    assert CropSpec(96, 672, 64, 1856).for_setting("crop_half", 1920, 1080) == CropSpec(96, 672, 64, 1856, 2)
+    assert crop_for_setting(CropSpec(96, 672, 64, 1856), "crop_half", 1920, 1080) == CropSpec(96, 672, 64, 1856, 2)
     with pytest.raises(ConfigError, match="unknown input setting"):
-        band.for_setting("quarter", 1920, 1080)
+        crop_for_setting(band, "quarter", 1920, 1080)
 
 
 @pytest.mark.parametrize("setting,net_input,scale,v_off", [
@@ -65,7 +66,7 @@ def test_each_setting_gives_its_crop() -> None:
 ])
 def test_whole_frame_runs_through_the_pipeline(setting, net_input, scale, v_off) -> None:
     calib = load_calibration("example_mainhoop")
-    calib = replace(calib, crop=calib.crop.for_setting(setting, calib.image_width, calib.image_height))
+    calib = replace(calib, crop=crop_for_setting(calib.crop, setting, calib.image_width, calib.image_height))
     det, net = stub_detector()
     pipe = Pipeline(calib, det)
     frame = bgr_to_yuyv(np.full((1080, 1920, 3), 90, np.uint8))
@@ -84,7 +85,7 @@ def test_bench_pipeline_reports_the_setting() -> None:
     from cone_perception.bench.pipeline import bench_pipeline
 
     calib = load_calibration("example_mainhoop")
-    calib = replace(calib, crop=calib.crop.for_setting("full", 1920, 1080))
+    calib = replace(calib, crop=crop_for_setting(calib.crop, "full", 1920, 1080))
     det, net = stub_detector()
     r = bench_pipeline(calib, det, synthetic_frames(1920, 1080, "yuv422_yuy2", 2), n_frames=3, warmup=1)
     assert r["model_input"] == [1920, 1088]

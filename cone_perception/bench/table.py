@@ -2,7 +2,7 @@
 
 For each model and each input setting (``full`` 1920x1080 -> 1920x1088, ``half`` 960x544,
 ``crop`` the band at full resolution, ``crop_half`` the band halved, see
-:meth:`~cone_perception.crop.CropSpec.for_setting`):
+:func:`crop_for_setting`):
 
 1. speed: :func:`.pipeline.bench_pipeline` (the code of ``bench pipeline --input SETTING``) on
    rendered 1920x1080 YUYV frames with the calibration's band;
@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..crop import INPUT_SETTINGS, CropSpec
+from ..crop import CropSpec
 from ..errors import ConfigError
 from ..detector import detect_one
 from ..sources import iter_source
@@ -35,6 +35,21 @@ from .frames import rendered_frames
 from .pipeline import bench_pipeline, load_for_crop
 
 SRC = "bench table"
+
+#: The thesis's runtime-table inputs: whole image or the band, each at full or half resolution.
+INPUT_SETTINGS = ("full", "half", "crop", "crop_half")
+
+
+def crop_for_setting(band: CropSpec, setting: str, image_width: int, image_height: int) -> CropSpec:
+    """The crop of a runtime-table input ``setting`` (:data:`INPUT_SETTINGS`) for the camera's ``band``:
+    ``full`` all rows and columns, downscale 1; ``half`` the same, downscale 2; ``crop`` the band
+    (rows and columns), downscale 1; ``crop_half`` the band, downscale 2."""
+    if setting not in INPUT_SETTINGS:
+        raise ConfigError("input", None, f"unknown input setting {setting!r}; choose one of {', '.join(INPUT_SETTINGS)}")
+    downscale = 2 if setting in ("half", "crop_half") else 1
+    if setting in ("full", "half"):
+        return CropSpec.full_image(image_width, image_height, downscale)
+    return CropSpec(band.v0, band.v1, band.u0, band.u1, downscale)
 
 
 def _need(args: argparse.Namespace) -> None:
@@ -143,7 +158,7 @@ def run_table(args: argparse.Namespace, calib) -> int:
     bar = tqdm(runs, desc="bench table", unit="run", file=sys.stderr, disable=getattr(args, "no_progress", False))
     for model, setting in bar:
         bar.set_postfix_str(f"{Path(model).stem if model else 'default'} {setting}")
-        bench_calib = replace(calib, crop=calib.crop.for_setting(setting, calib.image_width, calib.image_height))
+        bench_calib = replace(calib, crop=crop_for_setting(calib.crop, setting, calib.image_width, calib.image_height))
         det = load_for_crop(model, args.backend, bench_calib.crop, args.threads, bf16=args.bf16)
         tag = f"{Path(det.source).stem}" + (f" ({det.checkpoint.cfg.name})" if det.checkpoint else "")
         b = bench_pipeline(bench_calib, det, frames, args.frames, args.warmup)
@@ -164,7 +179,7 @@ def run_table(args: argparse.Namespace, calib) -> int:
                     v0, v1, u0, u1 = args.band if len(args.band) == 4 else (*args.band, 0, w)
                     band = CropSpec(v0, v1, u0, u1)
                     band.validate(w, h, "--band")
-                c = band.for_setting(setting, w, h)
+                c = crop_for_setting(band, setting, w, h)
                 val_input = det.input_size_for(c.out_width, c.out_height)
                 boxes, scale = detect_one(det, img, name, (c.v0, c.v1, c.u0, c.u1), c.downscale)
                 write_prediction(fh, name, w, h, boxes, input_scale=scale)

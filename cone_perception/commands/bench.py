@@ -13,8 +13,8 @@ model input, forward, decode + NMS, mapping) and the packing of ``cone_boxes`` a
 into PointCloud2 messages, as the ``pipeline`` node runs them; ``debug_image`` is the cost of one
 ``image_cropped/debug`` image (drawn and copied; outside end_to_end: opt-in, at most
 ``debug_image_hz`` a second). ``--input`` replaces the
-calibration's crop and downscale by one of the runtime-table settings (:meth:`CropSpec.for_setting`).
-``table``: the runtime table (see ``bench_table.py``).
+calibration's crop and downscale by one of the runtime-table settings (:func:`cone_perception.bench.table.crop_for_setting`).
+``table``: the runtime table (see ``bench/table.py``).
 ``tracker``: the cone tracker's update per frame (ego-motion from the cones, association, Kalman
 update) on a simulated drive through rows of cones, about 100 tracks with the defaults.
 Warm-up frames are excluded; median, p90, p99, min-max (noise) and frames/s (from the median
@@ -32,9 +32,9 @@ from pathlib import Path
 
 from ..bench.frames import rendered_frames
 from ..bench.pipeline import BYTES_PER_PX, bench_adapter, bench_pipeline, bench_tracker, load_for_crop
+from ..bench.table import INPUT_SETTINGS, crop_for_setting
 from ..benchmark import format_table
 from ..calib import DEFAULT_CAMERA, load_calibration
-from ..crop import INPUT_SETTINGS
 from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, RUNTIME_THREADS
 from ..errors import ConfigError
 from ..params import DEFAULT_CONF
@@ -90,7 +90,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def _bench_pipeline(args: argparse.Namespace, calib) -> dict:
     if args.input:
-        calib = replace(calib, crop=calib.crop.for_setting(args.input, calib.image_width, calib.image_height))
+        calib = replace(calib, crop=crop_for_setting(calib.crop, args.input, calib.image_width, calib.image_height))
     det = load_for_crop(args.model, args.backend, calib.crop, args.threads, bf16=args.bf16)
     result = bench_pipeline(calib, det, rendered_frames(calib, max(1, args.scenes)), args.frames, args.warmup)
     result["setting"] = args.input or "calibration"
