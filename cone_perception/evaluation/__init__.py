@@ -3,7 +3,8 @@
 * :mod:`.metrics`: box metrics: COCO mAP (pycocotools), the operating point (P/R/F1), matching;
 * :mod:`.groundtruth`: ground truth (YOLO labels, ``gt.jsonl``) paired with a prediction file;
 * :mod:`.localisation`: cones in metres: matching, recall and error by distance, blue-yellow pairs;
-* :mod:`.report`: ``eval``'s evaluation, plots and report writer.
+* :mod:`.report`: ``eval``'s evaluation and report writer (metrics.json, report.md, the printed summary);
+* :mod:`.plots`: ``eval``'s pictures (confusion, precision-recall, by distance, localisation, pairs, worst frames).
 
 The names below are the face of the former module ``cone_perception.evaluation`` (now :mod:`.localisation`):
 ``from cone_perception.evaluation import LocalisationReport`` keeps working.
