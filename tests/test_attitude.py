@@ -22,7 +22,7 @@ from cone_perception.classes import BLUE, CONE_SIZE_M, LARGE_ORANGE, YELLOW
 from cone_perception.errors import ConfigError
 from cone_perception.mapping import ConeMapper
 from cone_perception.records import boxes_from_arrays
-from cone_perception.synth.outputs import SynthConfig
+from cone_perception.synth.config import SynthConfig
 from cone_perception.synth.render import CONE_MODELS
 from cone_perception.synth.scene import CarPose, SceneCamera
 

@@ -16,7 +16,7 @@ from cone_perception.nodes import _msgs
 from cone_perception.nodes.mapping import MappingNode
 from cone_perception.records import boxes_from_arrays
 from cone_perception.synth.motion import quat_from_rpy
-from cone_perception.synth.outputs import SynthConfig
+from cone_perception.synth.config import SynthConfig
 from cone_perception.synth.scene import CarPose, SceneCamera
 
 from rosutil import Inbox, RosFixture, ros  # noqa: F401 (ros is a fixture)

@@ -21,7 +21,8 @@ from cone_perception.nodes.live_replay import live_replay, write_result_bag
 from cone_perception.pipeline import Pipeline
 from cone_perception.replay import offline_replay, read_ground_truth
 from cone_perception.resources import calib_dir
-from cone_perception.synth.outputs import SynthConfig, write_scene_bag
+from cone_perception.synth.config import SynthConfig
+from cone_perception.synth.writers import write_scene_bag
 from cone_perception import bagio
 
 SEED = 90210  # not a training seed (training data: seed 1)

@@ -10,7 +10,7 @@ from cone_perception.classes import CLASS_NAMES, LARGE_ORANGE, ORANGE
 from cone_perception.errors import ConfigError
 from cone_perception.mapping import ConeMapper
 from cone_perception.records import boxes_from_arrays
-from cone_perception.synth.outputs import SynthConfig
+from cone_perception.synth.config import SynthConfig
 from cone_perception.synth.scene import random_pose
 
 

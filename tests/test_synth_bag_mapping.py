@@ -9,7 +9,8 @@ from cone_perception.adapter import DriverAdapter
 from cone_perception.calib import load_calibration
 from cone_perception.mapping import ConeMapper
 from cone_perception.records import CONE_DTYPE, boxes_from_arrays, from_pointcloud2
-from cone_perception.synth.outputs import SynthConfig, bag_side_paths, write_scene_bag
+from cone_perception.synth.config import SynthConfig
+from cone_perception.synth.writers import bag_side_paths, write_scene_bag
 
 
 def test_bag_frames_through_adapter_and_mapping(tmp_path):

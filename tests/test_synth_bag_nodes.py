@@ -19,7 +19,8 @@ from cone_perception.nodes import _msgs
 from cone_perception.nodes.driver_adapter import DriverAdapterNode
 from cone_perception.nodes.mapping import MappingNode
 from cone_perception.records import CONE_DTYPE, boxes_from_arrays, from_pointcloud2
-from cone_perception.synth.outputs import SynthConfig, bag_side_paths, write_scene_bag
+from cone_perception.synth.config import SynthConfig
+from cone_perception.synth.writers import bag_side_paths, write_scene_bag
 
 from rosutil import Inbox, RosFixture, ros  # noqa: F401 (ros is a fixture)
 

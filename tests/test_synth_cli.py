@@ -14,7 +14,8 @@ from cone_perception.classes import CLASS_NAMES
 from cone_perception.cli import main
 from cone_perception.crop import CropSpec
 from cone_perception.records import CONE_DTYPE, from_pointcloud2
-from cone_perception.synth.outputs import MIN_LABEL_BOX_PX, MIN_LABEL_VISIBLE, SynthConfig
+from cone_perception.synth.config import SynthConfig
+from cone_perception.synth.writers import MIN_LABEL_BOX_PX, MIN_LABEL_VISIBLE
 
 SMALL = ["--size", "320x180", "--quiet"]
 
@@ -162,7 +163,7 @@ def test_vary_mount_records_each_frames_camera(tmp_path):
 
 
 def test_mapcheck_shows_the_jitter_error(capsys):
-    from cone_perception.synth.outputs import mapping_check
+    from cone_perception.synth.mapcheck import mapping_check
 
     off = mapping_check(SynthConfig(width=960, height=540, jitter=False, nose_prob=0.0, photometric=False), 6)
     on = mapping_check(SynthConfig(width=960, height=540, jitter=True, nose_prob=0.0, photometric=False), 6)

@@ -16,7 +16,8 @@ from cone_perception.pipeline import Pipeline
 from cone_perception.records import boxes_from_arrays
 from cone_perception.replay import offline_replay, read_attitude_truth
 from cone_perception.synth.motion import drive_motion, quat_from_rpy, rpy_matrix
-from cone_perception.synth.outputs import SynthConfig, bag_side_paths, write_scene_bag
+from cone_perception.synth.config import SynthConfig
+from cone_perception.synth.writers import bag_side_paths, write_scene_bag
 from cone_perception.synth.track import make_track
 
 

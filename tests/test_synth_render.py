@@ -6,7 +6,7 @@ import pytest
 from cone_perception.calib import load_calibration
 from cone_perception.classes import BLUE, YELLOW
 from cone_perception.geometry import GroundMapper
-from cone_perception.synth.outputs import SynthConfig
+from cone_perception.synth.config import SynthConfig
 from cone_perception.synth.render import cone_vertices_W
 from cone_perception.synth.scene import CarPose, SceneCamera, random_pose
 from cone_perception.synth.track import Track, make_track

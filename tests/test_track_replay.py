@@ -18,7 +18,8 @@ from cone_perception.errors import ConfigError
 from cone_perception.pipeline import Pipeline
 from cone_perception.records import CONE_DTYPE, TRACKED_CONE_DTYPE, from_pointcloud2
 from cone_perception.replay import TRACKED_TOPIC, offline_replay
-from cone_perception.synth.outputs import SynthConfig, bag_side_paths, write_scene_bag
+from cone_perception.synth.config import SynthConfig
+from cone_perception.synth.writers import bag_side_paths, write_scene_bag
 from cone_perception.track_eval import TrackingReport, idf1, load_drive_truth
 from cone_perception.track_replay import ReplayTracking, drive_truth_beside, read_twists
 

@@ -90,7 +90,8 @@ def test_pipeline_node_with_track_publishes_tracked_cones(ros: RosFixture, tmp_p
 
     from cone_perception import bagio
     from cone_perception.nodes.pipeline import PipelineNode
-    from cone_perception.synth.outputs import SynthConfig, bag_side_paths, write_scene_bag
+    from cone_perception.synth.config import SynthConfig
+    from cone_perception.synth.writers import bag_side_paths, write_scene_bag
 
     bag = tmp_path / "drive"
     write_scene_bag(SynthConfig(seed=4242, jitter=False), 0.4, 10.0, bag, speed_mps=6.0, progress=False)

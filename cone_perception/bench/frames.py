@@ -26,7 +26,7 @@ def synthetic_frames(width: int, height: int, encoding: str, n: int, seed: int =
 
 def rendered_frames(calib, n: int, seed: int = 4242) -> list[bytes]:
     """``n`` YUYV frames of rendered scenes with cones, at the calibration's image size."""
-    from ..synth.outputs import SynthConfig
+    from ..synth.config import SynthConfig
     from ..synth.scene import random_pose
 
     cfg = SynthConfig(width=calib.image_width, height=calib.image_height, seed=seed, jitter=False)

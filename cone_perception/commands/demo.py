@@ -43,7 +43,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _bag(args) -> tuple[Path, Path]:
-    from ..synth.outputs import SynthConfig, bag_side_paths, write_scene_bag
+    from ..synth.config import SynthConfig
+    from ..synth.writers import bag_side_paths, write_scene_bag
 
     name = f"drive_seed{args.seed}_{args.seconds:g}s_{args.fps:g}hz{'' if args.jitter else '_nojitter'}"
     bag = args.out / name

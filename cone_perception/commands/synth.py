@@ -81,7 +81,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def config_from_args(args: argparse.Namespace):
     from ..camera import MountPose
-    from ..synth.outputs import SynthConfig
+    from ..synth.config import SynthConfig
     from ._args import parse_size
 
     w, h = parse_size(args.size, "--size", "1920x1080")
@@ -106,23 +106,23 @@ def config_from_args(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..synth import outputs
+    from ..synth import mapcheck, writers
 
     cfg = config_from_args(args)
     if args.action == "dataset":
-        c = outputs.write_dataset(cfg, args.n, args.out, args.frames_per_track, args.val_frac, progress=not args.no_progress)
+        c = writers.write_dataset(cfg, args.n, args.out, args.frames_per_track, args.val_frac, progress=not args.no_progress)
         print(f"wrote {c['train']} train + {c['val']} val frames, {c['labels']} YOLO labels, {c['cones']} cones in gt.jsonl -> {args.out}")
     elif args.action == "bag":
-        c = outputs.write_scene_bag(cfg, args.seconds, args.fps, args.out, args.compressed, args.speed, args.track, not args.no_progress)
-        calib, gt = outputs.bag_side_paths(Path(args.out))
+        c = writers.write_scene_bag(cfg, args.seconds, args.fps, args.out, args.compressed, args.speed, args.track, not args.no_progress)
+        calib, gt = writers.bag_side_paths(Path(args.out))
         print(f"wrote {args.out}: " + ", ".join(f"{t} {k}" for t, k in c.items()) + f"; calibration {calib}; ground truth {gt}")
     elif args.action == "preview":
         from ..outfiles import print_written, refuse_existing
 
         refuse_existing([args.out], args.force, "synth preview")
-        print_written([outputs.write_preview(cfg, args.out, args.n)], "synth preview")
+        print_written([writers.write_preview(cfg, args.out, args.n)], "synth preview")
     elif args.action == "mapcheck":
-        rows = outputs.mapping_check(cfg, args.frames)
+        rows = mapcheck.mapping_check(cfg, args.frames)
         print(f"exact boxes of fully visible cones -> foot-point rule -> H_F_B ({args.frames} frames, "
               f"{cfg.width}x{cfg.height}, jitter {'on' if cfg.jitter else 'off'}): position error in m")
         print("  range      n  median    p95    max")
