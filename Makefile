@@ -8,7 +8,7 @@ PYTEST_ARGS ?=
 CAR_VENV  ?= .venv-car
 CAR_PY    := $(CAR_VENV)/bin/python
 CAR_STAMP := $(CAR_VENV)/.setup-done
-CAR_TESTS ?= tests/test_nms.py tests/test_detector_inference.py tests/test_adapter.py tests/test_yuyv_roundtrip.py \
+CAR_TESTS ?= tests/test_model_decode.py tests/test_detector.py tests/test_adapter.py tests/test_yuyv_roundtrip.py \
              tests/test_mapping.py tests/test_e2e_replay.py tests/test_replay_bad_input.py \
              tests/test_debug_image.py tests/test_transforms.py
 # not on the car: the development machine's export and speed tools (keeps test-car under 3 minutes)

@@ -11,7 +11,7 @@ import pytest
 
 from cone_perception.calib import load_calibration
 from cone_perception.cli import main
-from test_eval import box_rows, scene_boxes, write_gt_jsonl, write_pred, CONES
+from test_evaluation_report import box_rows, scene_boxes, write_gt_jsonl, write_pred, CONES
 
 
 @pytest.fixture(scope="module")
