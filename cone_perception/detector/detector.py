@@ -134,40 +134,53 @@ class Detector:
         suffix = path.suffix.lower()
         if bf16 and suffix in (".torchscript", ".ts", ".onnx"):
             raise ConfigError(src, "bf16", "bf16 runs a checkpoint (.pt) with backend 'torch', not an exported model")
-        if suffix in (".torchscript", ".ts", ".onnx"):
-            side = find_sidecar(path) or sidecar_path(path)
-            if suffix == ".onnx":
-                if backend != "onnx":
-                    raise ConfigError(src, "backend", f"an ONNX file runs with backend 'onnx', not {backend!r}")
-                sess = ort_session(str(path), device, threads, src)
-                embedded = dict(sess.get_modelmeta().custom_metadata_map)
-                names, side_imgsz, names_src = external_names(path, embedded)
-                size = imgsz or side_imgsz or onnx_input_size(sess, src)
-                det = cls(OrtRunner(sess), class_map_from_names(names, names_src), size, True, "onnx", src, **kw)
-            else:
-                if backend != "torchscript":
-                    raise ConfigError(src, "backend", f"a TorchScript file runs with backend 'torchscript', not {backend!r}")
-                extra = {"config.txt": ""}
-                try:
-                    module = torch.jit.load(str(path), map_location=device, _extra_files=extra).eval()
-                except (RuntimeError, ValueError) as e:
-                    raise ConfigError(src, None, f"not a readable TorchScript file: {e}") from e
-                try:
-                    embedded = json.loads(extra["config.txt"]) if extra["config.txt"] else {}
-                except (json.JSONDecodeError, UnicodeDecodeError):
-                    embedded = {}
-                names, side_imgsz, names_src = external_names(path, embedded)
-                if fp16:
-                    module = module.half()
-                size = imgsz or side_imgsz
-                if size is None:
-                    raise ConfigError(str(side), "imgsz", "TorchScript models need imgsz: [W, H] in the sidecar")
-                det = cls(TorchRunner(module, device, fp16, False), class_map_from_names(names, names_src), size, True,
-                          "torchscript", src, **kw)
-            det._check_output_shape()
-            return det
+        if suffix == ".onnx":
+            det = cls._load_onnx(path, backend, device, imgsz, threads, kw)
+        elif suffix in (".torchscript", ".ts"):
+            det = cls._load_torchscript(path, backend, device, fp16, imgsz, kw)
+        else:
+            return cls.from_checkpoint(load_checkpoint(path), backend, device, fp16, imgsz=imgsz, threads=threads, bf16=bf16, **kw)
+        det._check_output_shape()
+        return det
 
-        return cls.from_checkpoint(load_checkpoint(path), backend, device, fp16, imgsz=imgsz, threads=threads, bf16=bf16, **kw)
+    @classmethod
+    def _load_onnx(cls, path: Path, backend: str, device: str, imgsz: tuple[int, int] | None, threads: int | None,
+                   kw: dict) -> "Detector":
+        """An ONNX file on ONNX Runtime; names and size from the sidecar, the embedded metadata or the graph."""
+        src = str(path)
+        if backend != "onnx":
+            raise ConfigError(src, "backend", f"an ONNX file runs with backend 'onnx', not {backend!r}")
+        sess = ort_session(src, device, threads, src)
+        embedded = dict(sess.get_modelmeta().custom_metadata_map)
+        names, side_imgsz, names_src = external_names(path, embedded)
+        size = imgsz or side_imgsz or onnx_input_size(sess, src)
+        return cls(OrtRunner(sess), class_map_from_names(names, names_src), size, True, "onnx", src, **kw)
+
+    @classmethod
+    def _load_torchscript(cls, path: Path, backend: str, device: str, fp16: bool, imgsz: tuple[int, int] | None,
+                          kw: dict) -> "Detector":
+        """A TorchScript file; names and size from the sidecar or its embedded ``config.txt``."""
+        src = str(path)
+        if backend != "torchscript":
+            raise ConfigError(src, "backend", f"a TorchScript file runs with backend 'torchscript', not {backend!r}")
+        extra = {"config.txt": ""}
+        try:
+            module = torch.jit.load(src, map_location=device, _extra_files=extra).eval()
+        except (RuntimeError, ValueError) as e:
+            raise ConfigError(src, None, f"not a readable TorchScript file: {e}") from e
+        try:
+            embedded = json.loads(extra["config.txt"]) if extra["config.txt"] else {}
+        except (json.JSONDecodeError, UnicodeDecodeError):
+            embedded = {}
+        names, side_imgsz, names_src = external_names(path, embedded)
+        if fp16:
+            module = module.half()
+        size = imgsz or side_imgsz
+        if size is None:
+            side = find_sidecar(path) or sidecar_path(path)
+            raise ConfigError(str(side), "imgsz", "TorchScript models need imgsz: [W, H] in the sidecar")
+        return cls(TorchRunner(module, device, fp16, False), class_map_from_names(names, names_src), size, True,
+                   "torchscript", src, **kw)
 
     @classmethod
     def from_checkpoint(
