@@ -18,7 +18,7 @@ import numpy as np
 
 from . import bagio
 from .attitude import Attitude, AttitudeReport, attitude_vector
-from .benchmark import StageTimer
+from .timing import StageTimer
 from .errors import ConfigError, FrameError
 from .evaluation import LocalisationReport
 from .pipeline import Pipeline

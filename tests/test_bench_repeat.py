@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from cone_perception.benchmark import format_runs, summarize_runs
+from cone_perception.timing import format_runs, summarize_runs
 from cone_perception.cli import main
 
 

@@ -10,7 +10,7 @@ import time
 import numpy as np
 
 from ..adapter import DriverAdapter
-from ..benchmark import StageTimer, peak_rss_mb
+from ..timing import StageTimer, peak_rss_mb
 from ..crop import CropSpec
 from .frames import synthetic_frames
 

@@ -19,7 +19,7 @@ calibration's crop and downscale by one of the runtime-table settings (:func:`co
 update) on a simulated drive through rows of cones, about 100 tracks with the defaults.
 Warm-up frames are excluded; median, p90, p99, min-max (noise) and frames/s (from the median
 end-to-end time) are reported, plus peak RSS. ``pipeline --repeat N`` runs it N times, each in a
-fresh process, and reports the spread across runs (:func:`benchmark.summarize_runs`).
+fresh process, and reports the spread across runs (:func:`timing.summarize_runs`).
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from pathlib import Path
 from ..bench.frames import rendered_frames
 from ..bench.pipeline import BYTES_PER_PX, bench_adapter, bench_pipeline, bench_tracker, load_for_crop
 from ..bench.table import INPUT_SETTINGS, crop_for_setting
-from ..benchmark import format_table
+from ..timing import format_table
 from ..calib import DEFAULT_CAMERA, load_calibration
 from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, RUNTIME_THREADS
 from ..errors import ConfigError
@@ -104,7 +104,7 @@ def _repeat_pipeline(args: argparse.Namespace) -> int:
 
     from tqdm import tqdm
 
-    from ..benchmark import format_runs, summarize_runs
+    from ..timing import format_runs, summarize_runs
 
     cmd = [sys.executable, "-m", "cone_perception.cli", "bench", "pipeline", "--json",
            "--frames", str(args.frames), "--warmup", str(args.warmup), "--calib", str(args.calib),

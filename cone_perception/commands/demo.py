@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..benchmark import format_table, summarize
+from ..timing import format_table, summarize
 from ..calib import DEFAULT_CAMERA, load_calibration, resolve_calibration_path
 from ..evaluation import LocalisationReport, format_localisation
 from ..mapping import expected_truth

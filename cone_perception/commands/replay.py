@@ -26,7 +26,7 @@ import numpy as np
 from tqdm import tqdm
 
 from ..attitude import ATTITUDE_MODES, format_attitude_report
-from ..benchmark import format_table, summarize
+from ..timing import format_table, summarize
 from ..calib import DEFAULT_CAMERA, load_calibration, resolve_calibration_path
 from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, RUNTIME_THREADS, Detector, default_model_path
 from ..evaluation import LocalisationReport, format_localisation
