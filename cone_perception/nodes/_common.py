@@ -194,9 +194,7 @@ class PerceptionNode(Node):
 
 def _stamp_ns(msg) -> int | None:
     header = getattr(msg, "header", None)
-    if header is None:
-        return None
-    return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
+    return None if header is None else _msgs.stamp_ns(header)
 
 
 def run_node(factory: Callable[[], Node], args: list[str] | None = None, name: str = "cone_perception") -> int:

@@ -52,7 +52,3 @@ class DetectorLoader:
             f"input {det.imgsz[0]}x{det.imgsz[1]}) loaded and warm")
         return det
 
-
-def load_detector(node: Node, band_wh: tuple[int, int] | None = None) -> Detector:
-    """Declare the detector parameters on ``node`` and load the detector (:class:`DetectorLoader`)."""
-    return DetectorLoader(node).load(band_wh)

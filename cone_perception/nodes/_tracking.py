@@ -24,10 +24,6 @@ from ._common import QOS_DATA, WARN_THROTTLE_S
 TRACKED_TOPIC = "/cones/tracked"
 
 
-def _stamp_ns(header) -> int:
-    return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
-
-
 class NodeTracking:
     """Declares the tracking parameters on ``node``, subscribes the odometry, publishes tracked cones."""
 
@@ -55,13 +51,13 @@ class NodeTracking:
         self._reported = {}
 
     def _twist(self, header, tw) -> None:
-        if not self.stage.add_twist(_stamp_ns(header), tw.linear.x, tw.linear.y, tw.angular.z):
+        if not self.stage.add_twist(_msgs.stamp_ns(header), tw.linear.x, tw.linear.y, tw.angular.z):
             self._report()
 
     def process(self, cones, header) -> None:
         """Track one frame's ``CONE_DTYPE`` records; publish with the frame's stamp. Raises ``FrameError``
         (stamp not after the last frame: not fused)."""
-        tracked, _ = self.stage.process(_stamp_ns(header), cones)
+        tracked, _ = self.stage.process(_msgs.stamp_ns(header), cones)
         h = _msgs.copy_header(header, self.frame_id)
         self.pub.publish(_msgs.tracked_msg(tracked, h))
         if self.markers:
