@@ -72,9 +72,10 @@ class PipelineNode(PerceptionNode):
             try:
                 self.tracking.process(res.cones, header)
             except FrameError as e:  # /cones went out; only this frame's tracking is dropped
-                n = self.stats.count_drop(f"tracker_{e.reason}")
-                self.get_logger().warning(f"tracker: frame not fused ({e.reason}, {n} so far): {e}",
-                                          throttle_duration_sec=2.0)
+                reason = f"tracker_{e.reason}"
+                n = self.stats.count_drop(reason)
+                if self._may_warn(reason):  # the guard's throttle: one warning per cause every 2 s
+                    self.get_logger().warning(f"tracker: frame not fused ({e.reason}, {n} so far): {e}")
         self.get_logger().debug(
             f"{len(res.boxes)} boxes, {len(res.cones)} cones in {(time.perf_counter() - t0) * 1e3:.1f} ms "
             + " ".join(f"{k}={v:.1f}" for k, v in res.timing_ms.items())
