@@ -37,6 +37,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="first N epochs with the pretrained backbone frozen (default 0)")
     p.add_argument("--freeze-bn", action="store_true",
                    help="keep the pretrained backbone's batch-norm statistics and affine parameters fixed")
+    p.add_argument("--teacher", default="", metavar="PT",
+                   help="checkpoint of a slower, more accurate detector to distil from: its soft class scores and "
+                        "boxes on every training image join the loss (same strides and classes; docs/training.md "
+                        "'Distillation'; default none)")
+    p.add_argument("--distill", type=float, default=d.distill, metavar="GAIN",
+                   help=f"gain of the distillation loss beside the ground-truth loss (default {d.distill:g})")
     p.add_argument("--epochs", type=int, default=d.epochs, help=f"epochs (default {d.epochs}; with --resume: new total)")
     p.add_argument("--imgsz", type=size_arg, default=d.imgsz, help="input WxH px, multiples of 32 (default 960x288)")
     p.add_argument("--batch", type=int, default=d.batch, help=f"images per batch (default {d.batch})")
@@ -95,6 +101,7 @@ def run(args: argparse.Namespace) -> int:
         seed=args.seed, close_mosaic=args.close_mosaic, max_batches=args.max_batches, augment=aug,
         precision=args.precision or "auto", device=args.device, backbone_weights=args.backbone_weights,
         backbone_lr=args.backbone_lr, freeze_backbone=args.freeze_backbone, freeze_bn=args.freeze_bn,
+        teacher=args.teacher, distill=args.distill,
     )
     if rank == 0:
         print(f"train: run folder {args.out}", file=sys.stderr, flush=True)

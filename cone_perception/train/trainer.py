@@ -34,6 +34,7 @@ from ..model.loss import DetectionLoss
 from .augment import AugmentConfig
 from . import distributed
 from .datasets import load_data_yaml, summary_table
+from .distill import DistillLoss, check_teacher
 from .loader import EpochSampler, TrainSet, ValSet, collate
 from .report import plot_results
 
@@ -71,6 +72,8 @@ class TrainConfig:
     backbone_lr: float = 1.0  # learning-rate factor of a pretrained backbone's body
     freeze_backbone: int = 0  # first N epochs: pretrained body frozen (no gradient, BN statistics fixed)
     freeze_bn: bool = False  # pretrained body's batch-norms frozen for the whole run (statistics and affine)
+    teacher: str = ""  # checkpoint of a detector to distil from (train/distill.py); "" = no teacher
+    distill: float = 1.0  # gain of the distillation loss beside the ground-truth loss
     augment: AugmentConfig = field(default_factory=AugmentConfig)
 
     def to_dict(self) -> dict:
@@ -306,6 +309,9 @@ def _train(cfg: TrainConfig, info: "distributed.DistInfo", resume: bool, progres
         model = build_model(cfg)
     else:
         model = ck.build_model()  # the run's own architecture; its weights follow from the training state
+    teacher, distill_loss = _load_teacher(cfg, model, device, channels_last=bool(amp_dtype))
+    if teacher is not None:
+        say(f"teacher {cfg.teacher} ({teacher.cfg.name}), distillation gain {cfg.distill:g}")
     say(f"reading {cfg.data} (labels of every image) ...")
     train_entries, val_entries, rest = load_data_yaml(cfg.data)
     data_summary = {"data_yaml": str(cfg.data), "train": [e.summary() for e in train_entries],
@@ -368,7 +374,7 @@ def _train(cfg: TrainConfig, info: "distributed.DistInfo", resume: bool, progres
         mode = set_backbone_mode(model, cfg, epoch)
         if epoch == start_epoch or epoch == cfg.freeze_backbone:
             log.info("epoch %d: %s", epoch, mode)
-        loss_sum, n_img, n_batches = torch.zeros(3), 0, 0
+        loss_sum, kd_sum, n_img, n_batches = torch.zeros(3), torch.zeros(2), 0, 0
         ep = epoch + 1  # the number people see: bar, log, results.csv, history, best_epoch
         bar = tqdm(loader, total=nb, desc=f"epoch {ep}/{cfg.epochs}", disable=not progress, leave=False)
         for i, (imgs, targets) in enumerate(bar):
@@ -386,6 +392,13 @@ def _train(cfg: TrainConfig, info: "distributed.DistInfo", resume: bool, progres
             else:
                 feats = net(x)
             loss, parts = criterion(feats, targets)
+            if teacher is not None:
+                with torch.no_grad(), torch.autocast(device.type, dtype=amp_dtype or torch.float32,
+                                                     enabled=amp_dtype is not None):
+                    t_feats = teacher.forward_raw(x.contiguous(memory_format=torch.channels_last) if amp_dtype else x)
+                kd, kd_parts = distill_loss(feats, t_feats)
+                loss = loss + cfg.distill * kd
+                kd_sum += kd_parts.cpu()
             if info.ddp:  # DDP averages gradients over processes; the loss is scaled by batch size per process
                 loss = loss * info.world
             optimizer.zero_grad(set_to_none=True)
@@ -410,6 +423,9 @@ def _train(cfg: TrainConfig, info: "distributed.DistInfo", resume: bool, progres
         row = {"epoch": ep, "box_loss": mean[0], "cls_loss": mean[1], "dfl_loss": mean[2],
                "images_per_s": steady_n / max(steady_s, 1e-9),
                "epoch_train_s": t_end - t0, "lr": lr}
+        if teacher is not None:
+            kd_mean = (distributed.mean_over_ranks(kd_sum, info) / max(n_batches, 1)).tolist()
+            row.update(distill_cls=kd_mean[0], distill_box=kd_mean[1])
         if val_entries:  # rank 0 validates; the others take its fitness (early stop, best epoch)
             m = validate(ema.ema, val_loader, cfg.val_conf, cfg.val_iou, device=device) if main else {}
             m = distributed.from_main(m, info)
@@ -447,6 +463,21 @@ def _train(cfg: TrainConfig, info: "distributed.DistInfo", resume: bool, progres
             say(f"early stop: no better fitness for {cfg.patience} epochs (best epoch {best_epoch})")
             break
     return {"history": history, "best_epoch": best_epoch, "best_fitness": best_fitness, "out": str(out)}
+
+
+def _load_teacher(cfg: TrainConfig, student: ConeYOLO, device, channels_last: bool
+                  ) -> tuple[ConeYOLO | None, DistillLoss | None]:
+    """The frozen teacher of ``cfg.teacher`` (eval mode) and its loss, or (None, None) without one."""
+    if not cfg.teacher:
+        return None, None
+    if not Path(cfg.teacher).is_file():
+        raise ConfigError(cfg.teacher, None, "teacher checkpoint not found")
+    teacher = load_checkpoint(cfg.teacher).build_model()
+    check_teacher(teacher, student, cfg.teacher)
+    teacher = teacher.to(device).eval().requires_grad_(False)
+    if channels_last:
+        teacher = teacher.to(memory_format=torch.channels_last)
+    return teacher, DistillLoss(student.cfg.num_classes, student.cfg.reg_max, teacher.cfg.reg_max)
 
 
 def _append_csv(path: Path, row: dict) -> None:
