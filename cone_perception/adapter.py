@@ -151,9 +151,12 @@ class DriverAdapter:
     crop: CropSpec
     image_width: int
     image_height: int
+    far: CropSpec | None = None  # the far band's full-resolution rows (detector/farband.py), or None
 
     def __post_init__(self) -> None:
         self.crop.validate(self.image_width, self.image_height)
+        if self.far is not None:
+            self.far.validate(self.image_width, self.image_height, "far band")
         pin_opencv_threads()
 
     def _check_size(self, width: int, height: int) -> None:
@@ -174,6 +177,20 @@ class DriverAdapter:
         size than the calibration's is refused before decoding."""
         img = decode_compressed(data, expect_wh=(self.image_width, self.image_height))
         return crop_bgr(img, self.crop)
+
+    def bands_from_raw(self, encoding: str, width: int, height: int, step: int, data
+                       ) -> tuple[np.ndarray, np.ndarray | None]:
+        """sensor_msgs/Image fields -> (the band as :meth:`from_raw`, the far band's full-resolution
+        strip ``(V1 - V0, W, 3)`` BGR or None without one); the frame is validated once."""
+        name, view = raw_frame_view(encoding, width, height, step, data)
+        self._check_size(width, height)
+        far = crop_raw_to_bgr(name, view, self.far) if self.far is not None else None
+        return crop_raw_to_bgr(name, view, self.crop), far
+
+    def bands_from_compressed(self, data) -> tuple[np.ndarray, np.ndarray | None]:
+        """Compressed image -> (band, far band's strip or None), decoded once."""
+        img = decode_compressed(data, expect_wh=(self.image_width, self.image_height))
+        return crop_bgr(img, self.crop), (crop_bgr(img, self.far) if self.far is not None else None)
 
     def camera_info_fields(self) -> dict:
         """Fields of the ``image_cropped/camera_info`` that goes with each output."""

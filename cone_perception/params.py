@@ -108,6 +108,8 @@ _SPECS = (
     ParamSpec("max_det", DEFAULT_MAX_DET, "most boxes per frame (best first)", min=1, max=1000, dynamic=True),
     ParamSpec("debug_image", False, "publish image_cropped/debug (bgr8): the band with boxes, classes, scores "
               "and each cone's distance; drawn only while someone subscribes", dynamic=True),
+    ParamSpec("far_rows", "", "pipeline: image rows V0,V1 also run at full resolution, the whole width (the far band "
+              "for small, far cones; a second forward); empty = off"),
     ParamSpec("debug_image_hz", 5.0, "most debug images per second", min=0.1, max=100.0, dynamic=True),
 )
 

@@ -14,9 +14,10 @@ import numpy as np
 from .adapter import DriverAdapter
 from .attitude import FIXED, Attitude, attitude_estimator, attitude_for_boxes
 from .calib import Calibration
+from .detector.farband import FarBand
 from .mapping import ConeMapper
 
-STAGES = ("adapter", "preprocess", "forward", "postprocess", "attitude", "mapping")
+STAGES = ("adapter", "preprocess", "forward", "postprocess", "far_band", "attitude", "mapping")
 
 
 @dataclass
@@ -39,22 +40,28 @@ class Pipeline:
     ``attitude``: ``fixed``, ``image``, ``imu`` or ``fused`` (see :mod:`cone_perception.attitude`);
     None picks the default (``fused`` with ``imu`` and a mount pose, ``image`` with a mount pose, else
     ``fixed``). ``imu``: an :class:`~cone_perception.attitude.ImuAttitude` the caller feeds; set
-    :attr:`frame_stamp_ns` before each frame.
+    :attr:`frame_stamp_ns` before each frame. ``far``: a :class:`~cone_perception.detector.farband.FarBand`
+    (full-resolution rows near the horizon, a second forward; its boxes merge with the band's), or None.
     """
 
-    def __init__(self, calib: Calibration, detector, attitude: str | None = None, imu=None):
+    def __init__(self, calib: Calibration, detector, attitude: str | None = None, imu=None, far: FarBand | None = None):
         self.calib = calib
-        self.adapter = DriverAdapter(calib.crop, calib.image_width, calib.image_height)
+        self.far = far  # the far band (full-resolution rows near the horizon, detector/farband.py), or None
+        self.adapter = DriverAdapter(calib.crop, calib.image_width, calib.image_height, far.crop if far else None)
         self.detector = detector
         self.mapper = ConeMapper(calib)
         self.imu = imu  # an ImuAttitude the caller feeds (modes imu, fused), or None
         self.attitude_mode, self.attitude = attitude_estimator(self.mapper, attitude, imu)
         self.frame_stamp_ns: int | None = None  # the capture stamp of the frame being processed (for the IMU)
 
-    def _run(self, band: np.ndarray, t_adapter_s: float) -> FrameResult:
+    def _run(self, band: np.ndarray, t_adapter_s: float, strip: np.ndarray | None = None) -> FrameResult:
         boxes = self.detector.detect(band, self.calib.crop)
         timing = {"adapter": t_adapter_s * 1e3}
         timing.update({k.removesuffix("_ms"): v for k, v in self.detector.timing.items()})
+        if self.far is not None and strip is not None:
+            t0 = time.perf_counter()
+            boxes = self.far.merged(boxes, strip)
+            timing["far_band"] = (time.perf_counter() - t0) * 1e3
         att = FIXED
         if self.attitude is not None:
             t0 = time.perf_counter()
@@ -68,11 +75,11 @@ class Pipeline:
     def process_raw(self, encoding: str, width: int, height: int, step: int, data) -> FrameResult:
         """sensor_msgs/Image fields -> :class:`FrameResult`. Raises ``FrameError`` for a bad frame."""
         t0 = time.perf_counter()
-        band = self.adapter.from_raw(encoding, width, height, step, data)
-        return self._run(band, time.perf_counter() - t0)
+        band, strip = self.adapter.bands_from_raw(encoding, width, height, step, data)
+        return self._run(band, time.perf_counter() - t0, strip)
 
     def process_compressed(self, data) -> FrameResult:
         """sensor_msgs/CompressedImage data (JPEG/PNG) -> :class:`FrameResult`."""
         t0 = time.perf_counter()
-        band = self.adapter.from_compressed(data)
-        return self._run(band, time.perf_counter() - t0)
+        band, strip = self.adapter.bands_from_compressed(data)
+        return self._run(band, time.perf_counter() - t0, strip)

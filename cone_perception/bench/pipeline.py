@@ -18,16 +18,16 @@ from .frames import synthetic_frames
 BYTES_PER_PX = {"yuv422_yuy2": 2, "bgr8": 3, "rgb8": 3}
 
 
-def bench_pipeline(calib, det, frames: list[bytes], n_frames: int, warmup: int = 20) -> dict:
+def bench_pipeline(calib, det, frames: list[bytes], n_frames: int, warmup: int = 20, far=None) -> dict:
     """Time ``det`` in the fused pipeline of ``calib`` (its crop and downscale) on raw YUYV ``frames``
     (cycled): per stage, end to end with the packing of ``cone_boxes`` and ``/cones``. The result
-    of ``bench pipeline`` (and one row of ``bench table``)."""
+    of ``bench pipeline`` (and one row of ``bench table``). ``far``: a far band (``detector/farband.py``) or None."""
     from .. import bagio
     from ..debug_image import DebugImage
     from ..pipeline import Pipeline
     from ..records import to_pointcloud2
 
-    pipe = Pipeline(calib, det)
+    pipe = Pipeline(calib, det, far=far)
     debug = DebugImage(pipe.mapper)
     w, h = calib.image_width, calib.image_height
     crop = calib.crop

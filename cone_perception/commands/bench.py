@@ -61,6 +61,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="pipeline, table: inference backend (default %(default)s: ONNX Runtime on the CPU where "
                         "installed, else torch; fixed-size ones are built for each band's input size)")
     p.add_argument("--bf16", action="store_true", help="pipeline, table: backend torch with bfloat16 autocast on the CPU")
+    p.add_argument("--far-rows", default=None, metavar="V0,V1",
+                   help="pipeline: add the far band, these image rows at full resolution (docs/detector.md 'Far band')")
     p.add_argument("--scenes", type=int, default=16, help="pipeline, table: distinct rendered scenes, cycled (default %(default)s)")
     p.add_argument("--input", default=None, choices=INPUT_SETTINGS,
                    help="pipeline: override the calibration's crop: full = all rows, downscale 1; half = all rows, "
@@ -92,7 +94,14 @@ def _bench_pipeline(args: argparse.Namespace, calib) -> dict:
     if args.input:
         calib = replace(calib, crop=crop_for_setting(calib.crop, args.input, calib.image_width, calib.image_height))
     det = load_for_crop(args.model, args.backend, calib.crop, args.threads, bf16=args.bf16)
-    result = bench_pipeline(calib, det, rendered_frames(calib, max(1, args.scenes)), args.frames, args.warmup)
+    far = None
+    if args.far_rows:
+        from ..detector.farband import FarBand
+
+        far = FarBand.load(det.source, args.far_rows, calib.image_width, calib.image_height, calib.crop, "--far-rows",
+                           backend=args.backend, threads=args.threads, bf16=args.bf16)
+    result = bench_pipeline(calib, det, rendered_frames(calib, max(1, args.scenes)), args.frames, args.warmup, far)
+    result["far_rows"] = args.far_rows or ""
     result["setting"] = args.input or "calibration"
     result["threads"] = args.threads
     return result

@@ -23,6 +23,8 @@ from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, Detector, default_model
 from ..errors import ConfigError
 from ..params import DEFAULT_CONF, DEFAULT_IOU
 from ..sources import iter_source
+from ..crop import CropSpec
+from ..detector.farband import FarBand
 from ._args import parse_crop, size_arg
 
 
@@ -39,6 +41,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--imgsz", type=size_arg, default=None, help="letterbox each image to this model input WxH")
     p.add_argument("--crop", type=parse_crop, default=None, help="band V0,V1[,U0,U1] in image px, cut before the model")
     p.add_argument("--downscale", type=int, default=1, choices=[1, 2, 4], help="with --crop: integer downscale")
+    p.add_argument("--far-rows", default=None, metavar="V0,V1",
+                   help="with --crop: also run image rows V0-V1 at full resolution, the whole width (the far band: "
+                        "small, far cones), and merge its boxes (docs/detector.md 'Far band')")
     p.add_argument("--conf", type=float, default=DEFAULT_CONF, help="confidence threshold (default %(default)s)")
     p.add_argument("--iou", type=float, default=DEFAULT_IOU, help="NMS IoU threshold (default %(default)s)")
     p.add_argument("--topic", default=None, help="rosbag: camera topic (default: the only image topic)")
@@ -53,19 +58,32 @@ def run(args: argparse.Namespace) -> int:
     from ..predictions import write_prediction
     from ..vis import draw_band, draw_boxes
 
+    if args.far_rows and not args.crop:
+        raise ConfigError("--far-rows", None, "needs --crop: the far band adds to the car's band")
     model = args.model or default_model_path()
     backend = resolve_backend(args.backend, model, bf16=args.bf16)
     det = Detector.load(model, backend=backend, conf=args.conf, iou=args.iou,
                         imgsz=args.imgsz if backend != "torch" else None, bf16=args.bf16)
     # with --crop the detector is built for the band's own size (as the pipeline node does), so a
     # fixed-size backend never letterboxes the band into another input size
-    by_band = {}
+    by_band, far_by_size = {}, {}
 
     def detector_for(w: int, h: int):
         if not args.crop or args.imgsz:
             return det
         v0, v1, u0, u1 = args.crop if len(args.crop) == 4 else (*args.crop, 0, w)
-        band = (max(1, (u1 - u0) // args.downscale), max(1, (v1 - v0) // args.downscale))
+        return detector_for_size((max(1, (u1 - u0) // args.downscale), max(1, (v1 - v0) // args.downscale)))
+
+    def far_for(w: int, h: int):
+        if not args.far_rows:
+            return None
+        if (w, h) not in far_by_size:
+            crop = CropSpec(*(args.crop if len(args.crop) == 4 else (*args.crop, 0, w)), args.downscale)
+            far_by_size[(w, h)] = FarBand.load(model, args.far_rows, w, h, crop, "--far-rows", backend=backend,
+                                               conf=args.conf, iou=args.iou, bf16=args.bf16)
+        return far_by_size[(w, h)]
+
+    def detector_for_size(band):
         if band not in by_band:
             by_band[band] = Detector.load_for_band(model, band, backend=backend, conf=args.conf, iou=args.iou,
                                                    bf16=args.bf16)
@@ -85,7 +103,8 @@ def run(args: argparse.Namespace) -> int:
                 skipped.append(f"{name}: {err}")
                 continue
             h, w = img.shape[:2]
-            boxes, scale = detect_one(detector_for(w, h), img, name, args.crop, args.downscale, args.imgsz)
+            boxes, scale = detect_one(detector_for(w, h), img, name, args.crop, args.downscale, args.imgsz,
+                                      far_for(w, h))
             write_prediction(fh, name, w, h, boxes, input_scale=scale)
             n += 1
             if args.save_vis:
@@ -93,6 +112,7 @@ def run(args: argparse.Namespace) -> int:
                 vis = draw_boxes(img, boxes)
                 if args.crop:
                     vis = draw_band(vis, args.crop, args.downscale)
+
                 cv2.imwrite(str(out), vis)
     from ..words import plural
 

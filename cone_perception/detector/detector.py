@@ -304,10 +304,11 @@ class Detector:
 
 
 def detect_one(det, img: np.ndarray, name: str, crop: tuple[int, ...] | None = None, downscale: int = 1,
-               imgsz: tuple[int, int] | None = None) -> tuple[np.ndarray, float]:
+               imgsz: tuple[int, int] | None = None, far=None) -> tuple[np.ndarray, float]:
     """Boxes (``BOX_DTYPE``, the image's px) of one full BGR image, as ``detect`` does it: with ``crop``
     (V0,V1[,U0,U1]) the band is cut and downscaled as on the car, else letterboxed to ``imgsz`` or the
     model input; and the model input px per image px (the prediction file's ``input_scale``).
+    ``far``: a :class:`~.farband.FarBand` whose full-resolution strip runs too (with ``crop``).
     Used by ``detect`` and ``bench table``."""
     from ..adapter import crop_bgr
     from ..crop import CropSpec
@@ -317,7 +318,10 @@ def detect_one(det, img: np.ndarray, name: str, crop: tuple[int, ...] | None = N
         v0, v1, u0, u1 = crop if len(crop) == 4 else (*crop, 0, w)
         spec = CropSpec(v0, v1, u0, u1, downscale)
         spec.validate(w, h, f"--crop for {name}")
-        return det.detect(crop_bgr(img, spec), spec), 1.0 / downscale
+        boxes = det.detect(crop_bgr(img, spec), spec)
+        if far is not None:
+            boxes = far.merged(boxes, crop_bgr(img, far.crop))
+        return boxes, 1.0 / downscale
     if imgsz:
         from ..records import boxes_from_arrays
 

@@ -29,6 +29,20 @@ from ._params import RuntimeParameters, declare
 
 
 class PipelineNode(PerceptionNode):
+    def _far_band(self, calib, rows: str):
+        """The far band of ``far_rows`` (a detector built for its strip), or None when the parameter is empty."""
+        if not rows:
+            return None
+        from ..detector.farband import FarBand, far_band_crop
+
+        crop = far_band_crop(rows, calib.image_width, calib.image_height, calib.crop, "parameter far_rows")
+        return FarBand(crop, self.loader.load((crop.out_width, crop.out_height)))  # warmed like the band's
+
+    def _set_threshold(self, name: str, value) -> None:
+        self.loader.set_threshold(self.pipeline.detector, name, value)
+        if self.pipeline.far is not None:
+            self.loader.set_threshold(self.pipeline.far.detector, name, value)
+
     def __init__(self, **node_kwargs):
         super().__init__("pipeline", **node_kwargs)
         calib = load_calibration(declare(self, "calibration"))
@@ -38,12 +52,12 @@ class PipelineNode(PerceptionNode):
         detector = self.loader.load((calib.crop.out_width, calib.crop.out_height))
         self.advertise_cones(calib.frame_id, markers)
         mode, imu = declare_attitude(self)
-        self.pipeline = Pipeline(calib, detector, mode, imu)
+        self.pipeline = Pipeline(calib, detector, mode, imu, self._far_band(calib, declare(self, "far_rows")))
         self.pub_boxes = self.create_publisher(PointCloud2, "cone_boxes", QOS_DATA)
         self.runtime = RuntimeParameters(self)
         self.runtime.register("publish_markers", lambda v: setattr(self, "publish_markers", bool(v)))
         for name in DetectorLoader.RUNTIME:
-            self.runtime.register(name, lambda v, name=name: self.loader.set_threshold(self.pipeline.detector, name, v))
+            self.runtime.register(name, lambda v, name=name: self._set_threshold(name, v))
         self.debug = DebugImagePublisher(self, self.pipeline.mapper, self.runtime)
         self.tracking = None
         if bool(self.declare_parameter("track", False).value):

@@ -1,0 +1,141 @@
+"""The far band (detector/farband.py): its rows, cut cones, merging, and that it finds far cones the band misses."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cone_perception.crop import CropSpec
+from cone_perception.detector.farband import FarBand, drop_cut_boxes, far_band_crop, merge_boxes
+from cone_perception.errors import ConfigError
+from cone_perception.records import boxes_from_arrays
+
+from rosutil import ros  # noqa: F401 (a fixture)
+
+BAND = CropSpec(384, 960, 0, 1920, 2)
+
+
+def _boxes(rows):
+    a = np.array(rows, dtype=np.float32).reshape(-1, 6)
+    return boxes_from_arrays(a[:, :4], a[:, 4], a[:, 5].astype(np.uint8))
+
+
+def test_far_rows_give_a_full_width_full_resolution_crop():
+    assert far_band_crop("384,576", 1920, 1080, BAND) == CropSpec(384, 576, 0, 1920, 1)
+    assert far_band_crop((400, 592), 1920, 1080, BAND).out_height == 192
+
+
+@pytest.mark.parametrize("rows, why", [
+    ("384", "two image rows"), ("a,b", "two image rows"), ("500,1200", "not inside"),
+    ("0,200", "do not overlap the band"), ("400,420", "32..1024 rows"), ("576,384", "not inside"),
+])
+def test_bad_far_rows_are_refused_naming_the_source(rows, why):
+    with pytest.raises(ConfigError, match=f"far_rows.*{why}"):
+        far_band_crop(rows, 1920, 1080, BAND)
+
+
+def test_cones_cut_by_the_strip_are_dropped():
+    crop = CropSpec(384, 576, 0, 1920, 1)
+    b = _boxes([[100, 400, 110, 420, 0.9, 0],    # inside: kept
+                [200, 540, 240, 576, 0.9, 1],    # its bottom on the strip's bottom edge: a nearer cone, cut
+                [300, 384, 310, 400, 0.9, 2],    # its top on the strip's top edge
+                [400, 560, 420, 573.5, 0.8, 3]])  # 2.5 px above the bottom: kept
+    kept = drop_cut_boxes(b, crop)
+    assert kept["u1"].tolist() == [100, 400]
+
+
+def test_merge_keeps_one_box_per_cone_and_the_far_band_only_cones():
+    band = _boxes([[100, 400, 110, 420, 0.30, 0], [500, 700, 560, 800, 0.9, 1]])
+    far = _boxes([[100.5, 400.5, 110.5, 420.5, 0.60, 0],  # the same cone, better scored in the far band
+                  [101, 401, 111, 421, 0.50, 3],          # another class on the same spot: not suppressed
+                  [900, 410, 906, 422, 0.40, 2]])          # only the far band saw it
+    merged = merge_boxes(band, far, iou=0.45)
+    got = sorted((int(b["class_id"]), round(float(b["score"]), 2)) for b in merged)
+    assert got == [(0, 0.6), (1, 0.9), (2, 0.4), (3, 0.5)]
+    assert merge_boxes(band, far[:0]) is band
+
+
+def test_far_band_finds_far_cones_the_halved_band_misses():
+    """Rendered scenes through the example calibration (band rows 384-960 halved to 960x288), the shipped
+    model: with the far band (rows 384-576 at full resolution) more of the cones beyond 15 m are found,
+    and the nearer ones are found as before (box IoU >= 0.5, same class, cones at least half visible)."""
+    from cone_perception.adapter import bgr_to_yuyv
+    from cone_perception.calib import load_calibration
+    from cone_perception.detector import Detector, default_model_path
+    from cone_perception.pipeline import Pipeline
+    from cone_perception.synth.config import SynthConfig
+    from cone_perception.synth.scene import random_pose
+
+    calib = load_calibration("example_mainhoop")
+    assert calib.crop == BAND
+    cfg = SynthConfig(width=calib.image_width, height=calib.image_height, seed=5, jitter=False)
+    renderer, rng = cfg.renderer(), np.random.default_rng(5)
+    frames = []
+    for i in range(8):
+        if i % 4 == 0:
+            track, look = cfg.track(i, rng), renderer.new_look(rng)
+        frames.append(renderer.render(track, random_pose(track, rng, False), look, rng))
+    det = Detector.load_for_band(default_model_path(), (BAND.out_width, BAND.out_height))
+    far = FarBand.load(default_model_path(), "384,576", calib.image_width, calib.image_height, BAND)
+
+    def recall(pipe):
+        hits = {"far": [0, 0], "near": [0, 0]}
+        for img, truth in frames:
+            boxes = pipe.process_raw("yuv422_yuy2", 1920, 1080, 3840, bgr_to_yuyv(img).tobytes()).boxes
+            xyxy = np.stack([boxes["u1"], boxes["v1"], boxes["u2"], boxes["v2"]], 1)
+            for t in truth:
+                if t.visible_fraction < 0.5 or t.box[3] < BAND.v0 or t.box[1] > BAND.v1:
+                    continue
+                g = hits["far" if t.distance_m > 15 else "near"]
+                g[1] += 1
+                lt, rb = np.maximum(xyxy[:, :2], t.box[:2]), np.minimum(xyxy[:, 2:], t.box[2:])
+                inter = np.prod(np.clip(rb - lt, 0, None), 1)
+                area = np.prod(xyxy[:, 2:] - xyxy[:, :2], 1) + (t.box[2] - t.box[0]) * (t.box[3] - t.box[1])
+                g[0] += bool(np.any((inter / (area - inter) >= 0.5) & (boxes["class_id"] == t.class_id)))
+        return {k: v[0] / v[1] for k, v in hits.items()}, hits
+
+    alone, n_alone = recall(Pipeline(calib, det))
+    both, n_both = recall(Pipeline(calib, det, far=far))
+    assert n_alone["far"][1] >= 50 and n_alone["near"][1] >= 30, n_alone  # enough cones of each kind
+    assert both["far"] >= alone["far"] + 0.08, (alone, both)
+    assert both["near"] >= alone["near"] - 0.02, (alone, both)
+
+
+def test_pipeline_node_with_far_rows_publishes_the_merged_boxes(ros):  # noqa: F811 (ros is a fixture)
+    """The node's ``far_rows`` parameter: its boxes are those of the core pipeline with the same far band;
+    a bad value stops the node naming the parameter."""
+    from rclpy.parameter import Parameter
+    from sensor_msgs.msg import Image, PointCloud2
+
+    from cone_perception.bench.frames import rendered_frames
+    from cone_perception.calib import load_calibration
+    from cone_perception.detector import Detector, default_model_path
+    from cone_perception.nodes import _msgs
+    from cone_perception.nodes.pipeline import PipelineNode
+    from cone_perception.pipeline import Pipeline
+    from rosutil import Inbox
+
+    calib = load_calibration("example_mainhoop")
+    node = ros.add(PipelineNode(context=ros.context, parameter_overrides=[Parameter("far_rows", value="384,576")]))
+    assert node.pipeline.far is not None and node.pipeline.far.crop == CropSpec(384, 576, 0, 1920, 1)
+    det = Detector.load_for_band(default_model_path(), (BAND.out_width, BAND.out_height))
+    far = FarBand.load(default_model_path(), "384,576", 1920, 1080, BAND)
+    with_far, alone = Pipeline(calib, det, far=far), Pipeline(calib, det)
+    # a frame where the far band adds boxes
+    data, want = next((d, w) for d in rendered_frames(calib, 8)
+                      if len(w := with_far.process_raw("yuv422_yuy2", 1920, 1080, 3840, d).boxes)
+                      > len(alone.process_raw("yuv422_yuy2", 1920, 1080, 3840, d).boxes))
+    img = Image()
+    img.header.stamp.sec, img.header.frame_id = 3, "camera_optical"
+    img.height, img.width, img.encoding, img.step, img.data = 1080, 1920, "yuv422_yuy2", 3840, data
+    t = ros.node("tester")
+    boxes = Inbox()
+    t.create_subscription(PointCloud2, "cone_boxes", boxes, 2)
+    pub = t.create_publisher(Image, "image_raw", 2)
+    assert ros.spin_until(lambda: pub.get_subscription_count() > 0)
+    assert ros.spin_until(lambda: (pub.publish(img) or True) and len(boxes.msgs) > 0, 30)
+    got = _msgs.boxes_from_msg(boxes.msgs[0])
+    assert len(got) == len(want)
+    np.testing.assert_allclose(np.sort(got["v1"]), np.sort(want["v1"]), atol=0.05)
+    with pytest.raises(ConfigError, match="far_rows"):
+        PipelineNode(context=ros.context, parameter_overrides=[Parameter("far_rows", value="10,20")])
