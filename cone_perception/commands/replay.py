@@ -58,6 +58,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--odom-topic", default=None,
                    help="offline, --track: the car's motion from this nav_msgs/Odometry or geometry_msgs/TwistStamped topic "
                         "of the bag (default: estimated from the cones)")
+    p.add_argument("--far-rows", default=None, metavar="V0,V1",
+                   help="also run these image rows at full resolution (the far band, docs/detector.md 'Far band'); "
+                        "live: the pipeline node's far_rows (fused only)")
     p.add_argument("--live", choices=["fused", "separate"], default=None,
                    help="play the bag into live node processes instead of replaying offline")
     p.add_argument("--pace", choices=["lockstep", "rate"], default="lockstep",
@@ -87,6 +90,14 @@ def run(args: argparse.Namespace) -> int:
         from ..errors import ConfigError
 
         raise ConfigError("--live", None, "--track, --drop-detections and --odom-topic work offline only")
+    if args.far_rows:  # a bad value fails before any model loads or node starts
+        from ..detector.farband import far_band_crop
+
+        far_band_crop(args.far_rows, calib.image_width, calib.image_height, calib.crop, "--far-rows")
+        if args.live == "separate":
+            from ..errors import ConfigError
+
+            raise ConfigError("--far-rows", None, "needs the fused pipeline node (--live fused or offline)")
     refuse_existing([p for p in (args.out, args.json) if p is not None], args.force, "replay")
     if args.out is not None:
         from ..bagio import check_new_output
@@ -133,8 +144,14 @@ def _run_offline(args, calib) -> dict:
     det = Detector.load_for_band(args.model or default_model_path(), (calib.crop.out_width, calib.crop.out_height),
                                  backend=args.backend, conf=args.conf, threads=args.threads or None, bf16=args.bf16)
     det.warmup()
+    far = None
+    if args.far_rows:
+        from ..detector.farband import FarBand
+
+        far = FarBand.load(det.source, args.far_rows, calib.image_width, calib.image_height, calib.crop, "--far-rows",
+                           backend=args.backend, conf=args.conf, threads=args.threads or None, bf16=args.bf16)
     imu = _imu_source(args, calib)
-    res = offline_replay(args.bag, Pipeline(calib, det, args.attitude, imu), args.topic, args.out, args.gt_topic,
+    res = offline_replay(args.bag, Pipeline(calib, det, args.attitude, imu, far), args.topic, args.out, args.gt_topic,
                          _progress(args.no_progress), imu_topic=args.imu_topic, tracking=tracking)
     stages = res.timer.summary()
     n = res.stats.ok
@@ -185,6 +202,8 @@ def _run_live(args, calib) -> dict:
     if args.model:
         params["model"] = str(Path(args.model).resolve())
     params["threads"] = args.threads
+    if args.far_rows:
+        params["far_rows"] = args.far_rows
     if args.bf16:
         params["bf16"] = True
     res = live_replay(args.bag, mode=args.live, topic=args.topic, params=params, pace=args.pace,
