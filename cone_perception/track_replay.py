@@ -16,12 +16,12 @@ from pathlib import Path
 import numpy as np
 
 from . import bagio
+from .bagio import ODOMETRY
 from .errors import ConfigError, FrameError
 from .evaluation import LocalisationReport
 from .track_eval import EVAL_RANGE_M, DriveTruth, TrackingReport, load_drive_truth
 from .tracker import TrackerConfig, TrackingStage
 
-ODOMETRY = "nav_msgs/msg/Odometry"
 TWIST_STAMPED = "geometry_msgs/msg/TwistStamped"
 TRACKED_TOPIC = "/cones/tracked"
 
