@@ -64,6 +64,8 @@ class TrackerConfig:
     max_range_m: float = 20.0  # detections farther than this are not used (too uncertain along the ray)
     spawn_chi2: float = 50.0  # an unassigned detection this near (Mahalanobis^2) to a track starts no new one
     merge_chi2: float = 6.0  # two tracks this near (and of one class) are merged into the older one
+    robust_chi2: float = 0.0  # > 0: a matched cone farther than this (Mahalanobis^2) gets its covariance scaled by d2 / robust_chi2
+    meas_cov_scale: float = 1.0  # the cones' own covariance times this (before the floor)
 
 
 class FieldOfView:
