@@ -52,6 +52,19 @@ def test_replay_track_writes_tracked_cones_and_fills_dropped_detections(drive, t
     assert msgs[-1].msg.header.frame_id == calib.frame_id
     stamps = [bagio.stamp_ns(m.msg.header) for m in msgs]
     assert stamps == sorted(res.cones)  # the capture stamps of the frames
+    # eval --tracked scores the output bag to the same figures (but the ego-motion, not in the bag)
+    from cone_perception.cli import main
+
+    assert main(["eval", "--tracked", str(out), "--gt", str(bag_side_paths(drive)[1]), "--out", str(tmp_path / "ev")]) == 0
+    m = json.loads((tmp_path / "ev" / "metrics.json").read_text())
+    assert m["raw"] == pytest.approx(s["raw"], nan_ok=True)
+    for k in ("recall", "false_per_frame", "median_err_0_7_m", "id_switches", "id_switches_all", "idf1",
+              "err_7_15_ratio_to_raw"):
+        assert m["tracked"][k] == pytest.approx(s["tracked"][k], nan_ok=True), k
+    for name, g in s["tracked"]["groups"].items():
+        assert m["tracked"]["groups"][name] == pytest.approx(g, nan_ok=True), name
+    assert m["tracked"]["ego_frames"] == 0 and m["messages"] == {"/cones": 20, "/cones/tracked": 20}
+    assert "IDF1" in (tmp_path / "ev" / "report.md").read_text()
 
 
 def test_replay_cli_refuses_track_live(drive, capsys):
@@ -106,6 +119,17 @@ def test_odometry_from_a_bag_moves_the_tracks(tmp_path, kind):
     # odometry that stops: stale at the next frame, counted, the cones take over
     _, _ = rt.frame(900_000_000, c)
     assert rt.stage.events["odom_stale"] == 1 and rt.stage.last_info.motion_source != "odometry"
+
+
+def test_eval_tracked_needs_a_drive_truth_and_a_replay_bag(drive, tmp_path):
+    from cone_perception.cli import main
+
+    gt = bag_side_paths(drive)[1]
+    # the synth bag itself has neither /cones nor /cones/tracked
+    assert main(["eval", "--tracked", str(drive), "--gt", str(gt), "--out", str(tmp_path / "a")]) != 0
+    assert main(["eval", "--tracked", str(drive), "--gt", str(drive), "--out", str(tmp_path / "b")]) != 0
+    with pytest.raises(SystemExit):  # --pred and --tracked together
+        main(["eval", "--tracked", str(drive), "--pred", str(gt), "--gt", str(gt), "--out", str(tmp_path / "c")])
 
 
 def test_drop_share_checked():
