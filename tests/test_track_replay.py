@@ -67,11 +67,35 @@ def test_replay_track_writes_tracked_cones_and_fills_dropped_detections(drive, t
     assert "IDF1" in (tmp_path / "ev" / "report.md").read_text()
 
 
-def test_replay_cli_refuses_track_live(drive, capsys):
+def test_replay_cli_refuses_drop_and_odometry_live(drive, capsys):
     from cone_perception.cli import main
 
-    assert main(["replay", str(drive), "--live", "fused", "--track"]) != 0
+    assert main(["replay", str(drive), "--live", "fused", "--track", "--drop-detections", "0.2"]) != 0
     assert "offline only" in capsys.readouterr().err
+    assert main(["replay", str(drive), "--live", "fused", "--track", "--odom-topic", "/odom"]) != 0
+    assert "offline only" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("mode", ["fused", "separate"])
+def test_live_replay_tracks_through_the_nodes(drive, tmp_path, capsys, mode):
+    """replay --live --track: the pipeline node with track: true, or a cone_tracker node after the three
+    nodes; every frame's /cones/tracked comes back under its capture stamp, ids stay, it is scored."""
+    from cone_perception.cli import main
+
+    out = tmp_path / "live"
+    args = ["replay", str(drive), "--live", mode, "--track", "--calib", str(bag_side_paths(drive)[0]),
+            "--gt-topic", "/cones_gt", "--out", str(out), "--json", str(tmp_path / "s.json"), "--no-progress",
+            "--model", str(default_model_path())]
+    assert main(args) == 0
+    text = capsys.readouterr().out
+    assert "20 /cones/tracked received" in text and "/cones/tracked within 15 m over 20 frames" in text
+    s = json.loads((tmp_path / "s.json").read_text())["tracking"]
+    assert s["tracked"]["recall"] >= s["raw"]["recall"] - 0.02 and s["tracked"]["id_switches"] == 0
+    msgs = [from_pointcloud2(m.msg, TRACKED_CONE_DTYPE) for m in bagio.read_messages(out, TRACKED_TOPIC)]
+    stamps = [bagio.stamp_ns(m.msg.header) for m in bagio.read_messages(out, TRACKED_TOPIC)]
+    assert stamps == [bagio.stamp_ns(m.msg.header) for m in bagio.read_messages(out, "/cones")]
+    assert len(msgs) == 20 and len(msgs[-1]) > 5
+    assert len(set(msgs[-1]["track_id"]) & set(msgs[-5]["track_id"])) >= 3  # the same cones keep their ids
 
 
 def _write_odometry_bag(path: Path, twists, kind: str) -> None:
