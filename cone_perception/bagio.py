@@ -37,6 +37,7 @@ COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
 POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
 VECTOR3_STAMPED = "geometry_msgs/msg/Vector3Stamped"
 IMU = "sensor_msgs/msg/Imu"
+ODOMETRY = "nav_msgs/msg/Odometry"
 
 Header = TYPESTORE.types["std_msgs/msg/Header"]
 Time = TYPESTORE.types["builtin_interfaces/msg/Time"]
@@ -48,6 +49,12 @@ Vector3Stamped = TYPESTORE.types[VECTOR3_STAMPED]
 Vector3 = TYPESTORE.types["geometry_msgs/msg/Vector3"]
 Quaternion = TYPESTORE.types["geometry_msgs/msg/Quaternion"]
 Imu = TYPESTORE.types[IMU]
+Odometry = TYPESTORE.types[ODOMETRY]
+Point = TYPESTORE.types["geometry_msgs/msg/Point"]
+Pose = TYPESTORE.types["geometry_msgs/msg/Pose"]
+PoseWithCovariance = TYPESTORE.types["geometry_msgs/msg/PoseWithCovariance"]
+Twist = TYPESTORE.types["geometry_msgs/msg/Twist"]
+TwistWithCovariance = TYPESTORE.types["geometry_msgs/msg/TwistWithCovariance"]
 
 
 def header(stamp_ns: int, frame_id: str) -> Any:

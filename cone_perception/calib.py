@@ -60,6 +60,7 @@ _KNOWN_KEYS = {
     "camera_matrix",
     "dist_coeffs",
     "foot_offset_m",
+    "foot_offset_from_width",
     "camera_xy_m",
     "mount_pose",
 }
@@ -85,6 +86,9 @@ class Calibration:
     camera_matrix: np.ndarray | None = None
     dist_coeffs: np.ndarray | None = None
     foot_offset_m: tuple[float, ...] = (0.0,) * len(CLASS_NAMES)  # per project class id
+    #: the foot offset of a class with a known base plate (CONE_SIZE_M) from each box's width instead
+    #: (:meth:`cone_perception.mapping.ConeMapper.map_boxes`)
+    foot_offset_from_width: bool = False
     camera_xy_m: tuple[float, float] | None = None
     mount_pose: MountPose | None = None  # needs camera_matrix; enables per-frame attitude
     extra: dict[str, Any] = field(default_factory=dict)
@@ -143,6 +147,8 @@ class Calibration:
             d["dist_coeffs"] = [float(x) for x in np.asarray(self.dist_coeffs).ravel()]
         if any(self.foot_offset_m):
             d["foot_offset_m"] = {CLASS_NAMES[i]: float(v) for i, v in enumerate(self.foot_offset_m)}
+        if self.foot_offset_from_width:
+            d["foot_offset_from_width"] = True
         if self.camera_xy_m is not None:
             d["camera_xy_m"] = [float(v) for v in self.camera_xy_m]
         if self.mount_pose is not None:
@@ -291,6 +297,9 @@ def calibration_from_dict(data: dict, source: str = "<memory>") -> Calibration:
         offsets[name] = f.number(name, where=off_d, prefix="foot_offset_m.")
         if not 0.0 <= offsets[name] <= 0.5:
             raise f.err(f"foot_offset_m.{name}", f"must be within 0..0.5 m, got {offsets[name]}")
+    from_width = f.get("foot_offset_from_width", False)
+    if not isinstance(from_width, bool):
+        raise f.err("foot_offset_from_width", f"must be true or false, got {from_width!r}")
     cam_xy = f.get("camera_xy_m", None)
     if cam_xy is not None:
         try:
@@ -346,6 +355,7 @@ def calibration_from_dict(data: dict, source: str = "<memory>") -> Calibration:
         camera_matrix=K,
         dist_coeffs=dist,
         foot_offset_m=tuple(offsets[n] for n in CLASS_NAMES),
+        foot_offset_from_width=from_width,
         camera_xy_m=cam_xy,
         mount_pose=mount_pose,
         extra={k: v for k, v in data.items() if k not in _KNOWN_KEYS},

@@ -6,6 +6,14 @@ calibration's ``H_F_B``, moves it by the class's foot offset away from the
 camera along the viewing ray (from the base edge the camera sees to the cone's
 centre) and returns :data:`CONE_DTYPE` records with covariance.
 
+Foot offset from the box width (calibration ``foot_offset_from_width: true``): a cone stands on a
+square base plate (side ``s``, :data:`~cone_perception.classes.CONE_SIZE_M`) at any yaw; the
+plate's edge nearest the camera lies ``h = s/2 (|cos a| + |sin a|)`` before its centre (``a``: the
+plate's yaw against the viewing ray), between ``s/2`` and ``s/sqrt(2)``, and the plate is ``2 h``
+wide across the ray. So each box's width, measured on the ground at its foot row, gives that cone's
+offset (half of it, clipped to ``s/2 .. s/sqrt(2)``) instead of the class's fixed
+``foot_offset_m`` (kept for classes of unknown size and boxes whose edges do not map).
+
 Pixel conventions: boxes are in pixel-EDGE coordinates (a box around pixel
 columns 10..19 has u1 = 10, u2 = 20, as detectors and YOLO labels use them);
 the calibration, like OpenCV, uses pixel-CENTRE coordinates (pixel 10 spans
@@ -18,7 +26,7 @@ import numpy as np
 
 from .attitude import Attitude, AttitudeModel
 from .calib import Calibration
-from .classes import NUM_CLASSES
+from .classes import CONE_SIZE_M, NUM_CLASSES
 from .errors import FrameError
 from .geometry import GroundMapper, foot_point_weights, foot_points
 from .records import BOX_DTYPE, CONE_DTYPE, boxes_to_arrays
@@ -55,7 +63,10 @@ class ConeMapper:
         )
         self._u_weights = foot_point_weights(calib.foot_points)
         self._offset_m = np.asarray(calib.foot_offset_m, dtype=np.float64)
-        self._camera_xy = calib.camera_ground_xy() if np.any(self._offset_m) else np.zeros(2)
+        self._from_width = bool(getattr(calib, "foot_offset_from_width", False))
+        self._camera_xy = calib.camera_ground_xy() if (np.any(self._offset_m) or self._from_width) else np.zeros(2)
+        #: half the base plate side per class id (NaN: size unknown)
+        self._plate_half_m = np.array([CONE_SIZE_M[c][1] / 2 if c in CONE_SIZE_M else np.nan for c in range(NUM_CLASSES)])
         #: H_F_B for a body attitude offset; None without a mount pose in the calibration (fixed H only)
         self.attitude_model = None
         if calib.mount_pose is not None and calib.camera_matrix is not None:
@@ -86,19 +97,36 @@ class ConeMapper:
         b, _, c = boxes_to_arrays(records)
         return foot_points(b, c, self._u_weights) - 0.5
 
-    def foot_offsets(self, xy_m: np.ndarray, class_ids: np.ndarray) -> np.ndarray:
-        """(N, 2) mapped foot points -> cone centres: moved by the class's foot offset along the
-        ground ray from the camera."""
-        off = self._offset_m[np.asarray(class_ids, dtype=np.intp)]
+    def foot_offsets(self, xy_m: np.ndarray, class_ids: np.ndarray, offsets_m: np.ndarray | None = None) -> np.ndarray:
+        """(N, 2) mapped foot points -> cone centres: moved by the class's foot offset (or ``offsets_m``,
+        (N,) m) along the ground ray from the camera."""
+        off = self._offset_m[np.asarray(class_ids, dtype=np.intp)] if offsets_m is None else np.asarray(offsets_m)
         if not np.any(off):
             return xy_m
         d = xy_m - self._camera_xy
         n = np.linalg.norm(d, axis=1, keepdims=True)
         return xy_m + d / np.maximum(n, 1e-9) * off[:, None]
 
+    def width_offsets(self, records: np.ndarray, foot_uv: np.ndarray, ground: GroundMapper | None = None) -> np.ndarray:
+        """(N,) m foot offsets from the boxes' widths (module doc): half the ground distance between the
+        box's left and right edges at its foot row, clipped to the class's plate ``s/2 .. s/sqrt(2)``;
+        the class's fixed offset where the size is unknown or an edge does not map.
+        ``foot_uv``: (N, 2) foot pixels (pixel-centre coordinates, :meth:`foot_points`)."""
+        ground = ground or self.ground
+        b, _, c = boxes_to_arrays(records)
+        cls = np.asarray(c, dtype=np.intp)
+        left, _ = ground.map_pixels(np.c_[b[:, 0] - 0.5, foot_uv[:, 1]])
+        right, _ = ground.map_pixels(np.c_[b[:, 2] - 0.5, foot_uv[:, 1]])
+        half = 0.5 * np.hypot(right[:, 0] - left[:, 0], right[:, 1] - left[:, 1])
+        lo = self._plate_half_m[cls]
+        with np.errstate(invalid="ignore"):
+            off = np.clip(half, lo, lo * np.sqrt(2.0))
+        return np.where(np.isfinite(off), off, self._offset_m[cls])
+
     def box_foot_of(self, xy_m: np.ndarray, class_ids: np.ndarray) -> np.ndarray:
         """Inverse of the box -> cone mapping: (N, 2) cone centres (m) -> (N, 2) box foot points
-        in pixel-EDGE coordinates (where this calibration expects each class's foot point)."""
+        in pixel-EDGE coordinates (where this calibration expects each class's foot point; with the
+        class's fixed foot offset, also under ``foot_offset_from_width``)."""
         xy = np.asarray(xy_m, dtype=np.float64).reshape(-1, 2)
         off = self._offset_m[np.asarray(class_ids, dtype=np.intp)]
         if np.any(off):
@@ -131,7 +159,8 @@ class ConeMapper:
         ground = self._ground_for(attitude)
         uv = self.foot_points(records)
         xy, valid = ground.map_pixels(uv)
-        xy[valid] = self.foot_offsets(xy[valid], records["class_id"][valid])
+        off = self.width_offsets(records, uv, ground)[valid] if self._from_width else None
+        xy[valid] = self.foot_offsets(xy[valid], records["class_id"][valid], off)
         cov = ground.covariance(uv[valid])
         if (self.attitude_model is not None and attitude is not None and valid.any()
                 and (attitude.sigma_pitch_deg > 0 or attitude.sigma_roll_deg > 0)):

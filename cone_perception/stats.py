@@ -18,6 +18,7 @@
 from __future__ import annotations
 
 from collections import Counter, deque
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from statistics import median
 
@@ -175,6 +176,13 @@ class NodeHealth:
         self.streams: dict[str, StreamMonitor] = {}
         self.timeout_s, self.max_age_s, self.period_s = timeout_s, max_age_s, period_s
         self._last: dict[str, int] = {}
+        self.watched: dict[str, tuple[Mapping[str, int], frozenset[str]]] = {}
+
+    def watch(self, name: str, counts: Mapping[str, int], warn: Iterable[str] = ()) -> None:
+        """Report a stage's own event counts (e.g. the tracker's ``events``, read at each
+        :meth:`assess`) with the node's: each as the value ``name:event``; an event in ``warn`` that grew
+        in the period makes it WARN (``"N name event"`` in the message)."""
+        self.watched[name] = (counts, frozenset(warn))
 
     def stream(self, topic: str, now_ns: int | None = None) -> StreamMonitor:
         if topic not in self.streams:
@@ -188,6 +196,10 @@ class NodeHealth:
         for s in self.streams.values():
             for k in ("skipped", "lost", "backwards", "repeated", "stale"):
                 t[f"{k}"] += getattr(s, k)
+        for name, (counts, warn) in self.watched.items():
+            for k in warn:
+                if counts.get(k, 0):
+                    t[f"{name}:{k}"] = int(counts[k])
         return dict(t)
 
     def assess(self, now_ns: int, publishers: dict[str, int] | None = None) -> HealthReport:
@@ -211,6 +223,8 @@ class NodeHealth:
         for k, v in sorted(new.items()):
             if k.startswith("dropped_"):
                 warns.append(f"{v} dropped ({k[len('dropped_'):]})")
+            elif ":" in k:
+                warns.append(f"{v} {k.replace(':', ' ')}")
             else:
                 warns.append(f"{v} {labels[k]}")
         level = ERROR if errors else WARN if warns else OK
@@ -219,6 +233,8 @@ class NodeHealth:
         values += [(f"dropped_{k}", str(v)) for k, v in sorted(self.stats.dropped.items())]
         for s in self.streams.values():
             values += [(f"{s.topic}:{k}", str(v)) for k, v in s.counts().items()]
+        for name, (counts, _) in self.watched.items():
+            values += [(f"{name}:{k}", str(v)) for k, v in sorted(counts.items())]
         return HealthReport(level, message, values)
 
     def summary(self) -> str:
@@ -228,4 +244,7 @@ class NodeHealth:
             faults = {k: v for k, v in s.counts().items() if k not in ("received", "ok", "dropped") and v}
             if faults:
                 parts.append(f"{s.topic}: " + ", ".join(f"{k}={v}" for k, v in faults.items()))
+        for name, (counts, _) in self.watched.items():
+            if any(counts.values()):
+                parts.append(f"{name}: " + ", ".join(f"{k}={v}" for k, v in sorted(counts.items()) if v))
         return "; ".join(parts)

@@ -19,6 +19,11 @@ within :attr:`TrackingReport.range_m` (15 m) of the rear axle:
   maximise the frames they are matched in, ``IDF1 = 2 IDTP / (n_truth + n_tracked)``;
 * **ego-motion**: the estimated motion between consecutive frames against the true one
   (translation error, also as a share of the distance travelled; yaw error).
+
+:class:`DriveEvaluation` scores the raw ``/cones`` (recall, false cones and error within the same
+range, :class:`~cone_perception.evaluation.LocalisationReport`) beside the tracked ones: the table
+``replay --track --gt-topic`` prints, and ``eval --tracked`` from a replay's output bag
+(:func:`evaluate_tracking_bag`, :func:`write_tracking_report`).
 """
 
 from __future__ import annotations
@@ -32,7 +37,7 @@ import numpy as np
 
 from .egomotion import Motion2D
 from .errors import ConfigError
-from .evaluation import DISTANCE_GROUPS, distance_group, match_cones
+from .evaluation import DISTANCE_GROUPS, LocalisationReport, distance_group, match_cones
 
 EVAL_RANGE_M = 15.0
 
@@ -249,6 +254,99 @@ def format_tracking(s: dict, title: str = "/cones/tracked") -> str:
                     f"{s['ego_median_err_frac'] * 100:.1f} % of the distance travelled (p90 {s['ego_p90_err_frac'] * 100:.1f} %), "
                     f"median yaw error {s['ego_median_err_yaw_deg']:.3f} deg")
     return "\n".join(rows)
+
+
+class DriveEvaluation:
+    """``/cones`` (raw) and ``/cones/tracked`` of one drive against its :class:`DriveTruth`, within ``range_m``.
+
+    :meth:`add_raw` and :meth:`add_tracked` take a frame by its capture stamp (frames the truth does not
+    have are skipped); :meth:`summary` gives ``{"raw": ..., "tracked": ...}`` for what was added.
+    """
+
+    def __init__(self, truth: DriveTruth, range_m: float = EVAL_RANGE_M):
+        self.truth = truth
+        self.raw = LocalisationReport(max_range_m=range_m)
+        self.tracked = TrackingReport(truth, range_m)
+
+    def add_raw(self, stamp_ns: int, cones: np.ndarray) -> None:
+        """One frame's ``/cones`` (``CONE_DTYPE``) against every cone the frame shows."""
+        if stamp_ns not in self.truth.frames:
+            return
+        fr = self.truth.frames[stamp_ns]
+        gt = np.zeros(len(fr.xy_m), dtype=cones.dtype)
+        gt["x"], gt["y"], gt["class_id"] = fr.xy_m[:, 0], fr.xy_m[:, 1], fr.class_ids
+        self.raw.add_frame(cones, gt)
+
+    def add_tracked(self, stamp_ns: int, tracked: np.ndarray, motion: Motion2D | None = None) -> None:
+        """One frame's ``/cones/tracked``; ``motion``: the tracker's ego-motion estimate, if known."""
+        self.tracked.add_frame(stamp_ns, tracked, motion)
+
+    def summary(self) -> dict:
+        out: dict = {}
+        if self.raw.frames:
+            r = self.raw.summary()
+            e = np.hypot(np.asarray(self.raw.err_x), np.asarray(self.raw.err_y))
+            near = e[np.asarray(self.raw.err_range) < 7.0]
+            out["raw"] = {"range_m": self.raw.max_range_m, "frames": r["frames"], "recall": r["all"]["recall"],
+                          "false_per_frame": r["false_positives"] / r["frames"],
+                          "median_err_0_7_m": float(np.median(near)) if near.size else float("nan"),
+                          "median_err_7_15_m": r["groups"]["far 7-15 m"]["median_err_m"]}
+        if self.tracked.frames:
+            out["tracked"] = self.tracked.summary()
+            if "raw" in out:
+                t = out["tracked"]["groups"].get("far 7-15 m", {}).get("median_err_m", float("nan"))
+                out["tracked"]["err_7_15_ratio_to_raw"] = t / out["raw"]["median_err_7_15_m"]
+        return out
+
+
+def format_drive_evaluation(s: dict) -> str:
+    """Plain-text lines of :meth:`DriveEvaluation.summary` (raw line, then the tracked lines)."""
+    rows = []
+    if "raw" in s:
+        r = s["raw"]
+        rows.append(f"/cones within {r['range_m']:g} m: recall {r['recall']:.3f}, false cones {r['false_per_frame']:.2f}/frame, "
+                    f"median error 0-7 m {r['median_err_0_7_m']:.3f}, 7-15 m {r['median_err_7_15_m']:.3f}")
+    if "tracked" in s:
+        rows.append(format_tracking(s["tracked"]))
+        if "err_7_15_ratio_to_raw" in s["tracked"]:
+            rows.append(f"  median error 7-15 m tracked / raw: {s['tracked']['err_7_15_ratio_to_raw']:.2f}")
+    return "\n".join(rows)
+
+
+def evaluate_tracking_bag(bag: str | os.PathLike, truth: DriveTruth, cones_topic: str = "/cones",
+                          tracked_topic: str = "/cones/tracked", range_m: float = EVAL_RANGE_M) -> dict:
+    """:meth:`DriveEvaluation.summary` of a bag with ``/cones`` and ``/cones/tracked`` (e.g. the ``--out`` of
+    ``replay --track``), messages taken by header stamp. No ego-motion figures (the bag has no estimate)."""
+    from . import bagio
+    from .records import CONE_DTYPE, TRACKED_CONE_DTYPE, from_pointcloud2
+
+    topics = bagio.bag_topics(bag)
+    ev = DriveEvaluation(truth, range_m)
+    n = {cones_topic: 0, tracked_topic: 0}
+    for topic, dtype, add in ((cones_topic, CONE_DTYPE, ev.add_raw), (tracked_topic, TRACKED_CONE_DTYPE, ev.add_tracked)):
+        if topic not in topics:
+            continue
+        for m in bagio.read_messages(bag, topic):
+            add(bagio.stamp_ns(m.msg.header), from_pointcloud2(m.msg, dtype))
+            n[topic] += 1
+    if not any(n.values()):
+        raise ConfigError(str(bag), None, f"has no {cones_topic} or {tracked_topic} messages (a replay --track --out bag?)")
+    out = ev.summary()
+    if not out:
+        raise ConfigError(str(bag), None, "no frame of the bag is in the drive's ground truth (another drive's gt.jsonl?)")
+    out["messages"] = n
+    return out
+
+
+def write_tracking_report(summary: dict, out_dir: str | os.PathLike, bag: str, gt: str) -> dict[str, Path]:
+    """``report.md`` (the table of :func:`format_drive_evaluation`) and ``metrics.json`` in ``out_dir``."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    files = {"metrics": out / "metrics.json", "report": out / "report.md"}
+    files["metrics"].write_text(json.dumps({"bag": bag, "gt": gt, **summary}, indent=1), encoding="utf-8")
+    files["report"].write_text(f"# Tracking: {bag}\n\nGround truth: `{gt}`. Definitions: `cone_perception/track_eval.py`.\n\n"
+                               f"```\n{format_drive_evaluation(summary)}\n```\n", encoding="utf-8")
+    return files
 
 
 def simulated_drive(n_frames: int, fov, rows_m: tuple[float, ...] = (1.75, -1.75, 5.0, -5.0, 8.5, -8.5),

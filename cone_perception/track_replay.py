@@ -16,12 +16,11 @@ from pathlib import Path
 import numpy as np
 
 from . import bagio
+from .bagio import ODOMETRY
 from .errors import ConfigError, FrameError
-from .evaluation import LocalisationReport
-from .track_eval import EVAL_RANGE_M, DriveTruth, TrackingReport, load_drive_truth
+from .track_eval import EVAL_RANGE_M, DriveEvaluation, DriveTruth, load_drive_truth
 from .tracker import TrackerConfig, TrackingStage
 
-ODOMETRY = "nav_msgs/msg/Odometry"
 TWIST_STAMPED = "geometry_msgs/msg/TwistStamped"
 TRACKED_TOPIC = "/cones/tracked"
 
@@ -66,8 +65,7 @@ class ReplayTracking:
         self.drop_share = drop_share
         self.rng = np.random.default_rng(seed)
         self.truth = truth
-        self.report = TrackingReport(truth, range_m) if (truth is not None and track) else None
-        self.raw = LocalisationReport(max_range_m=range_m) if truth is not None else None
+        self.evaluation = DriveEvaluation(truth, range_m) if truth is not None else None
         self.twists = twists or []
         self._next_twist = 0
         self.dropped_detections = 0
@@ -77,11 +75,8 @@ class ReplayTracking:
         """One frame's ``/cones`` -> (``/cones`` after the drop, tracked records or None when not fused)."""
         kept = drop_detections(cones, self.drop_share, self.rng)
         self.dropped_detections += len(cones) - len(kept)
-        if self.raw is not None and stamp_ns in self.truth.frames:
-            fr = self.truth.frames[stamp_ns]
-            gt = np.zeros(len(fr.xy_m), dtype=kept.dtype)
-            gt["x"], gt["y"], gt["class_id"] = fr.xy_m[:, 0], fr.xy_m[:, 1], fr.class_ids
-            self.raw.add_frame(kept, gt)
+        if self.evaluation is not None:
+            self.evaluation.add_raw(stamp_ns, kept)
         if self.stage is None:
             return kept, None
         while self._next_twist < len(self.twists) and self.twists[self._next_twist][0] <= stamp_ns:
@@ -92,8 +87,8 @@ class ReplayTracking:
         except FrameError as e:
             self.not_fused[e.reason] += 1
             return kept, None
-        if self.report is not None:
-            self.report.add_frame(stamp_ns, tracked, info.motion if info.motion_source != "none" else None)
+        if self.evaluation is not None:
+            self.evaluation.add_tracked(stamp_ns, tracked, info.motion if info.motion_source != "none" else None)
         return kept, tracked
 
     def summary(self) -> dict:
@@ -101,37 +96,20 @@ class ReplayTracking:
         if self.stage is not None:
             out["events"] = dict(self.stage.events)
             out["not_fused"] = dict(self.not_fused)
-        if self.raw is not None:
-            r = self.raw.summary()
-            out["raw"] = {"range_m": self.raw.max_range_m, "recall": r["all"]["recall"],
-                          "false_per_frame": r["false_positives"] / r["frames"] if r["frames"] else float("nan"),
-                          "median_err_0_7_m": _median_0_7(self.raw),
-                          "median_err_7_15_m": r["groups"]["far 7-15 m"]["median_err_m"]}
-        if self.report is not None:
-            out["tracked"] = self.report.summary()
+        if self.evaluation is not None:
+            out.update(self.evaluation.summary())
         return out
-
-
-def _median_0_7(rep: LocalisationReport) -> float:
-    e = np.hypot(np.asarray(rep.err_x), np.asarray(rep.err_y))
-    r = np.asarray(rep.err_range)
-    sel = e[r < 7.0]
-    return float(np.median(sel)) if sel.size else float("nan")
 
 
 def format_replay_tracking(s: dict) -> str:
     """Plain-text lines of :meth:`ReplayTracking.summary`."""
-    from .track_eval import format_tracking
+    from .track_eval import format_drive_evaluation
 
     rows = []
     if s["drop_share"] > 0:
         rows.append(f"dropped detections: {s['dropped_detections']} ({s['drop_share']:.0%} share, seeded)")
-    if "raw" in s:
-        r = s["raw"]
-        rows.append(f"/cones within {r['range_m']:g} m: recall {r['recall']:.3f}, false cones {r['false_per_frame']:.2f}/frame, "
-                    f"median error 0-7 m {r['median_err_0_7_m']:.3f}, 7-15 m {r['median_err_7_15_m']:.3f}")
-    if "tracked" in s:
-        rows.append(format_tracking(s["tracked"]))
+    if "raw" in s or "tracked" in s:
+        rows.append(format_drive_evaluation(s))
     if s.get("events") or s.get("not_fused"):
         ev = {**s.get("events", {}), **{f"not_fused_{k}": v for k, v in s.get("not_fused", {}).items()}}
         rows.append("tracker events: " + ", ".join(f"{k}={v}" for k, v in sorted(ev.items())))

@@ -33,6 +33,11 @@ from .errors import FrameError
 from .records import CONE_DTYPE, TRACKED_CONE_DTYPE
 
 _BIG = 1e9
+#: :attr:`ConeTracker.events` that mean bad or missing input (a node's health WARNs when one grows);
+#: ``merged`` (duplicate tracks joined) is normal work. Frames not fused for their stamp
+#: (``stamp_backwards`` / ``stamp_repeated``) are counted by the nodes as dropped frames as well.
+INPUT_EVENTS = ("stamp_backwards", "stamp_repeated", "gap", "odom_stale", "twist_nan", "twist_stamp",
+                "registration_failed", "bad_cone")
 
 
 @dataclass
@@ -64,6 +69,8 @@ class TrackerConfig:
     max_range_m: float = 20.0  # detections farther than this are not used (too uncertain along the ray)
     spawn_chi2: float = 50.0  # an unassigned detection this near (Mahalanobis^2) to a track starts no new one
     merge_chi2: float = 6.0  # two tracks this near (and of one class) are merged into the older one
+    robust_chi2: float = 0.0  # > 0: a matched cone farther than this (Mahalanobis^2) from its track is fused with its
+    # covariance times d2 / robust_chi2 (an outlier pulls less); off: no gain on the tuning drives (docs/benchmarks.md)
 
 
 class FieldOfView:
@@ -242,7 +249,10 @@ class ConeTracker:
 
         # ---- Kalman update of the matched tracks ----
         if len(rows):
-            P, S = self.P[cols], self.P[cols] + Rz[rows]
+            Rm = Rz[rows]
+            if cfg.robust_chi2 > 0:
+                Rm = Rm * np.maximum(d2[rows, cols] / cfg.robust_chi2, 1.0)[:, None, None]
+            P, S = self.P[cols], self.P[cols] + Rm
             K = P @ _inv2(S)
             innov = z[rows] - self.xy[cols]
             self.xy[cols] += np.einsum("nij,nj->ni", K, innov)

@@ -91,6 +91,24 @@ def test_drops_and_faults_warn_for_the_period_they_happened_in() -> None:
     assert "skipped=2" in h.summary() and "2 dropped" in h.summary()
 
 
+def test_a_watched_stage_reports_its_counts_and_warns_on_the_listed_ones() -> None:
+    from collections import Counter
+
+    h = NodeHealth(timeout_s=0)
+    events = Counter()
+    h.watch("tracker", events, warn=["gap", "twist_nan"])
+    assert h.assess(10**9).level == OK
+    events["merged"] += 3  # counted, not a fault
+    rep = h.assess(2 * 10**9)
+    assert rep.level == OK and dict(rep.values)["tracker:merged"] == "3"
+    events["twist_nan"] += 2
+    rep = h.assess(3 * 10**9)
+    assert rep.level == WARN and "2 tracker twist_nan" in rep.message
+    assert dict(rep.values)["tracker:twist_nan"] == "2"
+    assert h.assess(4 * 10**9).level == OK  # nothing new
+    assert "tracker: merged=3, twist_nan=2" in h.summary()
+
+
 def test_the_node_publishes_its_health(ros) -> None:  # noqa: F811
     from cone_perception.nodes.driver_adapter import DriverAdapterNode
 

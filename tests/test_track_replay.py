@@ -52,13 +52,50 @@ def test_replay_track_writes_tracked_cones_and_fills_dropped_detections(drive, t
     assert msgs[-1].msg.header.frame_id == calib.frame_id
     stamps = [bagio.stamp_ns(m.msg.header) for m in msgs]
     assert stamps == sorted(res.cones)  # the capture stamps of the frames
-
-
-def test_replay_cli_refuses_track_live(drive, capsys):
+    # eval --tracked scores the output bag to the same figures (but the ego-motion, not in the bag)
     from cone_perception.cli import main
 
-    assert main(["replay", str(drive), "--live", "fused", "--track"]) != 0
+    assert main(["eval", "--tracked", str(out), "--gt", str(bag_side_paths(drive)[1]), "--out", str(tmp_path / "ev")]) == 0
+    m = json.loads((tmp_path / "ev" / "metrics.json").read_text())
+    assert m["raw"] == pytest.approx(s["raw"], nan_ok=True)
+    for k in ("recall", "false_per_frame", "median_err_0_7_m", "id_switches", "id_switches_all", "idf1",
+              "err_7_15_ratio_to_raw"):
+        assert m["tracked"][k] == pytest.approx(s["tracked"][k], nan_ok=True), k
+    for name, g in s["tracked"]["groups"].items():
+        assert m["tracked"]["groups"][name] == pytest.approx(g, nan_ok=True), name
+    assert m["tracked"]["ego_frames"] == 0 and m["messages"] == {"/cones": 20, "/cones/tracked": 20}
+    assert "IDF1" in (tmp_path / "ev" / "report.md").read_text()
+
+
+def test_replay_cli_refuses_drop_and_odometry_live(drive, capsys):
+    from cone_perception.cli import main
+
+    assert main(["replay", str(drive), "--live", "fused", "--track", "--drop-detections", "0.2"]) != 0
     assert "offline only" in capsys.readouterr().err
+    assert main(["replay", str(drive), "--live", "fused", "--track", "--odom-topic", "/odom"]) != 0
+    assert "offline only" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("mode", ["fused", "separate"])
+def test_live_replay_tracks_through_the_nodes(drive, tmp_path, capsys, mode):
+    """replay --live --track: the pipeline node with track: true, or a cone_tracker node after the three
+    nodes; every frame's /cones/tracked comes back under its capture stamp, ids stay, it is scored."""
+    from cone_perception.cli import main
+
+    out = tmp_path / "live"
+    args = ["replay", str(drive), "--live", mode, "--track", "--calib", str(bag_side_paths(drive)[0]),
+            "--gt-topic", "/cones_gt", "--out", str(out), "--json", str(tmp_path / "s.json"), "--no-progress",
+            "--model", str(default_model_path())]
+    assert main(args) == 0
+    text = capsys.readouterr().out
+    assert "20 /cones/tracked received" in text and "/cones/tracked within 15 m over 20 frames" in text
+    s = json.loads((tmp_path / "s.json").read_text())["tracking"]
+    assert s["tracked"]["recall"] >= s["raw"]["recall"] - 0.02 and s["tracked"]["id_switches"] == 0
+    msgs = [from_pointcloud2(m.msg, TRACKED_CONE_DTYPE) for m in bagio.read_messages(out, TRACKED_TOPIC)]
+    stamps = [bagio.stamp_ns(m.msg.header) for m in bagio.read_messages(out, TRACKED_TOPIC)]
+    assert stamps == [bagio.stamp_ns(m.msg.header) for m in bagio.read_messages(out, "/cones")]
+    assert len(msgs) == 20 and len(msgs[-1]) > 5
+    assert len(set(msgs[-1]["track_id"]) & set(msgs[-5]["track_id"])) >= 3  # the same cones keep their ids
 
 
 def _write_odometry_bag(path: Path, twists, kind: str) -> None:
@@ -106,6 +143,17 @@ def test_odometry_from_a_bag_moves_the_tracks(tmp_path, kind):
     # odometry that stops: stale at the next frame, counted, the cones take over
     _, _ = rt.frame(900_000_000, c)
     assert rt.stage.events["odom_stale"] == 1 and rt.stage.last_info.motion_source != "odometry"
+
+
+def test_eval_tracked_needs_a_drive_truth_and_a_replay_bag(drive, tmp_path):
+    from cone_perception.cli import main
+
+    gt = bag_side_paths(drive)[1]
+    # the synth bag itself has neither /cones nor /cones/tracked
+    assert main(["eval", "--tracked", str(drive), "--gt", str(gt), "--out", str(tmp_path / "a")]) != 0
+    assert main(["eval", "--tracked", str(drive), "--gt", str(drive), "--out", str(tmp_path / "b")]) != 0
+    with pytest.raises(SystemExit):  # --pred and --tracked together
+        main(["eval", "--tracked", str(drive), "--pred", str(gt), "--gt", str(gt), "--out", str(tmp_path / "c")])
 
 
 def test_drop_share_checked():

@@ -274,3 +274,24 @@ def test_low_confidence_detections_are_not_published():
         assert out["class_id"].tolist() == [YELLOW] and out["track_id"].tolist() == [2]
     doubtful = trk.ids != 2
     assert np.all(trk.certainty[doubtful] < trk.config.publish_min_certainty)
+
+
+def test_robust_update_lets_an_outlier_pull_less():
+    """robust_chi2: a detection far (in its covariance) from its track is fused with a widened covariance."""
+    moved = {}
+    for robust in (0.0, 1.0):
+        t = ConeTracker(TrackerConfig(robust_chi2=robust, register=False, process_std_m=0.0))
+        for k in range(5):
+            t.update(k * DT_NS, cones([[10.0, 2.0]], BLUE, sigma=0.05), Motion2D())
+        t.update(5 * DT_NS, cones([[10.2, 2.0]], BLUE, sigma=0.05), Motion2D())  # 0.2 m off: inside the gate, d2 well above 1
+        assert len(t) == 1
+        moved[robust] = t.xy[0, 0] - 10.0
+    assert 0.0 < moved[1.0] < 0.5 * moved[0.0]
+    # a detection near its track is fused the same with or without
+    same = []
+    for robust in (0.0, 1.0):
+        t = ConeTracker(TrackerConfig(robust_chi2=robust, register=False))
+        t.update(0, cones([[10.0, 2.0]], BLUE, sigma=0.05), Motion2D())
+        t.update(DT_NS, cones([[10.01, 2.0]], BLUE, sigma=0.05), Motion2D())
+        same.append(t.xy[0].copy())
+    np.testing.assert_allclose(same[0], same[1])

@@ -14,6 +14,7 @@ from cone_perception.classes import BLUE, YELLOW
 from cone_perception.nodes import _msgs
 from cone_perception.nodes.cone_tracker import ConeTrackerNode
 from cone_perception.records import CONE_DTYPE
+from cone_perception.stats import WARN
 
 from rosutil import Inbox, RosFixture, ros  # noqa: F401 (ros is a fixture)
 
@@ -75,14 +76,31 @@ def test_cone_tracker_node_tracks_with_odometry_and_drops_bad_stamps(ros: RosFix
 def test_cone_tracker_node_twist_input_nan_counted(ros: RosFixture) -> None:
     node = ros.add(ConeTrackerNode(context=ros.context, parameter_overrides=[
         Parameter("odom_topic", value="twist"), Parameter("odom_type", value="twist")]))
+    node._diag_timer.cancel()  # the test takes the diagnostics itself
     t = ros.node("tester")
     pub = t.create_publisher(TwistStamped, "twist", 10)
-    assert ros.spin_until(lambda: pub.get_subscription_count() > 0)
+    cones = t.create_publisher(PointCloud2, "/cones", 10)  # an upstream: no ERROR for a missing one
+    assert ros.spin_until(lambda: pub.get_subscription_count() > 0 and cones.get_subscription_count() > 0)
     m = TwistStamped()
     m.header.stamp.sec = 5
     m.twist.linear.x = float("nan")
     assert ros.spin_until(lambda: (pub.publish(m) or True) and node.tracking.stage.events["twist_nan"] >= 1, 10)
     assert not node.tracking.stage.twists.stamps
+    # on /diagnostics: the count as a value, the period WARNs
+    st = _diagnostics(node)
+    assert st.level == bytes([WARN]) and "tracker twist_nan" in st.message
+    assert int({kv.key: kv.value for kv in st.values}["tracker:twist_nan"]) >= 1
+
+
+def _diagnostics(node):
+    """The node's next /diagnostics status (published at once, captured)."""
+    sent = []
+    pub, node._diag_pub.publish = node._diag_pub.publish, sent.append
+    try:
+        node._publish_diagnostics()
+    finally:
+        node._diag_pub.publish = pub
+    return sent[-1].status[0]
 
 
 def test_pipeline_node_with_track_publishes_tracked_cones(ros: RosFixture, tmp_path) -> None:
@@ -105,6 +123,7 @@ def test_pipeline_node_with_track_publishes_tracked_cones(ros: RosFixture, tmp_p
     node = ros.add(PipelineNode(context=ros.context, parameter_overrides=[
         Parameter("calibration", value=str(bag_side_paths(bag)[0])), Parameter("track", value=True),
         Parameter("odom_topic", value="")]))
+    node._diag_timer.cancel()  # the test takes the diagnostics itself
     t = ros.node("tester")
     tracked, cones = Inbox(), Inbox()
     t.create_subscription(PointCloud2, "/cones/tracked", tracked, 10)
@@ -122,3 +141,12 @@ def test_pipeline_node_with_track_publishes_tracked_cones(ros: RosFixture, tmp_p
     assert ros.spin_until(lambda: (pub.publish(frames[-1]) or True) and node.stats.dropped.get("tracker_stamp_repeated", 0) > d0, 30)
     assert ros.spin_until(lambda: len(cones.msgs) > n_cones, 10)
     assert len(tracked.msgs) == 4
+    _diagnostics(node)  # the period of the repeated stamp
+    # a frame 2 s after the last: tracks predicted over the gap, counted, on /diagnostics
+    late = frames[-1]
+    late.header.stamp.sec += 2
+    assert ros.spin_until(lambda: (pub.publish(late) or True) and len(tracked.msgs) == 5, 30)
+    st = _diagnostics(node)
+    assert st.level == bytes([WARN]) and "1 tracker gap" in st.message
+    values = {kv.key: kv.value for kv in st.values}
+    assert values["tracker:gap"] == "1" and values["tracker:stamp_repeated"] == "1"

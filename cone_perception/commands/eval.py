@@ -2,9 +2,13 @@
 
   cone-perception eval --pred FILE.jsonl --gt DIR_OR_GT.jsonl [--calib FILE] --out DIR
                        [--conf 0.25] [--iou 0.5] [--gt-names A,B,..] [--band V0,V1] [--min-height PX] [--worst N] [--only-predicted]
+  cone-perception eval --tracked REPLAY_OUT_BAG --gt DRIVE_gt.jsonl --out DIR
 
 Ground truth: a YOLO label folder (images/, labels/, data.yaml) or a synthetic gt.jsonl (with cone
 positions: localisation and the thesis's pair metric too). See ``cone_perception/evaluation/report.py``.
+``--tracked``: the tracking table of ``replay --track --gt-topic`` from a replay's output bag
+(``/cones`` and ``/cones/tracked``) against the synthetic drive's gt.jsonl
+(``cone_perception/track_eval.py``).
 """
 
 from __future__ import annotations
@@ -40,8 +44,15 @@ def _rows(text: str) -> tuple[int, int]:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.description = ("Evaluate a prediction file of `cone-perception detect` against ground truth: mAP (pycocotools), "
                      "precision/recall/F1, confusion matrix, PR curves, the same per distance group, localisation error "
-                     "and the blue-yellow pair distance error; writes report.md, metrics.json and PNGs.")
-    p.add_argument("--pred", type=Path, required=True, help="JSON-lines prediction file written by `cone-perception detect`")
+                     "and the blue-yellow pair distance error; writes report.md, metrics.json and PNGs. With --tracked "
+                     "instead of --pred: the tracking figures of a `replay --track --out` bag against a synthetic drive "
+                     "(recall, false cones, error within 15 m of /cones and /cones/tracked, id switches, IDF1).")
+    what = p.add_mutually_exclusive_group(required=True)
+    what.add_argument("--pred", type=Path, help="JSON-lines prediction file written by `cone-perception detect`")
+    what.add_argument("--tracked", type=Path, metavar="BAG",
+                      help="score tracking instead: the --out bag of `cone-perception replay --track` (its /cones and "
+                           "/cones/tracked) against --gt, the gt.jsonl of the `synth bag` it replayed (BAG_gt.jsonl); "
+                           "the table of `replay --gt-topic` without the ego-motion error (not in the bag)")
     p.add_argument("--gt", type=Path, required=True,
                    help="ground truth: a YOLO folder (images/ + labels/, flat or per split, class names in data.yaml) "
                         "or a gt.jsonl of `cone-perception synth` (with cone positions)")
@@ -76,10 +87,12 @@ def run(args: argparse.Namespace) -> int:
     from ..evaluation.report import evaluate_predictions, format_summary, write_report
 
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(message)s")
-    if not args.pred.is_file():
-        raise ConfigError(str(args.pred), None, "prediction file not found")
     if args.out.exists() and not args.out.is_dir():
         raise ConfigError(str(args.out), None, "output exists and is not a directory")
+    if args.tracked is not None:
+        return _run_tracked(args)
+    if not args.pred.is_file():
+        raise ConfigError(str(args.pred), None, "prediction file not found")
     res = evaluate_predictions(args.pred, args.gt, args.gt_names, args.calib, args.conf, args.iou, args.only_predicted,
                                progress=not args.no_progress, band=args.band, min_height=args.min_height)
     from ..evaluation.report import lowest_score_note
@@ -92,5 +105,23 @@ def run(args: argparse.Namespace) -> int:
     except OSError as e:
         raise ConfigError(str(args.out), None, f"cannot write: {e.strerror}") from None
     print(format_summary(res))
+    print(f"wrote {', '.join(p.name for p in files.values())} to {args.out}")
+    return 0
+
+
+def _run_tracked(args: argparse.Namespace) -> int:
+    from ..errors import ConfigError
+    from ..track_eval import evaluate_tracking_bag, format_drive_evaluation, load_drive_truth, write_tracking_report
+
+    if not args.tracked.is_dir() and not args.tracked.is_file():
+        raise ConfigError(str(args.tracked), None, "bag not found")
+    if args.gt.suffix != ".jsonl":
+        raise ConfigError(str(args.gt), None, "--tracked needs the drive's gt.jsonl of `cone-perception synth bag` as --gt")
+    summary = evaluate_tracking_bag(args.tracked, load_drive_truth(args.gt))
+    try:
+        files = write_tracking_report(summary, args.out, str(args.tracked), str(args.gt))
+    except OSError as e:
+        raise ConfigError(str(args.out), None, f"cannot write: {e.strerror}") from None
+    print(format_drive_evaluation(summary))
     print(f"wrote {', '.join(p.name for p in files.values())} to {args.out}")
     return 0

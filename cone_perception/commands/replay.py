@@ -2,7 +2,7 @@
 
   cone-perception replay BAG [--calib CAL] [--model M] [--out OUT] [--gt-topic /cones_gt]
   cone-perception replay BAG --track [--drop-detections P] [--odom-topic odom] [--gt-topic /cones_gt] [...]
-  cone-perception replay BAG --live fused|separate [...]
+  cone-perception replay BAG --live fused|separate [--track] [...]
 
 Offline: every frame of the bag's camera topic (YUYV, bgr8/rgb8 or JPEG/PNG) goes through the
 same code as the fused node; ``/cone_boxes`` and ``/cones`` are written to OUT (rosbag2, MCAP)
@@ -11,7 +11,8 @@ three separate nodes or the fused ``pipeline`` node - and what they publish is r
 Prints frames, throughput, per-stage latency percentiles, dropped frames by cause, and with
 ``--gt-topic`` the localisation table (recall and position error per distance group).
 ``--track`` adds the cone tracker (``/cones/tracked``); on a synthetic bag with ``--gt-topic`` it prints
-recall, false cones, error, id switches, IDF1 and ego-motion error within 15 m, tracked against raw.
+recall, false cones, error, id switches, IDF1 and ego-motion error within 15 m, tracked against raw
+(live: no ego-motion error, the nodes do not publish their estimate).
 """
 
 from __future__ import annotations
@@ -49,8 +50,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, default=None, help="write /cone_boxes and /cones to this new bag (MCAP)")
     p.add_argument("--gt-topic", default=None, help="ground-truth cones topic (e.g. /cones_gt): print the localisation table")
     p.add_argument("--track", action="store_true",
-                   help="offline: run the cone tracker too; /cones/tracked goes to --out, and with --gt-topic on a synthetic "
-                        "bag (its <bag>_gt.jsonl beside it) the tracking figures are printed")
+                   help="run the cone tracker too (live: the pipeline with track: true, or a cone_tracker node after the "
+                        "separate nodes; motion from the cones); /cones/tracked goes to --out, and with --gt-topic on a "
+                        "synthetic bag (its <bag>_gt.jsonl beside it) the tracking figures are printed")
     p.add_argument("--drop-detections", type=float, default=0.0, metavar="P",
                    help="offline: drop a random share P (0..1) of the detections before tracking and scoring (seeded by "
                         "--drop-seed), to measure gap filling (default 0)")
@@ -86,10 +88,10 @@ def _progress(disable: bool):
 
 def run(args: argparse.Namespace) -> int:
     calib = load_calibration(args.calib)
-    if args.live and (args.track or args.drop_detections or args.odom_topic):
+    if args.live and (args.drop_detections or args.odom_topic):
         from ..errors import ConfigError
 
-        raise ConfigError("--live", None, "--track, --drop-detections and --odom-topic work offline only")
+        raise ConfigError("--live", None, "--drop-detections and --odom-topic work offline only")
     if args.far_rows:  # a bad value fails before any model loads or node starts
         from ..detector.farband import far_band_crop
 
@@ -207,10 +209,10 @@ def _run_live(args, calib) -> dict:
     if args.bf16:
         params["bf16"] = True
     res = live_replay(args.bag, mode=args.live, topic=args.topic, params=params, pace=args.pace,
-                      progress=_progress(args.no_progress))
+                      progress=_progress(args.no_progress), track=args.track)
     got = len(res.cones)
     print(f"replay (live, {args.live} nodes, {args.pace}) {args.bag}: {res.sent} frames sent, {got} /cones received, "
-          f"{len(res.lost)} lost")
+          f"{len(res.lost)} lost" + (f", {len(res.tracked)} /cones/tracked received" if args.track else ""))
     for exe, code in res.died.items():
         tail = "\n".join(res.node_output.get(exe, "").strip().splitlines()[-15:])
         print(f"replay: node {exe} died during the replay (exit code {code}); its last output:\n{tail}", file=sys.stderr)
@@ -227,8 +229,28 @@ def _run_live(args, calib) -> dict:
                 rep.add_frame(cones, truth[stamp])
         loc = rep.summary()
         print(format_localisation(loc))
+    tracking = _live_tracking(args, res) if args.track and args.gt_topic else None
     if args.out:
         write_result_bag(res, args.out)
         print_written([args.out], "replay")
     return {"mode": f"live-{args.live}", "sent": res.sent, "received": got, "lost": len(res.lost),
-            "latency": lat, "wall_s": res.wall_s, "localisation": loc, "died": res.died}
+            "latency": lat, "wall_s": res.wall_s, "localisation": loc, "died": res.died, "tracking": tracking}
+
+
+def _live_tracking(args, res) -> dict | None:
+    """The tracking table of a live replay (``--track --gt-topic`` on a synthetic bag); no ego-motion figures."""
+    from ..track_eval import DriveEvaluation, format_drive_evaluation
+    from ..track_replay import drive_truth_beside
+
+    truth = drive_truth_beside(args.bag)
+    if truth is None:
+        print(f"replay: no {Path(args.bag).name}_gt.jsonl beside the bag: tracking not scored", file=sys.stderr)
+        return None
+    ev = DriveEvaluation(truth)
+    for stamp in sorted(res.cones):
+        ev.add_raw(stamp, res.cones[stamp])
+    for stamp in sorted(res.tracked):
+        ev.add_tracked(stamp, res.tracked[stamp])
+    summary = ev.summary()
+    print(format_drive_evaluation(summary))
+    return summary

@@ -7,6 +7,10 @@ Parameters
   odom_type ("odometry" | "twist"): nav_msgs/Odometry (twist.twist) or geometry_msgs/TwistStamped.
   odom_max_age_s (float, 0.1): odometry older than this at a frame is not used for it (counted).
   publish_tracked_markers (bool, true): cylinders with the track ids as text, for rviz2.
+
+Health: the tracker's event counts (:attr:`cone_perception.tracker.ConeTracker.events`) are values
+``tracker:<event>`` of the node's ``/diagnostics`` status; a gap, stale odometry, a refused twist, a
+failed registration or a bad cone in the period makes it WARN.
 """
 
 from __future__ import annotations
@@ -17,7 +21,7 @@ from sensor_msgs.msg import PointCloud2
 from visualization_msgs.msg import MarkerArray
 
 from ..errors import ConfigError
-from ..tracker import TrackingStage
+from ..tracker import INPUT_EVENTS, TrackingStage
 from . import _msgs
 from ._common import QOS_DATA, WARN_THROTTLE_S
 
@@ -37,6 +41,8 @@ class NodeTracking:
         if not max_age > 0:
             raise ConfigError("parameter", "odom_max_age_s", f"must be > 0 s, got {max_age}")
         self.stage = TrackingStage(calib, odom_max_age_s=max_age)
+        # on /diagnostics as tracker:<event>; stamps are warned as dropped frames already
+        node.health.watch("tracker", self.stage.events, warn=[e for e in INPUT_EVENTS if not e.startswith("stamp_")])
         self.pub = node.create_publisher(PointCloud2, TRACKED_TOPIC, QOS_DATA)
         self.pub_markers = node.create_publisher(MarkerArray, TRACKED_TOPIC + "/markers", QOS_DATA)
         if odom_topic:

@@ -2,7 +2,9 @@
 
 The nodes run as separate processes, exactly as on the car: either the three nodes
 (``driver_adapter``, ``detection``, ``mapping``) or the fused ``pipeline`` node. This process
-plays the frames and records ``cone_boxes`` and ``/cones`` by header stamp.
+plays the frames and records ``cone_boxes`` and ``/cones`` by header stamp. With ``track`` the
+tracker runs too (the ``pipeline`` node with ``track: true``, or a ``cone_tracker`` node after the
+three nodes; motion from the cones) and ``/cones/tracked`` is recorded as well.
 
 Pacing: ``lockstep`` sends the next frame when the last one's ``/cones`` came back (as fast as
 the pipeline takes them; nothing is dropped for being late; the latency of each frame is the
@@ -39,6 +41,9 @@ from ..replay import BOXES_TOPIC, CONES_TOPIC, find_image_topic
 from . import _msgs
 
 MODES = {"separate": ("driver_adapter", "detection", "mapping"), "fused": ("pipeline",)}
+TRACKED_TOPIC = "/cones/tracked"
+#: how long lockstep waits for a frame's /cones/tracked once its /cones is back
+TRACKED_WAIT_S = 2.0
 _QOS_PLAY = QoSProfile(depth=2, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
 
 
@@ -59,6 +64,7 @@ def node_command(executable: str) -> list[str]:
 class LiveResult:
     cones: dict[int, np.ndarray] = field(default_factory=dict)  # header stamp ns -> CONE_DTYPE
     boxes: dict[int, np.ndarray] = field(default_factory=dict)  # header stamp ns -> BOX_DTYPE
+    tracked: dict[int, np.ndarray] = field(default_factory=dict)  # header stamp ns -> TRACKED_CONE_DTYPE (track=True)
     latency_ms: dict[int, float] = field(default_factory=dict)  # publish -> /cones received
     raw: list[tuple[str, int, bytes]] = field(default_factory=list)  # (topic, stamp, CDR) as received
     sent: int = 0
@@ -92,6 +98,7 @@ def live_replay(
     frame_timeout_s: float = 15.0,
     ready_timeout_s: float = 120.0,
     progress: Callable | None = None,
+    track: bool = False,
 ) -> LiveResult:
     """Play ``bag``'s camera topic into freshly started node processes; returns what came back.
 
@@ -101,7 +108,8 @@ def live_replay(
     Before the first recorded frame, a primer (the first frame under another stamp) is sent until
     its ``/cones`` comes back: that proves every link of the chain is matched (the graph can list
     an endpoint before its publisher delivers to it) and warms the model up. The primer is not
-    part of the result.
+    part of the result (with ``track`` the tracker starts from it: its tracks are predicted over the
+    1 s gap to the first frame).
     """
     if mode not in MODES:
         raise ConfigError("live replay", "mode", f"must be one of {', '.join(MODES)}, got {mode!r}")
@@ -123,11 +131,14 @@ def live_replay(
         ros_args += ["-p", "input_transport:=compressed", "-r", f"image_raw/compressed:={topic}"]
     else:
         ros_args += ["-r", f"image_raw:={topic}"]
+    exes = MODES[mode] + (("cone_tracker",) if track and mode == "separate" else ())
+    track_args = ["-p", "odom_topic:=''"] + (["-p", "track:=true"] if mode == "fused" else [])
     procs = {}
     res = LiveResult()
     primer_stamp, primer_raw = _primer(frames[0][2], CompressedImage if compressed else Image,
                                        [s for _, s, _ in frames]) if frames else (None, b"")
     primer_seen: list[int] = []
+    primer_tracked: list[int] = []
     sent_at: dict[int, float] = {}
     context = rclpy.Context()
     rclpy.init(context=context)
@@ -155,11 +166,22 @@ def live_replay(
             res.boxes[stamp] = _msgs.boxes_from_msg(msg)
             res.raw.append((BOXES_TOPIC, stamp, raw))
 
+        def on_tracked(raw: bytes) -> None:
+            stamp, msg = _stamp_of(raw)
+            if stamp == primer_stamp:
+                primer_tracked.append(stamp)
+                return
+            res.tracked[stamp] = _msgs.tracked_from_msg(msg)
+            res.raw.append((TRACKED_TOPIC, stamp, raw))
+
         node.create_subscription(PointCloud2, "/cones", on_cones, QOS_DATA, raw=True)
         node.create_subscription(PointCloud2, "/cone_boxes", on_boxes, QOS_DATA, raw=True)
-        for exe in MODES[mode]:
+        if track:
+            node.create_subscription(PointCloud2, TRACKED_TOPIC, on_tracked, QOS_DATA, raw=True)
+        for exe in exes:
+            args = ros_args + (track_args if track and exe in ("pipeline", "cone_tracker") else [])
             procs[exe] = subprocess.Popen(
-                node_command(exe) + ros_args, env=dict(os.environ), stdout=subprocess.PIPE,
+                node_command(exe) + args, env=dict(os.environ), stdout=subprocess.PIPE,
                 stderr=subprocess.STDOUT, text=True,
             )
 
@@ -171,6 +193,8 @@ def live_replay(
             ok = pub.get_subscription_count() > 0 and node.count_publishers("/cones") > 0
             if mode == "separate":
                 ok = ok and node.count_subscribers("/image_cropped") > 0 and node.count_subscribers("/cone_boxes") > 1
+            if track:
+                ok = ok and node.count_publishers(TRACKED_TOPIC) > 0
             return ok
 
         end = time.monotonic() + ready_timeout_s
@@ -178,12 +202,15 @@ def live_replay(
             if time.monotonic() > end:
                 raise ConfigError("live replay", None, f"nodes not ready after {ready_timeout_s:.0f} s")
             executor.spin_once(timeout_sec=0.1)
-        while frames and not primer_seen:
+        def primed() -> bool:
+            return bool(primer_seen) and (not track or bool(primer_tracked))
+
+        while frames and not primed():
             if time.monotonic() > end:
                 raise ConfigError("live replay", None, f"no /cones for the primer frame after {ready_timeout_s:.0f} s")
             pub.publish(primer_raw)
             resend = time.monotonic() + 2.0
-            while not primer_seen and time.monotonic() < resend:
+            while not primed() and time.monotonic() < resend:
                 executor.spin_once(timeout_sec=0.05)
 
         items = progress(frames, len(frames)) if progress else frames
@@ -208,6 +235,9 @@ def live_replay(
             if pace == "lockstep":
                 deadline = time.monotonic() + frame_timeout_s
                 while stamp not in res.cones and time.monotonic() < deadline and not dead():
+                    executor.spin_once(timeout_sec=0.01)
+                tracked_by = time.monotonic() + TRACKED_WAIT_S
+                while track and stamp in res.cones and stamp not in res.tracked and time.monotonic() < tracked_by and not dead():
                     executor.spin_once(timeout_sec=0.01)
             else:
                 executor.spin_once(timeout_sec=0.0)
@@ -235,7 +265,10 @@ def live_replay(
 
 
 def write_result_bag(res: LiveResult, out: str | os.PathLike) -> None:
-    """Write the recorded ``/cone_boxes`` and ``/cones`` (raw CDR, header stamps as log time)."""
-    with bagio.BagWriter(Path(out), {BOXES_TOPIC: bagio.POINTCLOUD2, CONES_TOPIC: bagio.POINTCLOUD2}) as w:
+    """Write the recorded ``/cone_boxes``, ``/cones`` and ``/cones/tracked`` (raw CDR, header stamps as log time)."""
+    topics = {BOXES_TOPIC: bagio.POINTCLOUD2, CONES_TOPIC: bagio.POINTCLOUD2}
+    if res.tracked:
+        topics[TRACKED_TOPIC] = bagio.POINTCLOUD2
+    with bagio.BagWriter(Path(out), topics) as w:
         for topic, stamp, raw in sorted(res.raw, key=lambda x: (x[1], x[0])):
             w.write_raw(topic, stamp, raw)

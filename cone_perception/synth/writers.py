@@ -11,7 +11,8 @@
   ``/cones`` schema, frame ``rear_axle``, same stamps, every cone with a visible
   pixel, ``score`` = its visible fraction), ``/attitude_gt`` (Vector3Stamped: the exact
   camera attitude against the ground, x = roll, y = pitch in radians, as ``cones/attitude``)
-  and ``/imu`` (sensor_msgs/Imu, see :mod:`.motion`); beside it
+  ``/imu`` (sensor_msgs/Imu, see :mod:`.motion`) and ``/odom`` (nav_msgs/Odometry at 50 Hz, the true
+  body twist with noise and bias, see :mod:`.odometry`); beside it
   ``<bag>_calib.yaml`` and ``<bag>_gt.jsonl``.
 
 YOLO labels hold only cones whose box is at least :data:`MIN_LABEL_BOX_PX`
@@ -32,10 +33,17 @@ from ..bagio import (
     COMPRESSED_IMAGE,
     IMAGE,
     IMU,
+    ODOMETRY,
     POINTCLOUD2,
     VECTOR3_STAMPED,
     Imu,
+    Odometry,
+    Point,
+    Pose,
+    PoseWithCovariance,
     Quaternion,
+    Twist,
+    TwistWithCovariance,
     Vector3,
     Vector3Stamped,
     BagWriter,
@@ -52,6 +60,7 @@ from ..errors import ConfigError
 from ..records import CONE_DTYPE, to_pointcloud2
 from .config import SynthConfig
 from .render import ConeTruth
+from .odometry import ODOM_V_NOISE, ODOM_VY_NOISE, ODOM_W_NOISE, OdomSample, odometry_samples
 from .motion import IMU_ANGLE_NOISE_DEG, IMU_ACCEL_NOISE, IMU_RATE_NOISE_DPS, constant_speed_drive, drive_motion, imu_samples
 from .scene import CarPose, drive_poses, jitter_series, random_pose
 from .track import TRACK_KINDS, Track, make_track
@@ -64,6 +73,7 @@ COMPRESSED_TOPIC = "/camera/image_raw/compressed"
 GT_TOPIC = "/cones_gt"
 ATTITUDE_GT_TOPIC = "/attitude_gt"
 IMU_TOPIC = "/imu"
+ODOM_TOPIC = "/odom"
 CAMERA_FRAME = "camera"
 
 
@@ -212,13 +222,19 @@ def write_scene_bag(
     look = renderer.new_look(rng)
     poses, drive = _drive(cfg, track, n, fps, speed_mps, rng)
     imu = imu_samples(drive, np.array([p.yaw_rad for p in poses]), fps, np.random.default_rng([cfg.seed, 15]))
+    odom = odometry_samples(np.array([(p.x_m, p.y_m, p.yaw_rad) for p in poses]), fps, START_STAMP_NS,
+                            np.random.default_rng([cfg.seed, 17]))
+    next_odom = 0
     img_topic = COMPRESSED_TOPIC if compressed else IMAGE_TOPIC
     topics = {img_topic: COMPRESSED_IMAGE if compressed else IMAGE, GT_TOPIC: POINTCLOUD2,
-              ATTITUDE_GT_TOPIC: VECTOR3_STAMPED, IMU_TOPIC: IMU}
+              ATTITUDE_GT_TOPIC: VECTOR3_STAMPED, IMU_TOPIC: IMU, ODOM_TOPIC: ODOMETRY}
     cfg.save_calibration(calib_path)
     with BagWriter(out, topics) as bag, open(gt_path, "w", encoding="utf-8") as gt, _progress(n, "synth bag", progress) as bar:
         for i, pose in enumerate(poses):
             stamp = START_STAMP_NS + int(round(i * 1e9 / fps))
+            while next_odom < len(odom) and odom[next_odom].stamp_ns <= stamp:
+                bag.write(ODOM_TOPIC, odom[next_odom].stamp_ns, _odom_msg(odom[next_odom]))
+                next_odom += 1
             img, truths = renderer.render(track, pose, look, rng)
             msg = compressed_msg_from_bgr(img, stamp, CAMERA_FRAME) if compressed else image_msg_from_bgr(img, stamp, CAMERA_FRAME)
             bag.write(img_topic, stamp, msg)
@@ -248,6 +264,19 @@ def _drive(cfg: SynthConfig, track: Track, n: int, fps: float, speed_mps: float,
         x, y, yaw = track.pose_at(float(drive.s_m[i]))
         poses.append(CarPose(x, y, yaw, float(drive.pitch_deg[i]), float(drive.roll_deg[i])))
     return poses, drive
+
+
+def _odom_msg(o: OdomSample):
+    x, y, yaw = o.pose
+    twist_cov = np.diag([ODOM_V_NOISE**2, ODOM_VY_NOISE**2, 1e6, 1e6, 1e6, ODOM_W_NOISE**2]).ravel()
+    return Odometry(
+        header=header(o.stamp_ns, "odom"),
+        child_frame_id="rear_axle",
+        pose=PoseWithCovariance(pose=Pose(position=Point(x=x, y=y, z=0.0), orientation=Quaternion(
+            x=0.0, y=0.0, z=float(np.sin(yaw / 2)), w=float(np.cos(yaw / 2)))), covariance=np.zeros(36)),
+        twist=TwistWithCovariance(twist=Twist(linear=Vector3(x=o.twist[0], y=o.twist[1], z=0.0),
+                                              angular=Vector3(x=0.0, y=0.0, z=o.twist[2])), covariance=twist_cov),
+    )
 
 
 def _imu_msg(s, stamp: int):
