@@ -13,6 +13,8 @@ from cone_perception.attitude import (
     ImageAttitude,
     attitude_rotation,
     attitude_vector,
+    box_top_extra_px,
+    ImageAttitudeConfig,
     default_attitude_mode,
     pose_H_B_F,
 )
@@ -299,6 +301,7 @@ def test_fused_adds_the_ground_offset_the_imu_cannot_feel():
     imu = ImuAttitude()
     mode, est = attitude_estimator(mapper, None, imu)
     assert mode == "fused"
+    est.image.cfg.top_bias_extra_px = ()  # exact boxes: no detector correction
     body, grade = np.array([0.8, -0.3]), np.array([0.6, 0.2])  # the camera sees body + grade
     boxes = _cone_boxes(_tilted_camera(*(body + grade)), CONES_XY, CONES_CLS)
     for k in range(40):
@@ -323,6 +326,8 @@ def test_map_boxes_of_one_frame_with_the_image_attitude(tmp_path, capsys):
     cal_path = save_calibration(calib, tmp_path / "cal.yaml")
     near = slice(0, 12)  # 4-14 m: the fixed H keeps them all within range
     boxes = _cone_boxes(_tilted_camera(1.2, -0.4), CONES_XY[near], CONES_CLS[near])
+    # boxes as the detector draws them: its tops stand higher than the exact ones by what the fit corrects
+    boxes[:, 1] -= box_top_extra_px(boxes[:, 3] - boxes[:, 1], ImageAttitudeConfig().top_bias_extra_px)
     csv = tmp_path / "boxes.csv"
     csv.write_text("u1,v1,u2,v2,score,class_id\n" + "".join(
         f"{b[0]},{b[1]},{b[2]},{b[3]},0.9,{c}\n" for b, c in zip(boxes, CONES_CLS[near])))
@@ -365,3 +370,73 @@ def test_box_top_bias_on_rendered_cones():
         assert sel.sum() >= 30
         med[bias] = float(np.median(est.residuals(np.zeros(2), *est._prepare(boxes[sel], cls[sel]))))
     assert 0.6 < med[0.0] < 1.4 and abs(med[1.0]) < 0.4, med
+
+
+def _noisy(boxes: np.ndarray, rng: np.random.Generator, px: float = 0.7) -> np.ndarray:
+    """Box edges off by a little, as a detector's are."""
+    return boxes + np.round(rng.normal(0.0, px, boxes.shape))
+
+
+@pytest.mark.parametrize("kind", ["still", "sloped", "moving"])
+def test_still_body_returns_to_zero_but_a_slope_or_motion_does_not(kind):
+    """A body that does not move (the fits scatter only as much as their own sigma says) and stands
+    level gets exactly the calibration's zero; standing on a slope or moving keeps the estimate."""
+    rng = np.random.default_rng(7)
+    est, plain = _estimator(), _estimator(still_frames=0)
+    errs, errs_plain = [], []
+    for k in range(60):
+        pitch = {"still": 0.0, "sloped": 1.5, "moving": 0.8 * np.sin(2 * np.pi * 1.3 * k / 20)}[kind]
+        boxes = _noisy(_cone_boxes(_tilted_camera(pitch, 0.0), CONES_XY, CONES_CLS), rng)
+        a, b = est.update(boxes, CONES_CLS), plain.update(boxes, CONES_CLS)
+        if k >= 30:
+            errs.append(a.pitch_deg - pitch)
+            errs_plain.append(b.pitch_deg - pitch)
+    errs, errs_plain = np.abs(errs), np.abs(errs_plain)
+    if kind == "still":
+        assert np.all(errs == 0.0) and np.median(errs_plain) > 0.005  # without the still test: the fit's noise
+    else:
+        assert np.median(errs) == pytest.approx(np.median(errs_plain), abs=1e-9)  # untouched
+        assert np.median(errs) < 0.15
+
+
+def test_roll_bias_of_the_fit_is_learnt_as_the_long_run_mean():
+    """A fit whose roll stays off by 0.3 degree while the body's mean attitude is zero: the bias state
+    takes the long-run mean out (roll only: the mean pitch of a short drive may be a real grade)."""
+    est = _estimator()
+    k = np.arange(1500)
+    truth = np.column_stack([0.7 * np.sin(2 * np.pi * k / 37), 0.5 * np.sin(2 * np.pi * k / 23)])
+    out = np.array([est.debias(t + np.array([0.2, 0.3])) for t in truth])
+    assert est.bias[1] == pytest.approx(0.3, abs=0.03) and est.bias[0] == 0.0
+    np.testing.assert_allclose(out[-300:, 1], truth[-300:, 1], atol=0.04)
+    np.testing.assert_allclose(out[:, 0], truth[:, 0] + 0.2, atol=1e-12)  # pitch untouched
+    fresh = _estimator()  # the first fits hardly move it: shrunk towards zero
+    fresh.debias(np.array([0.0, 2.0]))
+    assert 0 < fresh.bias[1] < 2.0 / fresh.cfg.bias_prior_frames * 1.01
+    off = _estimator(bias_tau_frames=0)
+    np.testing.assert_allclose(off.debias(np.array([0.4, 0.3])), [0.4, 0.3])
+
+
+def test_detector_top_bias_table_interpolates_and_can_be_off():
+    table = ((15.0, 0.3), (30.0, 0.1))
+    np.testing.assert_allclose(box_top_extra_px(np.array([10.0, 15.0, 22.5, 30.0, 90.0]), table),
+                               [0.3, 0.3, 0.2, 0.1, 0.1])
+    np.testing.assert_allclose(box_top_extra_px(np.array([10.0, 50.0]), ()), 0.0)
+    # it moves the observed top rows of the fit down by that much
+    est, off = _estimator(top_bias_extra_px=table), _estimator(top_bias_extra_px=())
+    boxes = _cone_boxes(_tilted_camera(0.0, 0.0), CONES_XY, CONES_CLS)
+    h = boxes[:, 3] - boxes[:, 1]
+    np.testing.assert_allclose(est._prepare(boxes, CONES_CLS)[1] - off._prepare(boxes, CONES_CLS)[1],
+                               box_top_extra_px(h, table), atol=1e-9)
+
+
+def test_fused_still_body_on_level_ground_gets_zero_not_the_imu_bias():
+    from cone_perception.attitude import ImuAttitude, attitude_estimator
+
+    rng = np.random.default_rng(3)
+    imu = ImuAttitude()
+    _, est = attitude_estimator(ConeMapper(_calib()), "fused", imu)
+    for k in range(40):
+        imu.add(k * 50_000_000, _q(0.12, -0.08))  # the IMU's own bias (no rest capture)
+        a = est.update(_noisy(_cone_boxes(_tilted_camera(0.0, 0.0), CONES_XY, CONES_CLS), rng), CONES_CLS,
+                       k * 50_000_000)
+    assert a.source == "fused" and a.pitch_deg == 0.0 and a.roll_deg == 0.0
