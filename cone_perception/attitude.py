@@ -161,6 +161,7 @@ class ImageAttitudeConfig:
     top_bias_extra_px: tuple = ((15.0, 0.29), (22.0, 0.20), (33.0, 0.06), (50.0, 0.10), (75.0, 0.05), (120.0, 0.05))
     sigma_rel: float = 0.03  # plus this fraction of the box height (cone build, orientation)
     cauchy_c: float = 1.5  # robust scale in sigmas
+    outer_iterations: int = 1  # linearisations per fit (the second only after a step of more than 0.3 degree)
     prior_sigma_deg: float = 2.0  # per-frame prior around zero
     process_sigma_deg: float = 0.6  # random walk per frame (body motion at 20 fps)
     decay: float = 0.95  # per frame, towards zero
@@ -338,7 +339,7 @@ class ImageAttitude:
         theta = np.zeros(2) if start_deg is None else np.clip(np.asarray(start_deg, dtype=np.float64), -2.0, 2.0)
         eps = 0.05
         lam = np.eye(2) / c.prior_sigma_deg**2
-        for outer in range(2):
+        for outer in range(self.cfg.outer_iterations):
             rr = self._residuals_batch(theta + np.array([[0.0, 0.0], [eps, 0.0], [0.0, eps]]), rays, v_top, cls)
             r0 = rr[0]
             J = ((rr[1:] - r0) / eps).T
@@ -658,6 +659,72 @@ class ImuAttitude:
             self.counts.stale_at_frame += 1
             return None
         return v0.copy()
+
+
+#: Rest capture (``cone-perception imu-rest``): at least this many usable samples, and a car that stands
+#: still: angular rate and acceleration (each axis) and the pitch / roll readings scatter at most this much
+#: (1-sigma over the window; an IMU's noise is a few tenths of a degree/s and a few cm/s^2).
+IMU_REST_MIN_SAMPLES = 20
+IMU_REST_MAX_RATE_SD_DPS = 0.5
+IMU_REST_MAX_ACCEL_SD = 0.2
+IMU_REST_MAX_ANGLE_SD_DEG = 0.1
+
+
+@dataclass
+class ImuRest:
+    """The IMU's pitch and roll (degrees) with the car at rest: the ``imu_rest_deg`` of the nodes."""
+
+    pitch_deg: float
+    roll_deg: float
+    sd_pitch_deg: float
+    sd_roll_deg: float
+    n: int  # samples used
+    seconds: float  # the window they span
+    rate_sd_dps: float  # largest 1-sigma of the angular rate over the three axes (NaN without rates)
+    accel_sd: float  # m/s^2, likewise
+    dropped: dict  # IMU messages dropped by cause (NaN, quaternion norm, out of order)
+
+
+def imu_rest(stamps_ns, quats_xyzw, rates_rad_s=None, accels=None, source: str = "imu") -> ImuRest:
+    """The rest attitude from IMU samples of a car standing still: ``stamps_ns`` (N,), ``quats_xyzw``
+    (N, 4), optional ``rates_rad_s`` (N, 3) and ``accels`` (N, 3) m/s^2. Samples with NaN or a quaternion
+    off unit length are dropped (as :meth:`ImuAttitude.add`, counted).
+
+    Raises :class:`ConfigError` (naming ``source``) with too few samples or when the car moved.
+    """
+    from .errors import ConfigError
+
+    acc = ImuAttitude(keep=1 << 30)
+    ok = np.array([acc.add(int(t), q) for t, q in zip(stamps_ns, quats_xyzw)], dtype=bool)
+    dropped = {k.removeprefix("dropped_"): v for k, v in acc.counts.as_dict().items() if k.startswith("dropped_") and v}
+    why = f" (dropped: {', '.join(f'{k} {v}' for k, v in dropped.items())})" if dropped else ""
+    n = int(ok.sum())
+    if n < IMU_REST_MIN_SAMPLES:
+        raise ConfigError(source, None, f"only {n} usable IMU samples in the window, need >= {IMU_REST_MIN_SAMPLES}{why}")
+    v = np.asarray(acc.values)
+    sd = v.std(axis=0)
+
+    def _sd(x, scale=1.0):
+        if x is None:
+            return float("nan")
+        x = np.asarray(x, dtype=np.float64)[ok] * scale
+        x = x[np.all(np.isfinite(x), axis=1)]
+        return float(np.max(x.std(axis=0))) if len(x) > 1 else float("nan")
+
+    rate_sd, accel_sd = _sd(rates_rad_s, 180.0 / math.pi), _sd(accels)
+    moved = []
+    if rate_sd > IMU_REST_MAX_RATE_SD_DPS:
+        moved.append(f"angular rate scatters {rate_sd:.2f} deg/s (limit {IMU_REST_MAX_RATE_SD_DPS})")
+    if accel_sd > IMU_REST_MAX_ACCEL_SD:
+        moved.append(f"acceleration scatters {accel_sd:.3f} m/s^2 (limit {IMU_REST_MAX_ACCEL_SD})")
+    if np.max(sd) > IMU_REST_MAX_ANGLE_SD_DEG:
+        moved.append(f"pitch / roll scatter {sd[0]:.3f} / {sd[1]:.3f} deg (limit {IMU_REST_MAX_ANGLE_SD_DEG})")
+    if moved:
+        raise ConfigError(source, None, "the car moved in the window: " + "; ".join(moved)
+                          + " (1-sigma over the window; choose a still part with --start / --seconds)")
+    m = v.mean(axis=0)
+    return ImuRest(float(m[0]), float(m[1]), float(sd[0]), float(sd[1]), n,
+                   (acc.stamps[-1] - acc.stamps[0]) / 1e9, rate_sd, accel_sd, dropped)
 
 
 class FusedAttitude:

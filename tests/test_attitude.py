@@ -115,6 +115,16 @@ def test_small_disagreement_is_accepted():
     assert calib.mount_pose.pitch_deg == 10.05
 
 
+@pytest.mark.parametrize("pitch, ok", [(10.06, True), (10.07, False), (9.93, False)])
+def test_mount_pose_tolerance_is_one_percent_at_ten_metres(pitch, ok):
+    # 0.06 degree: 0.89 % at 10 m, accepted; 0.07 degree: 1.04 %, refused naming the field and the figure
+    if ok:
+        assert _calib(mount_pose={"x_m": 0.5, "z_m": 1.2, "pitch_deg": pitch}).mount_pose.pitch_deg == pitch
+    else:
+        with pytest.raises(ConfigError, match=r"test.yaml: mount_pose: disagrees .* by 1\.0"):
+            _calib(mount_pose={"x_m": 0.5, "z_m": 1.2, "pitch_deg": pitch})
+
+
 def test_attitude_needs_the_camera_matrix_beside_the_mount_pose():
     d = SynthConfig(seed=0).calibration().to_dict()
     del d["camera_matrix"]
@@ -213,6 +223,16 @@ def test_fits_beyond_five_degrees_are_rejected_and_counted():
     assert est.counts.rejected == 1
 
 
+@pytest.mark.parametrize("pitch, roll, rejected", [(4.6, 0.0, False), (5.5, 0.0, True), (0.0, -5.5, True)])
+def test_the_five_degree_limit(pitch, roll, rejected):
+    est = _estimator(prior_sigma_deg=100.0, top_bias_extra_px=())
+    boxes = _cone_boxes(_tilted_camera(pitch, roll), CONES_XY, CONES_CLS)
+    fit = est.fit(boxes, CONES_CLS)
+    assert abs(fit[0][0] - pitch) < 0.3 and abs(fit[0][1] - roll) < 0.4  # the fit itself finds it
+    a = est.update(boxes, CONES_CLS)
+    assert (a.source == "hold", est.counts.rejected) == ((True, 1) if rejected else (False, 0))
+
+
 def test_prior_pulls_a_weak_fit_towards_zero():
     boxes = _cone_boxes(_tilted_camera(1.0, 0.0), CONES_XY[:4], CONES_CLS[:4])
     strong = _estimator(prior_sigma_deg=0.05).fit(boxes, CONES_CLS[:4])[0]
@@ -282,6 +302,7 @@ def test_imu_orientation_relative_to_rest_interpolated_to_the_frame():
     ((np.nan, 0.0, 0.0, 1.0), "dropped_nan"),
     ((0.0, 0.0, 0.0, 1.1), "dropped_quaternion_norm"),
     ((0.0, 0.0, 0.0, 0.0), "dropped_quaternion_norm"),
+    ((0.0, 0.0, 0.0, 1.012), "dropped_quaternion_norm"),  # 1.2 % off unit length (tolerance 1 %)
 ])
 def test_bad_imu_messages_are_dropped_and_counted(quat, cause):
     from cone_perception.attitude import ImuAttitude
@@ -292,6 +313,18 @@ def test_bad_imu_messages_are_dropped_and_counted(quat, cause):
     assert getattr(imu.counts, cause) == 1 and imu.counts.used == 1
     np.testing.assert_allclose(imu.at(10), [1.0, 0.0], atol=1e-9)  # the good one still serves
     assert not imu.add(1, _q(1.0, 0.0)) and imu.counts.dropped_out_of_order == 1
+    assert imu.add(20, np.asarray(_q(2.0, 0.0)) * 1.008) and imu.counts.used == 2  # 0.8 % off: used (normalised)
+    np.testing.assert_allclose(imu.at(20), [2.0, 0.0], atol=1e-9)
+
+
+def test_imu_older_than_100_ms_is_not_used_and_counted():
+    from cone_perception.attitude import ImuAttitude
+
+    imu = ImuAttitude()
+    assert imu.add(1_000_000_000, _q(1.0, 0.5))
+    np.testing.assert_allclose(imu.at(1_095_000_000), [1.0, 0.5], atol=1e-9)  # 95 ms old: used
+    assert imu.counts.stale_at_frame == 0
+    assert imu.at(1_105_000_000) is None and imu.counts.stale_at_frame == 1  # 105 ms old: not used, counted
 
 
 def test_fused_adds_the_ground_offset_the_imu_cannot_feel():
