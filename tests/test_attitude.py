@@ -473,3 +473,46 @@ def test_fused_still_body_on_level_ground_gets_zero_not_the_imu_bias():
         a = est.update(_noisy(_cone_boxes(_tilted_camera(0.0, 0.0), CONES_XY, CONES_CLS), rng), CONES_CLS,
                        k * 50_000_000)
     assert a.source == "fused" and a.pitch_deg == 0.0 and a.roll_deg == 0.0
+
+
+def test_eval_fits_each_images_attitude_and_reports_the_uncertainty_per_group(tmp_path, capsys):
+    """``eval --attitude image``: each image's attitude from its own detections (as ``map --boxes``), and
+    the localisation table's median predicted 1-sigma per distance group (the attitude's included)."""
+    import json
+
+    from cone_perception.cli import main
+
+    cal_path = save_calibration(_calib(), tmp_path / "cal.yaml")
+    near = slice(0, 12)  # 4-14 m
+    gt, pred = [], []
+    for k, (pitch, roll) in enumerate([(1.0, -0.4), (-0.8, 0.3), (1.4, 0.0)]):
+        boxes = _cone_boxes(_tilted_camera(pitch, roll), CONES_XY[near], CONES_CLS[near])
+        cones = [{"class_id": int(c), "x_m": float(x), "y_m": float(y), "distance_m": float(np.hypot(x, y)),
+                  "box": [float(v) for v in b], "visible_fraction": 1.0} for b, c, (x, y) in zip(boxes, CONES_CLS[near], CONES_XY[near])]
+        gt.append({"image": f"f{k}.jpg", "width": W, "height": H, "track": {}, "pose": {}, "cones": cones})
+        det = boxes.copy()  # as the detector draws them (see test_map_boxes_of_one_frame_with_the_image_attitude)
+        det[:, 1] -= box_top_extra_px(det[:, 3] - det[:, 1], ImageAttitudeConfig().top_bias_extra_px)
+        pred.append({"image": f"f{k}.jpg", "width": W, "height": H,
+                     "boxes": [[*map(float, b), 0.9, int(c)] for b, c in zip(det, CONES_CLS[near])]})
+    (tmp_path / "gt.jsonl").write_text("".join(json.dumps(g) + "\n" for g in gt))
+    (tmp_path / "pred.jsonl").write_text("".join(json.dumps(p) + "\n" for p in pred))
+    loc = {}
+    for mode in ("fixed", "image"):
+        assert main(["eval", "--pred", str(tmp_path / "pred.jsonl"), "--gt", str(tmp_path / "gt.jsonl"), "--calib", str(cal_path),
+                     "--out", str(tmp_path / mode), "--attitude", mode, "--worst", "0", "--no-progress"]) == 0
+        printed = capsys.readouterr().out
+        assert f"1-sigma = the matched cones' median predicted 1-sigma (attitude {mode})" in printed
+        loc[mode] = json.loads((tmp_path / mode / "metrics.json").read_text())["localisation"]
+        assert "median 1-sigma" in (tmp_path / mode / "report.md").read_text()
+    far = "far 7-15 m"
+    assert loc["image"]["attitude"]["frames_by_source"] == {"image": 3} and loc["image"]["attitude"]["fits"]["fitted"] == 3
+    assert loc["fixed"]["attitude"]["frames_by_source"] == {"fixed": 3}
+    assert loc["image"]["groups"][far]["median_err_m"] < 0.3 * loc["fixed"]["groups"][far]["median_err_m"]
+    # the attitude's uncertainty widens the far cones' covariance; the errors stay within it
+    s_img, s_fix = (loc[m]["attitude"]["groups"][far]["median_sigma_m"] for m in ("image", "fixed"))
+    assert s_img > 1.5 * s_fix
+    assert loc["image"]["attitude"]["groups"][far]["within_2sigma"] >= 0.9
+    # without a mount pose in the calibration: refused, naming the field
+    assert main(["eval", "--pred", str(tmp_path / "pred.jsonl"), "--gt", str(tmp_path / "gt.jsonl"), "--calib",
+                 "example_mainhoop", "--out", str(tmp_path / "x"), "--attitude", "image", "--no-progress"]) == 2
+    assert "mount_pose" in capsys.readouterr().err
