@@ -24,6 +24,7 @@ decaying to zero; a fit beyond :data:`MAX_ABS_DEG` is rejected and counted. ROS-
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass
 
@@ -644,7 +645,7 @@ class ImuAttitude:
         if stamp_ns is None or not self.stamps:
             self.counts.stale_at_frame += 1
             return None
-        i = int(np.searchsorted(self.stamps, stamp_ns, side="right"))  # first sample after the stamp
+        i = bisect.bisect_right(self.stamps, stamp_ns)  # first sample after the stamp
         if i == 0:  # every sample is newer than the frame
             if self.stamps[0] - stamp_ns <= self.max_age_ns:
                 return self.values[0].copy()
