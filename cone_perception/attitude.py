@@ -259,6 +259,14 @@ class ImageAttitude:
         sloped = (np.max(np.abs(self._m1)) - c.still_max_mean_deg) / (0.5 * c.still_max_mean_deg)
         return float(np.clip(max(moving, sloped), 0.0, 1.0))
 
+    def still_sigma(self, sd: np.ndarray, wm: float) -> np.ndarray:
+        """(2,) 1-sigma (degrees) of the attitude used: the estimate's ``sd`` while the body moves; while it is
+        still (``wm`` 0) how far from zero the recent fits say it may be (their mean and spread)."""
+        if wm >= 1.0:
+            return sd
+        still = np.sqrt(self._m1**2 + np.maximum(self._m2 - self._m1**2, 0.0))
+        return wm * sd + (1.0 - wm) * np.minimum(still, sd)
+
     def debias(self, z: np.ndarray) -> np.ndarray:
         """Fold one accepted fit ``z`` (2,) degrees into the bias estimate; return the fit less the bias."""
         c = self.cfg
@@ -410,7 +418,7 @@ class ImageAttitude:
             self.P = (np.eye(2) - G) @ self.P
             self.counts.fitted += 1
             source = "image"
-        sd = np.sqrt(np.diag(self.P))
+        sd = self.still_sigma(np.sqrt(np.diag(self.P)), wm)
         x = self.x * wm
         return Attitude(float(x[0]), float(x[1]), float(sd[0]), float(sd[1]), source, n)
 
@@ -772,7 +780,7 @@ class FusedAttitude:
             wm = self.image.motion_weight(None, None)
         att = (body + self.g) * wm  # still body and ground (the image's still test): the calibration's zero
         self.image.x = att.copy()  # keeps the image filter warm for frames without IMU
-        sd = np.sqrt(np.diag(self.Pg) + s_imu**2)
+        sd = self.image.still_sigma(np.sqrt(np.diag(self.Pg) + s_imu**2), wm)
         return Attitude(float(att[0]), float(att[1]), float(sd[0]), float(sd[1]), "fused", n)
 
 
