@@ -23,6 +23,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "synth": ("synth", "synthetic FS scenes with exact ground truth: dataset, bag, preview, mapcheck, bench"),
     "detect": ("detect", "run the detector over images, a folder or a rosbag -> JSON lines"),
     "replay": ("replay", "run the full pipeline over a rosbag, offline or through live nodes"),
+    "imu-rest": ("imu_rest", "the IMU's rest attitude (imu_rest_deg) from a bag of the car standing still"),
     "calibrate": ("calibrate", "calibrate a camera to the rear axle (chessboard / points / mount pose) with report and pictures"),
     "train": ("train", "train the cone detector on YOLO txt datasets"),
     "export": ("export", "export a detector checkpoint to TorchScript or ONNX, verified against eager"),

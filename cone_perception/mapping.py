@@ -28,7 +28,7 @@ from .attitude import Attitude, AttitudeModel
 from .calib import Calibration
 from .classes import CONE_SIZE_M, NUM_CLASSES
 from .errors import FrameError
-from .geometry import GroundMapper, foot_point_weights, foot_points
+from .geometry import GroundMapper, apply_homography, foot_point_weights, foot_points
 from .records import BOX_DTYPE, CONE_DTYPE, boxes_to_arrays
 
 
@@ -180,11 +180,13 @@ class ConeMapper:
         differences of 0.1 degree about the attitude used)."""
         eps = 0.1
         J = np.empty((uv.shape[0], 2, 2))
+        und = self.ground.undistort(uv)  # once: the lens does not depend on the attitude
+        H = self.attitude_model.H_F_B
         for k, d in enumerate(((eps, 0.0), (0.0, eps))):
-            a = Attitude(att.pitch_deg + d[0], att.roll_deg + d[1])
-            b = Attitude(att.pitch_deg - d[0], att.roll_deg - d[1])
-            xa, xb = self._ground_for(a).map_pixels(uv)[0], self._ground_for(b).map_pixels(uv)[0]
-            J[:, :, k] = np.nan_to_num((xa - xb) / (2 * eps))
+            xa = apply_homography(H(att.pitch_deg + d[0], att.roll_deg + d[1]), und)[0]
+            xb = apply_homography(H(att.pitch_deg - d[0], att.roll_deg - d[1]), und)[0]
+            with np.errstate(invalid="ignore", divide="ignore"):
+                J[:, :, k] = np.nan_to_num((xa - xb) / (2 * eps))
         return J @ att.covariance_deg2() @ np.transpose(J, (0, 2, 1))
 
 

@@ -135,6 +135,24 @@ def read_imu(bag: str | os.PathLike, topic: str = IMU_TOPIC) -> list[tuple[int, 
     return sorted(out, key=lambda t: t[0])
 
 
+def read_imu_motion(bag: str | os.PathLike, topic: str = IMU_TOPIC) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A bag's IMU topic as arrays in stamp order: header stamps (N,) ns, orientation (N, 4) x, y, z, w,
+    angular rate (N, 3) rad/s, linear acceleration (N, 3) m/s^2. Raises :class:`ConfigError` without the
+    topic or for another message type."""
+    topics = bagio.bag_topics(bag)
+    if topic not in topics:
+        raise ConfigError(str(bag), topic, f"no such topic (topics: {', '.join(sorted(topics))})")
+    if topics[topic][0] != bagio.IMU:
+        raise ConfigError(str(bag), topic, f"is {topics[topic][0]}, not {bagio.IMU}")
+    rows = []
+    for m in bagio.read_messages(bag, topic):
+        q, w, a = m.msg.orientation, m.msg.angular_velocity, m.msg.linear_acceleration
+        rows.append((bagio.stamp_ns(m.msg.header), (q.x, q.y, q.z, q.w), (w.x, w.y, w.z), (a.x, a.y, a.z)))
+    rows.sort(key=lambda r: r[0])
+    return (np.array([r[0] for r in rows], dtype=np.int64), np.array([r[1] for r in rows], dtype=np.float64).reshape(-1, 4),
+            np.array([r[2] for r in rows], dtype=np.float64).reshape(-1, 3), np.array([r[3] for r in rows], dtype=np.float64).reshape(-1, 3))
+
+
 def read_attitude_truth(bag: str | os.PathLike, topic: str = ATTITUDE_GT_TOPIC) -> dict[int, tuple[float, float]]:
     """``header stamp ns -> (pitch, roll)`` degrees of a synthetic bag's ``/attitude_gt`` (empty without it)."""
     if topic not in bagio.bag_topics(bag):

@@ -77,6 +77,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "(default: every size counts)")
     p.add_argument("--worst", type=int, default=6, metavar="N",
                    help="draw the N frames with the most misses + false detections into worst_frames.jpg (default %(default)s; 0 = none)")
+    p.add_argument("--attitude", choices=("fixed", "image"), default="fixed",
+                   help="localisation: fixed (the calibration's H, default) or image (each image's camera pitch/roll fitted "
+                        "from its own detections first, as `map --boxes --attitude image`; needs mount_pose and "
+                        "camera_matrix in the calibration); the table gives each group's median predicted 1-sigma")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -94,7 +98,8 @@ def run(args: argparse.Namespace) -> int:
     if not args.pred.is_file():
         raise ConfigError(str(args.pred), None, "prediction file not found")
     res = evaluate_predictions(args.pred, args.gt, args.gt_names, args.calib, args.conf, args.iou, args.only_predicted,
-                               progress=not args.no_progress, band=args.band, min_height=args.min_height)
+                               progress=not args.no_progress, band=args.band, min_height=args.min_height,
+                               attitude=args.attitude)
     from ..evaluation.report import lowest_score_note
 
     low = lowest_score_note(res.images)

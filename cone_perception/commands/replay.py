@@ -74,7 +74,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--imu-topic", default="/imu", help="offline: the bag's sensor_msgs/Imu topic (default %(default)s)")
     p.add_argument("--imu-rest", default="0,0", metavar="PITCH,ROLL",
                    help="the IMU's pitch and roll (degrees) with the car at rest on the level calibration ground "
-                        "(default %(default)s)")
+                        "(`cone-perception imu-rest REST_BAG` measures it; default %(default)s)")
     p.add_argument("--attitude-png", type=Path, default=None, metavar="PNG",
                    help="offline: plot the attitude used per frame (and the bag's /attitude_gt where it has one)")
     p.add_argument("--json", type=Path, default=None, help="also write the summary as JSON to this file")

@@ -140,10 +140,13 @@ def lowest_score_note(images: list[EvalImage]) -> str | None:
 
 
 def evaluate(images: list[EvalImage], calib: Calibration | None, conf: float = DEFAULT_CONF, iou: float = 0.5,
-             has_positions: bool = False, progress: bool = False) -> EvalResult:
-    """Every figure of the report for paired images; ``calib`` maps boxes to metres (optional)."""
+             has_positions: bool = False, progress: bool = False, attitude: str = "fixed") -> EvalResult:
+    """Every figure of the report for paired images; ``calib`` maps boxes to metres (optional).
+    ``attitude``: ``fixed`` (the calibration's H) or ``image`` (each image's camera attitude fitted from its
+    own detections first, as ``map --boxes --attitude image``; needs a mount pose in the calibration)."""
     from tqdm import tqdm
 
+    from ..attitude import FIXED, AttitudeReport, attitude_estimator
     from ..mapping import ConeMapper
 
     notes: list[str] = []
@@ -154,6 +157,8 @@ def evaluate(images: list[EvalImage], calib: Calibration | None, conf: float = D
         notes.append("localisation skipped: the ground truth has positions but no calibration was given (--calib) or found beside it")
     loc = LocalisationReport(max_range_m=calib.max_range_m) if do_loc else None
     pairs = PairDistanceReport() if do_loc else None
+    att_report = AttitudeReport() if do_loc else None
+    att_est = attitude_estimator(mapper, attitude)[1] if do_loc and attitude != "fixed" else None
 
     if calib is not None:
         ratio = calib.image_width / calib.image_height
@@ -183,12 +188,17 @@ def evaluate(images: list[EvalImage], calib: Calibration | None, conf: float = D
         if loc is not None:
             keep = im.pred_scores >= conf
             rec = boxes_from_arrays(_to_calib_px(im.pred_boxes[keep], im.width, im.height, calib), im.pred_scores[keep], im.pred_classes[keep])
-            pred_cones = mapper.map_boxes(rec)
+            att = FIXED
+            if att_est is not None:
+                b = np.column_stack([rec["u1"], rec["v1"], rec["u2"], rec["v2"]]).astype(np.float64)
+                att = att_est.single_frame(b, rec["class_id"].astype(np.intp))
+            pred_cones = mapper.map_boxes(rec, att)
             truth = np.zeros(int((~im.gt_ignore).sum()), CONE_DTYPE)
             truth["x"], truth["y"] = im.gt_xy_m[~im.gt_ignore, 0], im.gt_xy_m[~im.gt_ignore, 1]
             truth["class_id"] = im.gt_classes[~im.gt_ignore]
             matches = loc.add_frame(pred_cones, truth)
             pairs.add_frame(pred_cones, truth, matches)
+            att_report.add_frame(att, None, pred_cones, truth, matches)
 
     low = lowest_score_note(images)
     if low:
@@ -224,6 +234,9 @@ def evaluate(images: list[EvalImage], calib: Calibration | None, conf: float = D
         notes.append("per-distance metrics skipped: no cone positions in the ground truth and no calibration (--calib)")
     if loc is not None:
         metrics["localisation"] = loc.summary()
+        metrics["localisation"]["attitude"] = {"mode": attitude, **att_report.summary()}
+        if att_est is not None:
+            metrics["localisation"]["attitude"]["fits"] = att_est.counts.as_dict()
         metrics["pair_distance"] = pairs.summary()
     return EvalResult(metrics, confusion, loc, pairs, notes, images)
 
@@ -336,6 +349,7 @@ def write_report(res: EvalResult, out: Path, pred_source: str, gt_source: str, w
         for name, s in list(lo["groups"].items()) + [("**all**", lo["all"])]:
             md.append(f"| {name} | {s['n_true']} | {_f(s['recall'])} | {s['n_matched']} | {_f(s['median_err_m'])} | {_f(s['p90_err_m'])} | "
                       f"{_f(s['median_abs_err_x_m'])} | {_f(s['median_abs_err_y_m'])} | {_f(s['class_accuracy'])} |")
+        md += _uncertainty_table(lo.get("attitude"))
         md += ["", f"Unmatched detections (false positives in metres): {lo['false_positives']}.", "",
                f"![localisation box plots]({FILES['localisation']})", "",
                "### Blue-yellow pair distance (thesis metric)", "",
@@ -370,6 +384,20 @@ def write_report(res: EvalResult, out: Path, pred_source: str, gt_source: str, w
     return files
 
 
+def _uncertainty_table(att: dict | None) -> list[str]:
+    """report.md lines: per distance group the matched cones' median error beside their median 1-sigma
+    (covariance: foot-point pixels and, with ``--attitude image``, the attitude's uncertainty)."""
+    if not att or not att.get("groups"):
+        return []
+    src = ", ".join(f"{k} {v}" for k, v in sorted(att["frames_by_source"].items()))
+    md = ["", f"Each matched cone's predicted 1-sigma (sqrt of the trace of its covariance; attitude `{att['mode']}`: "
+              f"images by source {src}) beside its error:", "",
+          "| group | matched | median err | median 1-sigma | err <= 2 sigma |", "|---|---|---|---|---|"]
+    md += [f"| {name} | {g['n']} | {_f(g['median_err_m'])} | {_f(g['median_sigma_m'])} | {_f(g['within_2sigma'], 2)} |"
+           for name, g in att["groups"].items()]
+    return md
+
+
 def format_summary(res: EvalResult) -> str:
     """The printed summary: overall, per group, localisation and pair error in a few lines."""
     m = res.metrics
@@ -388,23 +416,30 @@ def format_summary(res: EvalResult) -> str:
             lines.append(f"{name:<16}{g['num_gt']:>7}{_f(g['map50']):>8}{_f(s['recall']):>8}{_f(s['precision']):>8}")
     if "localisation" in m:
         r = inp.get("max_range_m")
-        lines.append(f"{'localisation':<16}{'true':>7}{'recall':>8}{'med err':>9}{'p90 err':>9}{'pair err':>10}   "
+        lines.append(f"{'localisation':<16}{'true':>7}{'recall':>8}{'med err':>9}{'p90 err':>9}{'pair err':>10}{'1-sigma':>9}   "
                      + (f"(within max_range_m {r:g} m)" if r is not None else "(no range cut)"))
         lo, pd = m["localisation"], m["pair_distance"]
+        sig = (lo.get("attitude") or {}).get("groups", {})
         for name in list(lo["groups"]) + ["all"]:
             s = lo["all"] if name == "all" else lo["groups"][name]
             p = pd["all"] if name == "all" else pd["groups"][name]
-            lines.append(f"{name:<16}{s['n_true']:>7}{_f(s['recall']):>8}{_f(s['median_err_m']):>9}{_f(s['p90_err_m']):>9}{_f(p['median_abs_err_m']):>10}")
-        lines.append("errors in m; pair err = median |measured - true| blue-yellow distance (thesis metric)")
+            sg = _f(sig[name]["median_sigma_m"]) if name in sig else "-"
+            lines.append(f"{name:<16}{s['n_true']:>7}{_f(s['recall']):>8}{_f(s['median_err_m']):>9}{_f(s['p90_err_m']):>9}"
+                         f"{_f(p['median_abs_err_m']):>10}{sg:>9}")
+        att = lo.get("attitude") or {}
+        lines.append("errors in m; pair err = median |measured - true| blue-yellow distance (thesis metric); 1-sigma = the "
+                     f"matched cones' median predicted 1-sigma (attitude {att.get('mode', 'fixed')})")
     lines += [f"note: {n}" for n in res.notes]
     return "\n".join(lines)
 
 
 def evaluate_predictions(pred: Path, gt_path: Path, gt_names: str | None = None, calib_arg: str | None = None,
                          conf: float = DEFAULT_CONF, iou: float = 0.5, only_predicted: bool = False, progress: bool = True,
-                         verbose: bool = True, band: tuple[int, int] | None = None, min_height: float | None = None):
+                         verbose: bool = True, band: tuple[int, int] | None = None, min_height: float | None = None,
+                         attitude: str = "fixed"):
     """A prediction file against ground truth -> :class:`~cone_perception.evaluation.report.EvalResult`, as ``eval``
-    computes it (``gt_names`` comma-separated; ``band``, ``min_height``: as ``eval --band``, ``--min-height``). Used by ``eval`` and ``bench table``."""
+    computes it (``gt_names`` comma-separated; ``band``, ``min_height``, ``attitude``: as ``eval --band``, ``--min-height``,
+    ``--attitude``). Used by ``eval`` and ``bench table``."""
     from ..calib import load_calibration
     from ..errors import ConfigError
     from .groundtruth import load_ground_truth, pair_with_predictions, restrict_to_band, restrict_to_min_height
@@ -429,6 +464,6 @@ def evaluate_predictions(pred: Path, gt_path: Path, gt_names: str | None = None,
         print(f"calibration: {calib_path} (found beside the ground truth)")
     if verbose and gt_path.is_dir() and (gt_path / "gt.jsonl").is_file():
         print(f"note: {gt_path / 'gt.jsonl'} exists; pass it as --gt for localisation and distances from true positions")
-    res = evaluate(images, calib, conf, iou, gt.has_positions, progress=progress)
+    res = evaluate(images, calib, conf, iou, gt.has_positions, progress=progress, attitude=attitude)
     res.metrics["ground_truth"] = {"format": gt.kind, **gt.info, **counts}
     return res

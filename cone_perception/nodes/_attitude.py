@@ -6,7 +6,7 @@ Parameters
     has a mount pose, else ``fixed`` (a node does not know at start whether an IMU will publish:
     ask for ``imu`` / ``fused`` explicitly).
   imu_rest_deg (double[2], [0, 0]): the IMU's pitch and roll (degrees) with the car at rest on the
-    level ground of the calibration.
+    level ground of the calibration (``cone-perception imu-rest REST_BAG`` measures it).
 """
 
 from __future__ import annotations
