@@ -746,23 +746,16 @@ class FusedAttitude:
     The image fit's roll bias is learnt against the IMU: the long-run mean of (roll fit minus IMU
     roll) is the fit's bias (less the IMU's own), since the road's cross grade averages out over a
     lap; a running mean shrunk towards zero by ``roll_bias_prior_frames`` pseudo-frames, an
-    exponential mean of the image config's ``bias_tau_frames`` once that many fits are in (0 prior
-    frames and tau 0: off). The IMU takes the body's own roll (cornering) out of that mean, which the
+    exponential mean of the image config's ``bias_tau_frames`` once that many fits are in (tau 0:
+    off). The IMU takes the body's own roll (cornering) out of that mean, which the
     image-only bias state (the mean of the raw fits) cannot do, so it may learn faster."""
 
     def __init__(self, image: ImageAttitude, imu: ImuAttitude, use_image: bool = True,
-                 offset_process_sigma_deg: float = 0.05, roll_bias_prior_frames: float = 30.0,
-                 slow_process_sigma_deg: tuple = (0.0, 0.0), slow_blend_deg: tuple = (0.04, 0.02)):
+                 offset_process_sigma_deg: float = 0.05, roll_bias_prior_frames: float = 30.0):
         self.image, self.imu, self.use_image = image, imu, use_image
         self.q = offset_process_sigma_deg**2
         self.g = np.zeros(2)  # ground offset (total attitude minus IMU), degrees
         self.Pg = np.eye(2) * image.cfg.prior_sigma_deg**2
-        #: a second, slow estimate of the ground offset per axis (0 = off): used while the fast one stays
-        #: within ``slow_blend_deg[0]`` of it, blending to the fast one over ``slow_blend_deg[1]`` more
-        self.qs = np.asarray(slow_process_sigma_deg, dtype=np.float64) ** 2
-        self.blend = slow_blend_deg
-        self.gs = np.zeros(2)
-        self.Ps = np.full(2, image.cfg.prior_sigma_deg**2)
         self.roll_bias_prior = float(roll_bias_prior_frames)
         self.roll_bias = 0.0  # the image fit's roll bias against the IMU, degrees
         self.n_roll_bias = 0
@@ -803,16 +796,10 @@ class FusedAttitude:
             G = self.Pg @ _inv2(S)
             self.g = self.g + G @ (z - body - self.g)
             self.Pg = (np.eye(2) - G) @ self.Pg
-            self.Ps = self.Ps + self.qs
-            Gs = self.Ps / (self.Ps + np.diag(Rz) + s_imu**2)
-            self.gs = self.gs + Gs * (z - body - self.gs)
-            self.Ps = (1.0 - Gs) * self.Ps
             self.image.counts.fitted += 1
         if wm is None:
             wm = self.image.motion_weight(None, None)
-        d = self.g - self.gs
-        w = np.where(self.qs > 0, np.clip((np.abs(d) - self.blend[0]) / self.blend[1], 0.0, 1.0), 1.0)
-        att = (body + self.gs + w * d) * wm  # still body and ground (the image's still test): the calibration's zero
+        att = (body + self.g) * wm  # still body and ground (the image's still test): the calibration's zero
         self.image.x = att.copy()  # keeps the image filter warm for frames without IMU
         sd = self.image.still_sigma(np.sqrt(np.diag(self.Pg) + s_imu**2), wm)
         return Attitude(float(att[0]), float(att[1]), float(sd[0]), float(sd[1]), "fused", n)

@@ -9,7 +9,9 @@ bag's /imu (--imu-rest 0,0).
 
 ``--series``: the attitude alone, without mapping (fast): per frame the fit (linearised at the truth),
 the IMU and the truth, and the ground-offset filters on them (median |error| of pitch and roll per
-kind: mean / worst drive).
+kind: mean / worst drive). ``--imu-rate``: the same with the IMU's orientation first smoothed with its
+angular rate (a Kalman filter: rate-integrated prediction, orientation noise 0.03 deg), the bag's /imu
+read again for the rates, the kept roll bias state.
 """
 import sys
 from pathlib import Path
@@ -61,6 +63,42 @@ class TwoState(FusedAttitude):
         return Attitude(float(att[0]), float(att[1]), 0.1, 0.1, "fused", 0)
 
 
+class SlowOffset(FusedAttitude):
+    """Tried: a second, slow ground offset per axis (random walk ``qs`` deg a frame, 0 = none), used while
+    the fast one stays within ``blend[0]`` of it, blending to the fast one over ``blend[1]`` more."""
+
+    def __init__(self, image, imu, qs=(0.003, 0.0), blend=(0.04, 0.02)):
+        super().__init__(image, imu)
+        self.qs, self.blend = np.asarray(qs) ** 2, blend
+        self.gs, self.Ps = np.zeros(2), np.full(2, 4.0)
+
+    def update(self, boxes, class_ids, stamp_ns):
+        body = self.imu.at(stamp_ns)
+        if body is None:
+            return self.image.update(boxes, class_ids)
+        s_imu = self.imu.sigma_deg
+        self.Pg = self.Pg + np.eye(2) * self.q
+        res = self.image.fit(boxes, class_ids, body + self.g + np.array([0.0, self.roll_bias]))
+        wm = None
+        if res is not None and np.all(np.abs(res[0]) <= self.image.cfg.max_abs_deg):
+            z, Rz, _ = res
+            wm = self.image.motion_weight(z, Rz)
+            z = z - self.debias_roll(float(z[1] - body[1]))
+            G = self.Pg @ np.linalg.inv(self.Pg + Rz + np.eye(2) * s_imu**2)
+            self.g = self.g + G @ (z - body - self.g)
+            self.Pg = (np.eye(2) - G) @ self.Pg
+            self.Ps = self.Ps + self.qs
+            Gs = self.Ps / (self.Ps + np.diag(Rz) + s_imu**2)
+            self.gs = self.gs + Gs * (z - body - self.gs)
+            self.Ps = (1.0 - Gs) * self.Ps
+        if wm is None:
+            wm = self.image.motion_weight(None, None)
+        d = self.g - self.gs
+        w = np.where(self.qs > 0, np.clip((np.abs(d) - self.blend[0]) / self.blend[1], 0.0, 1.0), 1.0)
+        att = (body + self.gs + w * d) * wm
+        return Attitude(float(att[0]), float(att[1]), 0.1, 0.1, "fused", 0)
+
+
 class Truth(FusedAttitude):
     """The bag's true attitude plus a fixed error (pitch, roll): what an attitude error costs at 7-15 m."""
 
@@ -87,9 +125,20 @@ DESIGNS = [
     ("kept: roll bias against the IMU, prior 30", lambda e, i: FusedAttitude(e, i)),
     ("roll bias against the IMU, prior 20", lambda e, i: FusedAttitude(e, i, roll_bias_prior_frames=20.0)),
     ("roll bias against the IMU, prior 50", lambda e, i: FusedAttitude(e, i, roll_bias_prior_frames=50.0)),
-    ("kept + slow pitch offset (0.003, blend 0.04 / 0.02)", lambda e, i: FusedAttitude(e, i, slow_process_sigma_deg=(0.003, 0.0))),
-    ("kept + slow pitch and roll offset", lambda e, i: FusedAttitude(e, i, slow_process_sigma_deg=(0.003, 0.003))),
+    ("kept + slow pitch offset (0.003, blend 0.04 / 0.02)", lambda e, i: SlowOffset(e, i)),
+    ("kept + slow pitch and roll offset", lambda e, i: SlowOffset(e, i, qs=(0.003, 0.003))),
 ]
+
+
+def _still_from(n: float):
+    def make(e, i):
+        e.cfg.still_min_frames = n
+        return FusedAttitude(e, i)
+    return make
+
+
+#: the start of a drive: the still test judges from this many fits (before: moving); run with flat bags too
+STILL_DESIGNS = [(f"kept, still test from {n} fits", _still_from(n)) for n in (5.0, 3.0)]
 
 
 def score(bag: str, d: dict, make) -> tuple[float, float, float]:
@@ -175,10 +224,31 @@ SERIES = [
 ]
 
 
+def rate_smoothed(bag: str, a: np.ndarray, qn: float) -> np.ndarray:
+    """``a`` of :func:`series` with the IMU columns replaced by the IMU smoothed with its angular rate
+    (random walk ``qn`` deg a sample around the rate-integrated prediction)."""
+    from cone_perception.replay import read_imu_motion
+
+    st, q, w, _ = read_imu_motion(bag)
+    y = np.array([np.degrees(rpy_from_quaternion(*qq))[[1, 0]] for qq in q])
+    rate = np.degrees(w[:, [1, 0]])  # pitch rate about y, roll rate about x
+    xs, x, P, R = np.zeros_like(y), y[0].copy(), np.full(2, 0.03**2), 0.03**2
+    for k in range(len(y)):
+        if k:
+            x, P = x + 0.5 * (rate[k - 1] + rate[k]) * (st[k] - st[k - 1]) / 1e9, P + qn**2
+            G = P / (P + R)
+            x, P = x + G * (y[k] - x), (1 - G) * P
+        xs[k] = x
+    b = a.copy()
+    b[:, 2:4] = xs
+    return b
+
+
 def main(argv: list[str]) -> None:
-    use_series = "--series" in argv
-    bags = [b.rstrip("/") for b in argv if b != "--series"]
-    kinds = {k: [b for b in bags if Path(b).name.startswith(k)] for k in ("jit", "car")}
+    use_series, use_rate = "--series" in argv, "--imu-rate" in argv
+    bags = [b.rstrip("/") for b in argv if not b.startswith("--")]
+    kinds = {k: [b for b in bags if Path(b).name.startswith(k)] for k in ("jit", "car", "flat")}
+    kinds = {k: v for k, v in kinds.items() if v}
     data = {b: cached(b) for b in bags}
     if use_series:
         S = {b: series(b, data[b]) for b in bags}
@@ -191,9 +261,21 @@ def main(argv: list[str]) -> None:
                 cells += [f"{r[:, 0].mean():.3f} / {r[:, 0].max():.3f}", f"{r[:, 1].mean():.3f} / {r[:, 1].max():.3f}"]
             print(f"| {name} | " + " | ".join(cells) + " |", flush=True)
         return
-    print("| design | jit 7-15 m | car 7-15 m | worst drive | drives > 0.08 m | pitch / roll err (deg) |")
-    print("|---|---|---|---|---|---|")
-    for name, make in DESIGNS:
+    if use_rate:
+        S = {b: series(b, data[b]) for b in bags}
+        print("| IMU | jit pitch | jit roll | car pitch | car roll |  (median abs error, deg: mean / worst drive)")
+        print("|---|---|---|---|---|")
+        for qn in (None, 0.005, 0.01, 0.02):
+            cells = []
+            for v in kinds.values():
+                r = np.array([offset_filter(S[b] if qn is None else rate_smoothed(b, S[b], qn), roll_bias_prior=30) for b in v])
+                cells += [f"{r[:, 0].mean():.3f} / {r[:, 0].max():.3f}", f"{r[:, 1].mean():.3f} / {r[:, 1].max():.3f}"]
+            name = "as read" if qn is None else f"smoothed with its rate, {qn} deg a sample"
+            print(f"| {name} | " + " | ".join(cells) + " |", flush=True)
+        return
+    print("| design | " + " | ".join(f"{k} 7-15 m" for k in kinds) + " | worst drive | drives > 0.08 m | pitch / roll err (deg) |")
+    print("|---|" + "---|" * (len(kinds) + 3))
+    for name, make in DESIGNS + (STILL_DESIGNS if "flat" in kinds else []):
         r = {k: [score(b, data[b], make) for b in v] for k, v in kinds.items()}
         a = np.array([x for v in r.values() for x in v])
         print(f"| {name} | " + " | ".join(f"{np.mean([x[0] for x in r[k]]):.3f}" for k in kinds)
