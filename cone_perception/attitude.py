@@ -179,6 +179,7 @@ class ImageAttitudeConfig:
     #: ``still_ratio`` (pitch and roll) the body is taken as still and the estimate returns to zero,
     #: fully at ``still_ratio - still_ramp``; 0 frames = off
     still_frames: float = 20.0
+    still_min_frames: float = 10.0  # fits before the test judges (until then: moving)
     still_ratio: float = 1.0
     still_ramp: float = 0.4
     #: ... and only while the fits' mean stays within this (degrees, pitch and roll; ramp of half of it):
@@ -252,7 +253,7 @@ class ImageAttitude:
             self._m1 += a * (z - self._m1)
             self._m2 += a * (z * z - self._m2)
             self._mv += a * (np.diag(Rz) - self._mv)
-        if self._n_still < 0.5 * c.still_frames:
+        if self._n_still < c.still_min_frames:
             return 1.0
         spread = np.sqrt(np.maximum(self._m2 - self._m1**2, 0.0) / np.maximum(self._mv, 1e-12))
         moving = (np.max(spread) - (c.still_ratio - c.still_ramp)) / c.still_ramp
@@ -740,18 +741,37 @@ class FusedAttitude:
     """Attitude from the IMU (``imu``), or the IMU plus a slowly varying ground offset estimated from
     the image fits (``fused``: the IMU feels the body against gravity, not a grade change of the road
     ahead, which the image sees). Without a fresh IMU sample a frame gets the image estimate (counted
-    in :attr:`ImuAttitude.counts`)."""
+    in :attr:`ImuAttitude.counts`).
+
+    The image fit's roll bias is learnt against the IMU: the long-run mean of (roll fit minus IMU
+    roll) is the fit's bias (less the IMU's own), since the road's cross grade averages out over a
+    lap; a running mean shrunk towards zero by ``roll_bias_prior_frames`` pseudo-frames, an
+    exponential mean of the image config's ``bias_tau_frames`` once that many fits are in (tau 0:
+    off). The IMU takes the body's own roll (cornering) out of that mean, which the
+    image-only bias state (the mean of the raw fits) cannot do, so it may learn faster."""
 
     def __init__(self, image: ImageAttitude, imu: ImuAttitude, use_image: bool = True,
-                 offset_process_sigma_deg: float = 0.05):
+                 offset_process_sigma_deg: float = 0.05, roll_bias_prior_frames: float = 30.0):
         self.image, self.imu, self.use_image = image, imu, use_image
         self.q = offset_process_sigma_deg**2
         self.g = np.zeros(2)  # ground offset (total attitude minus IMU), degrees
         self.Pg = np.eye(2) * image.cfg.prior_sigma_deg**2
+        self.roll_bias_prior = float(roll_bias_prior_frames)
+        self.roll_bias = 0.0  # the image fit's roll bias against the IMU, degrees
+        self.n_roll_bias = 0
 
     @property
     def counts(self) -> AttitudeCounts:
         return self.image.counts
+
+    def debias_roll(self, d_roll: float) -> np.ndarray:
+        """Fold one accepted fit's roll minus the IMU's (degrees) into the roll bias; return the bias
+        (pitch, roll) to take off the fit."""
+        tau = self.image.cfg.bias_tau_frames
+        if tau > 0:
+            self.n_roll_bias += 1
+            self.roll_bias += (d_roll - self.roll_bias) / min(self.n_roll_bias + self.roll_bias_prior, tau)
+        return np.array([0.0, self.roll_bias])
 
     def update(self, boxes: np.ndarray, class_ids: np.ndarray, stamp_ns: int | None) -> Attitude:
         body = self.imu.at(stamp_ns)
@@ -761,7 +781,8 @@ class FusedAttitude:
         if not self.use_image:
             return Attitude(float(body[0]), float(body[1]), s_imu, s_imu, "imu", 0)
         self.Pg = self.Pg + np.eye(2) * self.q
-        res = self.image.fit(boxes, class_ids, body + self.g + self.image.bias)
+        bias = np.array([0.0, self.roll_bias])
+        res = self.image.fit(boxes, class_ids, body + self.g + bias)
         n, wm = 0, None
         if res is None:
             self.image.counts.too_few += 1
@@ -770,7 +791,7 @@ class FusedAttitude:
         else:
             z, Rz, n = res
             wm = self.image.motion_weight(z, Rz)
-            z = self.image.debias(z)
+            z = z - self.debias_roll(float(z[1] - body[1]))
             S = self.Pg + Rz + np.eye(2) * s_imu**2
             G = self.Pg @ _inv2(S)
             self.g = self.g + G @ (z - body - self.g)

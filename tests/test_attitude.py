@@ -519,3 +519,31 @@ def test_eval_fits_each_images_attitude_and_reports_the_uncertainty_per_group(tm
     assert main(["eval", "--pred", str(tmp_path / "pred.jsonl"), "--gt", str(tmp_path / "gt.jsonl"), "--calib",
                  "example_mainhoop", "--out", str(tmp_path / "x"), "--attitude", "image", "--no-progress"]) == 2
     assert "mount_pose" in capsys.readouterr().err
+
+
+def test_fused_learns_the_fits_roll_bias_against_the_imu_not_the_bodys_roll():
+    """A fit whose roll is biased (the left cones' boxes 1 px taller) on a body that leans in a long
+    corner (the IMU's roll, 0.8 degree on average): the roll bias is learnt as the mean of fit minus IMU,
+    so the body's lean stays in the estimate (the mean of the raw fits would take it out as bias)."""
+    from cone_perception.attitude import ImuAttitude, attitude_estimator
+
+    rng = np.random.default_rng(5)
+    imu = ImuAttitude()
+    _, est = attitude_estimator(ConeMapper(_calib()), "fused", imu)
+    est.image.cfg.top_bias_extra_px = ()
+    left = CONES_CLS == BLUE
+    errs, fits = [], []
+    for k in range(400):
+        body = np.array([0.5 * np.sin(2 * np.pi * k / 31), 0.8 + 0.4 * np.sin(2 * np.pi * k / 23)])
+        boxes = _noisy(_cone_boxes(_tilted_camera(*body), CONES_XY, CONES_CLS), rng, 0.4)
+        boxes[left, 1] -= 1.0
+        if k >= 300:
+            fits.append(est.image.fit(boxes, CONES_CLS, body)[0][1] - body[1])
+        imu.add(k * 50_000_000, _q(*body))
+        a = est.update(boxes, CONES_CLS, k * 50_000_000)
+        if k >= 300:
+            errs.append(a.roll_deg - body[1])
+    bias = float(np.mean(fits))
+    assert abs(bias) > 0.1  # the boxes do bias the fit's roll
+    assert est.roll_bias == pytest.approx(bias, abs=0.05)  # learnt: the bias, not bias + the 0.8 degree lean
+    assert np.median(np.abs(errs)) < 0.05

@@ -56,3 +56,16 @@ def test_detections_beyond_the_range_are_not_false_positives() -> None:
     s = rep.summary()
     assert s["all"]["n_true"] == 1 and s["all"]["recall"] == 1.0
     assert s["false_positives"] == 1  # the one at 12 m; those at 20 and 25 m are beyond the range
+
+
+def test_the_15_25_m_band_beside_the_groups() -> None:
+    """The issue's 15-25 m target: a band reported beside the groups, leaving out what the >15 m group
+    holds beyond 25 m."""
+    rep = LocalisationReport()
+    truth = _cones([[16.0, 1.0], [24.0, -1.0], [28.0, 0.0], [10.0, 0.0]])
+    pred = _cones([[16.3, 1.0], [24.5, -1.0], [29.5, 0.0], [10.1, 0.0]])
+    rep.add_frame(pred, truth)
+    s = rep.summary()
+    band, far = s["extra_groups"]["15-25 m"], s["groups"]["very far >15 m"]
+    assert band["n_true"] == 2 and band["n_matched"] == 2 and np.isclose(band["median_err_m"], 0.4)
+    assert far["n_matched"] == 3 and np.isclose(far["median_err_m"], 0.5)

@@ -26,6 +26,9 @@ DISTANCE_GROUPS: tuple[tuple[str, float, float], ...] = (
     ("very far >15 m", 15.0, np.inf),
 )
 
+#: Further range bands reported beside the groups (the issue's 15-25 m target; bands may overlap the groups).
+EXTRA_GROUPS: tuple[tuple[str, float, float], ...] = (("15-25 m", 15.0, 25.0),)
+
 
 def distance_group(range_m: np.ndarray) -> np.ndarray:
     """(N,) ranges in m -> (N,) group index into :data:`DISTANCE_GROUPS`."""
@@ -111,10 +114,15 @@ class LocalisationReport:
         tg, mg = distance_group(tr), distance_group(er)
         for k, (name, _, _) in enumerate(DISTANCE_GROUPS):
             groups[name] = _stats(tm[tg == k], e[mg == k], ex[mg == k], ey[mg == k], sc[mg == k])
+        extra = {}
+        for name, lo, hi in EXTRA_GROUPS:
+            t_in, m_in = (tr >= lo) & (tr < hi), (er >= lo) & (er < hi)
+            extra[name] = _stats(tm[t_in], e[m_in], ex[m_in], ey[m_in], sc[m_in])
         return {
             "frames": self.frames,
             "false_positives": self.false_positives,
             "groups": groups,
+            "extra_groups": extra,
             "all": _stats(tm, e, ex, ey, sc),
         }
 
