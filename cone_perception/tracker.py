@@ -69,7 +69,7 @@ class TrackerConfig:
     max_range_m: float = 20.0  # detections farther than this are not used (too uncertain along the ray)
     spawn_chi2: float = 50.0  # an unassigned detection this near (Mahalanobis^2) to a track starts no new one
     merge_chi2: float = 6.0  # two tracks this near (and of one class) are merged into the older one
-    # the attitude part of the cones' covariance (given the frame's Attitude): one error common to the frame,
+    # the attitude part of the cones' covariance (given the frame's Attitude) is one error common to the frame,
     # correlated over attitude_tau_s, not independent noise (docs/tracking.md, "Attitude"); False: as before
     attitude_common: bool = True
     attitude_tau_s: float = 0.5  # 1 and 2 s were worse on the tuning drives (docs/benchmarks.md)

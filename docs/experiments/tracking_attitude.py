@@ -6,9 +6,10 @@ NAME_gt.jsonl and NAME_out, the output of `replay NAME --attitude fixed --out NA
 boxes again as `replay --attitude MODE` does (the IMU fed up to each frame's stamp), drops 0 % or
 20 % of the detections (seed 0, as `replay --drop-detections`), tracks (motion from the cones, or
 the bag's /odom with --odom; the tracker gets the frame's attitude as `replay --track` hands it, or
-not with --independent, as before the fix) and scores with DriveEvaluation:
+not with --independent; `--set attitude_common=true` switches the frame-common treatment on) and
+scores with DriveEvaluation:
 
-    .venv/bin/python docs/experiments/tracking_attitude.py [--odom] [--independent] [--set KEY=VALUE ...] NAME [NAME ...]
+    .venv/bin/python docs/experiments/tracking_attitude.py [--odom] [--independent] [--set attitude_common=true] NAME [NAME ...]
 
 One markdown row per drive, mode and drop share: median error 0-7 m and 7-15 m of /cones and
 /cones/tracked (ratio tracked / raw), recall within 15 m of both, id switches per 100 frames.
