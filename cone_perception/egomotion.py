@@ -12,7 +12,8 @@ and moves every static cone by -0.4 m in x. ROS-free.
   predicted by a prior motion (constant velocity): RANSAC over pairs of class-compatible
   correspondences when the prior explains too few cones, then Gauss-Newton least squares with each
   pair's covariance and Cauchy weights on the nearest pairs, re-associated once; the prior joins as
-  a measurement when the cones agree with it.
+  a measurement when the cones agree with it. Given the detections' attitude Jacobians, the frame's
+  common attitude error is estimated alongside (and dropped), so it is not taken for motion.
 """
 
 from __future__ import annotations

@@ -4,7 +4,8 @@ Per frame (:meth:`ConeTracker.update`): the tracks are moved by the car's motion
 frame (odometry when given, else a registration of the frame's cones against the tracks with a
 constant-velocity prior, see :mod:`cone_perception.egomotion`), associated with the frame's cones
 by gated Mahalanobis distance and one-to-one assignment (``scipy.optimize.linear_sum_assignment``),
-and updated by a Kalman filter with each cone's own covariance. Per track: id (uint32, never
+and updated by a Kalman filter with each cone's own covariance (its attitude part, when the frame's
+attitude is given, as one error common to the frame: :meth:`ConeTracker.update`). Per track: id (uint32, never
 reused), fused class probabilities, position + covariance, hits, misses, age, and a certainty that
 rises with each confident hit (Bayes odds of the detection score) and decays only while the cone should be visible (inside the band's ground
 footprint, :class:`FieldOfView`) and is not seen. Tracks are deleted below
@@ -72,8 +73,8 @@ class TrackerConfig:
     # the attitude part of the cones' covariance (given the frame's Attitude) is one error common to the frame,
     # correlated over attitude_tau_s, not independent noise (docs/tracking.md, "Attitude"); False: as before
     attitude_common: bool = True
-    attitude_tau_s: float = 0.5  # 1 and 2 s were worse on the tuning drives (docs/benchmarks.md)
-    register_attitude: bool = True  # the registration estimates that error alongside the motion  # correlation time of the attitude estimate's error (frame-common, see update)
+    attitude_tau_s: float = 0.5  # correlation time of that error; 1 and 2 s were worse on the tuning drives (benchmarks.md)
+    register_attitude: bool = True  # the registration estimates that error alongside the motion
     robust_chi2: float = 0.0  # > 0: a matched cone farther than this (Mahalanobis^2) from its track is fused with its
     # covariance times d2 / robust_chi2 (an outlier pulls less); off: no gain on the tuning drives (docs/benchmarks.md)
 
