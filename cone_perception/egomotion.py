@@ -12,7 +12,8 @@ and moves every static cone by -0.4 m in x. ROS-free.
   predicted by a prior motion (constant velocity): RANSAC over pairs of class-compatible
   correspondences when the prior explains too few cones, then Gauss-Newton least squares with each
   pair's covariance and Cauchy weights on the nearest pairs, re-associated once; the prior joins as
-  a measurement when the cones agree with it.
+  a measurement when the cones agree with it. Given the detections' attitude Jacobians, the frame's
+  common attitude error is estimated alongside (and dropped), so it is not taken for motion.
 """
 
 from __future__ import annotations
@@ -141,19 +142,31 @@ class Registration:
 
 
 def _gauss_newton(src, dst, c_src, c_dst, start: Motion2D, prior: Motion2D, prior_std, iterations: int = 3,
-                  cauchy_m: float = 0.05) -> Motion2D:
-    """Motion with ``dst ~= R src + t`` minimising Mahalanobis residuals (Cauchy-weighted), plus the prior."""
-    x = np.array([start.dx, start.dy, start.dyaw])
+                  cauchy_m: float = 0.05, src_att_jac=None, att_cov_deg2=None) -> Motion2D:
+    """Motion with ``dst ~= R src + t`` minimising Mahalanobis residuals (Cauchy-weighted), plus the prior.
+
+    With ``src_att_jac`` ((n, 2, 2) m/deg) and ``att_cov_deg2`` ((2, 2)): the detections share one
+    attitude error ``a`` (prior N(0, att_cov)), ``dst ~= R (src - J a) + t``; ``a`` is estimated with the
+    motion and thrown away, so a frame-common attitude error is not taken for motion."""
+    att = src_att_jac is not None and att_cov_deg2 is not None and np.any(att_cov_deg2)
+    m = 5 if att else 3
+    x = np.zeros(m)
+    x[:3] = start.dx, start.dy, start.dyaw
+    w_prior = np.zeros((m, m))
+    x_prior = np.zeros(m)
     if prior_std is not None:
-        w_prior = np.diag([1 / prior_std[0] ** 2, 1 / prior_std[0] ** 2, 1 / prior_std[1] ** 2])
-        x_prior = np.array([prior.dx, prior.dy, prior.dyaw])
+        w_prior[:3, :3] = np.diag([1 / prior_std[0] ** 2, 1 / prior_std[0] ** 2, 1 / prior_std[1] ** 2])
+        x_prior[:3] = prior.dx, prior.dy, prior.dyaw
+    if att:
+        w_prior[3:, 3:] = np.linalg.inv(np.asarray(att_cov_deg2, np.float64) + np.eye(2) * 1e-9)
     n = len(src)
-    J = np.zeros((n, 2, 3))
+    J = np.zeros((n, 2, m))
     J[:, 0, 0] = J[:, 1, 1] = 1.0
     for _ in range(iterations):
         c, s = np.cos(x[2]), np.sin(x[2])
         R = np.array([[c, -s], [s, c]])
-        rs = src @ R.T
+        src_a = src - np.einsum("nij,j->ni", src_att_jac, x[3:]) if att else src
+        rs = src_a @ R.T
         r = rs + x[:2] - dst  # (n, 2)
         cov = R @ c_src @ R.T + c_dst
         a, b, d = cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 1]
@@ -165,10 +178,12 @@ def _gauss_newton(src, dst, c_src, c_dst, start: Motion2D, prior: Motion2D, prio
         k2 = np.maximum(cauchy_m**2 / np.maximum((a + d) / 2, 1e-6), 1.0)
         W *= (1.0 / (1.0 + m2 / k2))[:, None, None]
         J[:, 0, 2], J[:, 1, 2] = -rs[:, 1], rs[:, 0]  # d(R src)/d yaw
+        if att:
+            J[:, :, 3:] = -R[None] @ src_att_jac  # d(R (src - J a))/d a
         JtW = np.transpose(J, (0, 2, 1)) @ W
         A = (JtW @ J).sum(0)
         g = (JtW @ r[:, :, None]).sum(0)[:, 0]
-        if prior_std is not None:
+        if prior_std is not None or att:
             dp = x - x_prior
             dp[2] = _wrap(dp[2])
             A = A + w_prior
@@ -192,6 +207,8 @@ def register_cones(
     iterations: int = 40,
     prior_gate: float = 3.0,
     rng: np.random.Generator | None = None,
+    det_att_jac: np.ndarray | None = None,
+    att_cov_deg2: np.ndarray | None = None,
 ) -> Registration:
     """Motion of the car from cones: the current frame's cones against the tracks of the previous frame.
 
@@ -201,7 +218,9 @@ def register_cones(
     two candidates at a time (the prior itself is a hypothesis too) keeps the motion with most inliers
     (residual <= ``inlier_m``, each detection once), refined by Gauss-Newton least squares with each
     pair's covariance ``R det_cov R^T + trk_cov`` ((N, 2, 2) / (M, 2, 2) m^2, default identity) and
-    Cauchy weights against outliers. With ``prior_std`` (translation m, yaw rad) the prior then joins as
+    Cauchy weights against outliers; with ``det_att_jac`` ((N, 2, 2) m/deg) and ``att_cov_deg2`` ((2, 2)
+    deg^2) the detections' common attitude error is estimated alongside (``det_cov`` then holds only the
+    independent part of their covariance). With ``prior_std`` (translation m, yaw rad) the prior then joins as
     one more measurement, if the cones' motion lies within ``prior_gate`` sigma of it. ``ok`` is False with fewer than ``min_inliers``; the motion is
     then the prior.
     """
@@ -273,12 +292,14 @@ def register_cones(
         tj = j[di]
         if len(di) < min_inliers:
             break
-        motion = _gauss_newton(det_xy[di], trk_xy[tj], det_cov[di], trk_cov[tj], motion, prior, None, iterations=2)
+        motion = _gauss_newton(det_xy[di], trk_xy[tj], det_cov[di], trk_cov[tj], motion, prior, None, iterations=2,
+                               src_att_jac=None if det_att_jac is None else det_att_jac[di], att_cov_deg2=att_cov_deg2)
     if prior_std is not None and len(di) >= min_inliers:
         # the prior joins only when the cones agree with it (a wrong prior must not hold the estimate)
         off = np.hypot(motion.dx - prior.dx, motion.dy - prior.dy)
         if off <= prior_gate * np.hypot(prior_std[0], 0.03) and abs(_wrap(motion.dyaw - prior.dyaw)) <= prior_gate * np.hypot(prior_std[1], 0.005):
-            motion = _gauss_newton(det_xy[di], trk_xy[tj], det_cov[di], trk_cov[tj], motion, prior, prior_std, iterations=1)
+            motion = _gauss_newton(det_xy[di], trk_xy[tj], det_cov[di], trk_cov[tj], motion, prior, prior_std, iterations=1,
+                                   src_att_jac=None if det_att_jac is None else det_att_jac[di], att_cov_deg2=att_cov_deg2)
     if len(di) < min_inliers:
         return Registration(prior, int(len(di)), False, di, tj)
     return Registration(motion, int(len(di)), True, di, tj)

@@ -178,16 +178,35 @@ class ConeMapper:
     def _attitude_covariance(self, uv: np.ndarray, att: Attitude) -> np.ndarray:
         """(N, 2, 2) m^2: J diag(sigma_pitch^2, sigma_roll^2) J^T, J = d(x, y)/d(pitch, roll) (central
         differences of 0.1 degree about the attitude used)."""
+        J = self._attitude_jacobian_px(uv, att)
+        return J @ att.covariance_deg2() @ np.transpose(J, (0, 2, 1))
+
+    def attitude_jacobian(self, xy_m: np.ndarray) -> np.ndarray | None:
+        """(N, 2) rear_axle ground points (m) -> (N, 2, 2) m/deg: how each point's mapped position moves
+        with the body's (pitch, roll) offset about zero (column 0 pitch, 1 roll); None without a mount pose.
+        An attitude error common to a frame moves all its cones by ``J @ delta`` (the tracker takes it out)."""
+        if self.attitude_model is None:
+            return None
+        xy = np.asarray(xy_m, dtype=np.float64).reshape(-1, 2)
+        if len(xy) == 0:
+            return np.zeros((0, 2, 2))
+        und, w = apply_homography(np.linalg.inv(self.ground.H), xy)  # undistorted px of the calibrated H
+        und[w <= 0] = np.nan
+        return self._attitude_jacobian_px(und, Attitude(), undistorted=True)
+
+    def _attitude_jacobian_px(self, uv: np.ndarray, att: Attitude, undistorted: bool = False) -> np.ndarray:
+        """(N, 2) full-image px (``undistorted``: already without the lens) -> (N, 2, 2) m/deg, central
+        differences of 0.1 degree about ``att``."""
         eps = 0.1
         J = np.empty((uv.shape[0], 2, 2))
-        und = self.ground.undistort(uv)  # once: the lens does not depend on the attitude
+        und = uv if undistorted else self.ground.undistort(uv)  # once: the lens does not depend on the attitude
         H = self.attitude_model.H_F_B
         for k, d in enumerate(((eps, 0.0), (0.0, eps))):
             xa = apply_homography(H(att.pitch_deg + d[0], att.roll_deg + d[1]), und)[0]
             xb = apply_homography(H(att.pitch_deg - d[0], att.roll_deg - d[1]), und)[0]
             with np.errstate(invalid="ignore", divide="ignore"):
                 J[:, :, k] = np.nan_to_num((xa - xb) / (2 * eps))
-        return J @ att.covariance_deg2() @ np.transpose(J, (0, 2, 1))
+        return J
 
 
 def expected_truth(truth: np.ndarray, calib, mapper=None) -> np.ndarray:

@@ -237,7 +237,7 @@ def offline_replay(
             res.stats.count_ok()
             tracked = None
             if tracking is not None:
-                r.cones, tracked = tracking.frame(fr.stamp_ns, r.cones)
+                r.cones, tracked = tracking.frame(fr.stamp_ns, r.cones, r.attitude)
                 if tracked is not None:
                     res.tracked[fr.stamp_ns] = tracked
             res.boxes[fr.stamp_ns], res.cones[fr.stamp_ns] = r.boxes, r.cones

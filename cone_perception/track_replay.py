@@ -71,8 +71,9 @@ class ReplayTracking:
         self.dropped_detections = 0
         self.not_fused = Counter()
 
-    def frame(self, stamp_ns: int, cones: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-        """One frame's ``/cones`` -> (``/cones`` after the drop, tracked records or None when not fused)."""
+    def frame(self, stamp_ns: int, cones: np.ndarray, attitude=None) -> tuple[np.ndarray, np.ndarray | None]:
+        """One frame's ``/cones`` -> (``/cones`` after the drop, tracked records or None when not fused).
+        ``attitude``: the :class:`~cone_perception.attitude.Attitude` the cones were mapped with."""
         kept = drop_detections(cones, self.drop_share, self.rng)
         self.dropped_detections += len(cones) - len(kept)
         if self.evaluation is not None:
@@ -83,7 +84,7 @@ class ReplayTracking:
             self.stage.add_twist(*self.twists[self._next_twist])
             self._next_twist += 1
         try:
-            tracked, info = self.stage.process(stamp_ns, kept)
+            tracked, info = self.stage.process(stamp_ns, kept, attitude)
         except FrameError as e:
             self.not_fused[e.reason] += 1
             return kept, None

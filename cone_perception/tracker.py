@@ -4,7 +4,8 @@ Per frame (:meth:`ConeTracker.update`): the tracks are moved by the car's motion
 frame (odometry when given, else a registration of the frame's cones against the tracks with a
 constant-velocity prior, see :mod:`cone_perception.egomotion`), associated with the frame's cones
 by gated Mahalanobis distance and one-to-one assignment (``scipy.optimize.linear_sum_assignment``),
-and updated by a Kalman filter with each cone's own covariance. Per track: id (uint32, never
+and updated by a Kalman filter with each cone's own covariance (its attitude part, when the frame's
+attitude is given, as one error common to the frame: :meth:`ConeTracker.update`). Per track: id (uint32, never
 reused), fused class probabilities, position + covariance, hits, misses, age, and a certainty that
 rises with each confident hit (Bayes odds of the detection score) and decays only while the cone should be visible (inside the band's ground
 footprint, :class:`FieldOfView`) and is not seen. Tracks are deleted below
@@ -69,6 +70,11 @@ class TrackerConfig:
     max_range_m: float = 20.0  # detections farther than this are not used (too uncertain along the ray)
     spawn_chi2: float = 50.0  # an unassigned detection this near (Mahalanobis^2) to a track starts no new one
     merge_chi2: float = 6.0  # two tracks this near (and of one class) are merged into the older one
+    # the attitude part of the cones' covariance (given the frame's Attitude) is one error common to the frame,
+    # correlated over attitude_tau_s, not independent noise (docs/tracking.md, "Attitude"); False: as before
+    attitude_common: bool = True
+    attitude_tau_s: float = 0.5  # correlation time of that error; 1 and 2 s were worse on the tuning drives (benchmarks.md)
+    register_attitude: bool = True  # the registration estimates that error alongside the motion
     robust_chi2: float = 0.0  # > 0: a matched cone farther than this (Mahalanobis^2) from its track is fused with its
     # covariance times d2 / robust_chi2 (an outlier pulls less); off: no gain on the tuning drives (docs/benchmarks.md)
 
@@ -146,12 +152,13 @@ class ConeTracker:
         self.misses = np.zeros(n, np.int64)
         self.age = np.zeros(n, np.int64)
         self.certainty = np.zeros(n)
+        self.C = np.zeros((n, 2, 2))  # cross-covariance of each track's error with the attitude error, m * deg
 
     def __len__(self) -> int:
         return len(self.ids)
 
     def _keep(self, keep: np.ndarray) -> None:
-        for name in ("ids", "xy", "P", "class_p", "hits", "misses", "age", "certainty"):
+        for name in ("ids", "xy", "P", "class_p", "hits", "misses", "age", "certainty", "C"):
             setattr(self, name, getattr(self, name)[keep])
 
     # ---- motion -------------------------------------------------------------------------------
@@ -169,15 +176,24 @@ class ConeTracker:
         self.xy = motion.to_current(self.xy)
         Rt = R.T  # rotation of vectors from the previous into the current frame
         self.P = Rt[None] @ self.P @ R[None]
+        # the attitude error of this frame is correlated with the last one's by exp(-dt / tau)
+        self.C = Rt[None] @ self.C * (np.exp(-dt_s / cfg.attitude_tau_s) if cfg.attitude_tau_s > 0 else 0.0)
         q = cfg.process_std_m**2 + (cfg.motion_std_frac * motion.translation_m) ** 2 + extra_std_m**2
         perp = np.stack([-self.xy[:, 1], self.xy[:, 0]], axis=1)  # yaw error moves a point along its normal
         self.P += q * np.eye(2)[None] + cfg.motion_std_rad**2 * perp[:, :, None] * perp[:, None, :]
 
     # ---- one frame ----------------------------------------------------------------------------
-    def update(self, stamp_ns: int, cones: np.ndarray, motion: Motion2D | None = None) -> FrameInfo:
+    def update(self, stamp_ns: int, cones: np.ndarray, motion: Motion2D | None = None,
+               attitude_jacobian=None, attitude_cov_deg2: np.ndarray | None = None) -> FrameInfo:
         """Fuse one frame's ``CONE_DTYPE`` records (``rear_axle``, this frame) taken at ``stamp_ns``.
 
         ``motion``: the car's motion since the last fused frame (odometry), or None to estimate it.
+        ``attitude_jacobian`` ((N, 2) m -> (N, 2, 2) m/deg, d(x, y)/d(pitch, roll) of a mapped cone) and
+        ``attitude_cov_deg2`` ((2, 2) deg^2, the covariance of the attitude the frame was mapped with): the
+        part ``J cov J^T`` of each cone's covariance is one error common to the whole frame and correlated
+        from frame to frame (:attr:`TrackerConfig.attitude_tau_s`), not independent noise; the Kalman
+        update then treats it so (a Schmidt "consider" filter: each track keeps its error's
+        cross-covariance with the attitude error), instead of averaging it away as if independent.
         Raises :class:`FrameError` for a stamp not after the last fused frame (nothing changes).
         """
         cfg = self.config
@@ -193,6 +209,13 @@ class ConeTracker:
         Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1] = cones["cov_xx"], cones["cov_xy"], cones["cov_xy"], cones["cov_yy"]
         Rz = _floor_cov(Rz, cfg.meas_var_floor_m2)
         zc = cones["class_id"].astype(np.intp)
+        Jz, Sa = np.zeros((len(z), 2, 2)), np.zeros((2, 2))
+        if attitude_jacobian is not None and attitude_cov_deg2 is not None and len(z) and np.any(attitude_cov_deg2):
+            Jz, Sa = attitude_jacobian(z), np.asarray(attitude_cov_deg2, np.float64)
+        Ra = Jz @ Sa @ np.transpose(Jz, (0, 2, 1))  # (n_z, 2, 2) the frame-common part of Rz
+        if np.any(Sa):  # the rest, independent, at least the floor (the mapping took its J at the foot pixel)
+            w, V = np.linalg.eigh(Rz - Ra)
+            Rz = Ra + (V * np.maximum(w, cfg.meas_var_floor_m2)[:, None, :]) @ np.transpose(V, (0, 2, 1))
 
         first = self.last_stamp_ns is None
         dt = 0.0 if first else (stamp_ns - self.last_stamp_ns) / 1e9
@@ -209,8 +232,10 @@ class ConeTracker:
                 motion, info.motion_source = prior, "prior"
                 if cfg.register and len(self) and len(z):
                     prior_std = None if gap or self.velocity is None else (cfg.prior_std_m, cfg.prior_std_rad)
-                    reg = register_cones(z, zc, self.xy, self._classes(), prior, Rz, self.P, prior_std,
-                                         search_m=3.0 if gap else 1.5, min_inliers=cfg.register_min_inliers)
+                    joint = cfg.register_attitude and np.any(Sa)
+                    reg = register_cones(z, zc, self.xy, self._classes(), prior, Rz - Ra if joint else Rz, self.P, prior_std,
+                                         search_m=3.0 if gap else 1.5, min_inliers=cfg.register_min_inliers,
+                                         det_att_jac=Jz if joint else None, att_cov_deg2=Sa if joint else None)
                     info.inliers = reg.inliers
                     if reg.ok:
                         motion, info.motion_source = reg.motion, "registration"
@@ -234,7 +259,10 @@ class ConeTracker:
         rows = cols = np.zeros(0, dtype=np.intp)
         gated_any = np.zeros(n_z, dtype=bool)
         if n_t and n_z:
-            d2 = _mahalanobis2(z, Rz, self.xy, self.P)  # (n_z, n_t)
+            if np.any(Sa):  # the common attitude error moves detection and track together: S = P + R - C J^T - J C^T
+                d2 = _mahalanobis2(z, Rz, self.xy, self.P, Jz, self.C)  # (n_z, n_t)
+            else:
+                d2 = _mahalanobis2(z, Rz, self.xy, self.P)  # (n_z, n_t)
             gated = d2 <= cfg.gate_chi2
             gated_any = (d2 <= cfg.spawn_chi2).any(axis=1)
             pc = self.class_p[:, zc].T  # (n_z, n_t): p(track is the detected class)
@@ -252,11 +280,21 @@ class ConeTracker:
             Rm = Rz[rows]
             if cfg.robust_chi2 > 0:
                 Rm = Rm * np.maximum(d2[rows, cols] / cfg.robust_chi2, 1.0)[:, None, None]
-            P, S = self.P[cols], self.P[cols] + Rm
-            K = P @ _inv2(S)
+            # z = x + J a + e (a: the frame's attitude error, cov Sa; C = cov(track error, a))
+            P, C, J = self.P[cols], self.C[cols], Jz[rows]
+            Jt = np.transpose(J, (0, 2, 1))
+            CJt = C @ Jt
+            Rind = Rm - Ra[rows]  # (robust scaling included)
+            S = _symmetrise(P + Ra[rows] - CJt - np.transpose(CJt, (0, 2, 1)) + Rind)
+            K = (P - CJt) @ _inv2(S)
             innov = z[rows] - self.xy[cols]
             self.xy[cols] += np.einsum("nij,nj->ni", K, innov)
-            self.P[cols] = _symmetrise(P - K @ P)
+            IK = np.eye(2)[None] - K
+            KJ = K @ J
+            cross = IK @ CJt @ np.transpose(K, (0, 2, 1))
+            self.P[cols] = _symmetrise(IK @ P @ np.transpose(IK, (0, 2, 1)) + K @ (Ra[rows] + Rind) @ np.transpose(K, (0, 2, 1))
+                                       + cross + np.transpose(cross, (0, 2, 1)))
+            self.C[cols] = IK @ C + KJ @ Sa[None]
             self.class_p[cols] = _fuse_class(self.class_p[cols], zc[rows], cones["score"][rows], cfg.class_floor)
             self.hits[cols] += 1
             self.misses[cols] = 0
@@ -285,7 +323,7 @@ class ConeTracker:
         assigned[rows] = True
         new = np.flatnonzero(~assigned & ~gated_any)
         if len(new):
-            self._spawn(z[new], Rz[new], zc[new], cones["score"][new])
+            self._spawn(z[new], Rz[new], zc[new], cones["score"][new], Jz[new] @ Sa[None])
         info.new = len(new)
         return info
 
@@ -309,7 +347,7 @@ class ConeTracker:
         self.events["merged"] += int(dup.sum())
         return dup
 
-    def _spawn(self, z: np.ndarray, Rz: np.ndarray, zc: np.ndarray, score: np.ndarray) -> None:
+    def _spawn(self, z: np.ndarray, Rz: np.ndarray, zc: np.ndarray, score: np.ndarray, C: np.ndarray | None = None) -> None:
         cfg, n = self.config, len(z)
         ids = np.arange(self.next_id, self.next_id + n, dtype=np.uint64)
         if ids[-1] > np.iinfo(np.uint32).max:
@@ -319,6 +357,7 @@ class ConeTracker:
         self.ids = np.concatenate([self.ids, ids.astype(np.uint32)])
         self.xy = np.concatenate([self.xy, z])
         self.P = np.concatenate([self.P, _floor_cov(Rz, cfg.init_var_floor_m2)])
+        self.C = np.concatenate([self.C, np.zeros((n, 2, 2)) if C is None else C])
         self.class_p = np.concatenate([self.class_p, _fuse_class(uniform, zc, score, cfg.class_floor)])
         self.hits = np.concatenate([self.hits, np.ones(n, np.int64)])
         self.misses = np.concatenate([self.misses, np.zeros(n, np.int64)])
@@ -370,11 +409,18 @@ def _floor_cov(C: np.ndarray, var_floor: float) -> np.ndarray:
     return C + var_floor * np.eye(2)[None]
 
 
-def _mahalanobis2(z: np.ndarray, Rz: np.ndarray, xy: np.ndarray, P: np.ndarray) -> np.ndarray:
-    """(n_z, n_t) squared Mahalanobis distance of each detection to each track, S = P + R."""
+def _mahalanobis2(z: np.ndarray, Rz: np.ndarray, xy: np.ndarray, P: np.ndarray, Jz: np.ndarray | None = None,
+                  C: np.ndarray | None = None) -> np.ndarray:
+    """(n_z, n_t) squared Mahalanobis distance of each detection to each track, S = P + R (minus
+    ``C J^T + J C^T`` with the detections' attitude Jacobians ``Jz`` (n_z, 2, 2) and the tracks' cross-covariances ``C``)."""
     a = P[None, :, 0, 0] + Rz[:, None, 0, 0]
     b = P[None, :, 0, 1] + Rz[:, None, 0, 1]
     c = P[None, :, 1, 1] + Rz[:, None, 1, 1]
+    if Jz is not None and C is not None:
+        CJt = np.einsum("tik,zjk->ztij", C, Jz)  # (n_z, n_t, 2, 2): C_t J_z^T
+        a = a - 2 * CJt[..., 0, 0]
+        b = b - CJt[..., 0, 1] - CJt[..., 1, 0]
+        c = c - 2 * CJt[..., 1, 1]
     dx = z[:, None, 0] - xy[None, :, 0]
     dy = z[:, None, 1] - xy[None, :, 1]
     return (c * dx * dx - 2 * b * dx * dy + a * dy * dy) / (a * c - b * b)
@@ -421,6 +467,11 @@ class TrackingStage:
         from .egomotion import TwistBuffer
 
         self.tracker = ConeTracker(config or TrackerConfig(), FieldOfView.from_calibration(calib) if calib is not None else None)
+        self.attitude_jacobian = None  # d(x, y)/d(pitch, roll) of a mapped cone, with a mount pose
+        if calib is not None and calib.has_attitude_model:
+            from .mapping import ConeMapper
+
+            self.attitude_jacobian = ConeMapper(calib).attitude_jacobian
         self.twists = TwistBuffer(max_age_s=odom_max_age_s)
         self.last_info: FrameInfo | None = None
 
@@ -435,8 +486,11 @@ class TrackingStage:
             self.tracker.events[why] += 1
         return why is None
 
-    def process(self, stamp_ns: int, cones: np.ndarray) -> tuple[np.ndarray, FrameInfo]:
+    def process(self, stamp_ns: int, cones: np.ndarray, attitude=None) -> tuple[np.ndarray, FrameInfo]:
         """Fuse one frame; returns (:data:`TRACKED_CONE_DTYPE` records, :class:`FrameInfo`).
+        ``attitude``: the :class:`~cone_perception.attitude.Attitude` the cones were mapped with (its
+        1-sigma is the frame-common part of their covariance, see :meth:`ConeTracker.update`); None: all
+        of each cone's covariance is taken as independent.
         Raises ``FrameError`` for a stamp not after the last fused frame."""
         motion = None
         last = self.tracker.last_stamp_ns
@@ -444,5 +498,8 @@ class TrackingStage:
             motion = self.twists.motion(last, stamp_ns)
             if motion is None:
                 self.tracker.events["odom_stale"] += 1
-        self.last_info = self.tracker.update(stamp_ns, cones, motion)
+        cov = None
+        if attitude is not None and self.attitude_jacobian is not None and self.tracker.config.attitude_common:
+            cov = attitude.covariance_deg2()
+        self.last_info = self.tracker.update(stamp_ns, cones, motion, self.attitude_jacobian, cov)
         return self.tracker.output(), self.last_info

@@ -295,3 +295,121 @@ def test_robust_update_lets_an_outlier_pull_less():
         t.update(DT_NS, cones([[10.01, 2.0]], BLUE, sigma=0.05), Motion2D())
         same.append(t.xy[0].copy())
     np.testing.assert_allclose(same[0], same[1])
+
+
+# ---- a frame-common attitude error (issue 16 with attitude image / fused) -------------------------
+CAM_H_M = 1.2
+
+
+def pitch_jacobian(xy) -> np.ndarray:
+    """(N, 2) m -> (N, 2, 2) m/deg: a flat-ground camera's pitch moves a ground point along its ray by
+    (r^2 + h^2) / h per radian (column 1, roll: none here)."""
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    r = np.hypot(xy[:, 0], xy[:, 1])
+    J = np.zeros((len(xy), 2, 2))
+    J[:, :, 0] = -(xy / r[:, None]) * ((r**2 + CAM_H_M**2) / CAM_H_M * np.pi / 180)[:, None]
+    return J
+
+
+def attitude_drive(give_attitude: bool, seed: int = 0, frames: int = 300, sigma_deg: float = 0.15, tau_s: float = 0.5,
+                   register: bool = False) -> dict[str, tuple[float, float]]:
+    """Drive 0.4 m a frame past two rows of cones; each frame's cones share one pitch error (AR(1), 1-sigma
+    ``sigma_deg``, correlation time ``tau_s``) on top of independent noise growing with range, and carry
+    its covariance ``J S J^T`` as the mapping gives it. Returns per range group (raw, tracked) median error."""
+    rng = np.random.default_rng(seed)
+    xs = np.arange(3.0, 3.0 + 0.4 * frames + 25, 4.0)
+    world = np.concatenate([np.c_[xs, np.full_like(xs, 1.6)], np.c_[xs + 2, np.full_like(xs, -1.6)]])
+    trk = ConeTracker(TrackerConfig())
+    a, rho = 0.0, np.exp(-0.05 / tau_s)
+    S = np.diag([sigma_deg**2, 0.0])
+    raw, out = [], []
+    for k in range(frames):
+        a = rho * a + np.sqrt(1 - rho**2) * sigma_deg * rng.standard_normal()
+        xy = world - (0.4 * k, 0.0)
+        r = np.hypot(xy[:, 0], xy[:, 1])
+        vis = (xy[:, 0] > 1.5) & (r <= 18.0)
+        xy, r = xy[vis], r[vis]
+        J = pitch_jacobian(xy)
+        s_ind = 0.01 * (1 + (r / 8) ** 2)
+        z = xy + J[:, :, 0] * a + rng.standard_normal(xy.shape) * s_ind[:, None]
+        c = cones(z, BLUE, score=0.9)
+        R = J @ S @ np.transpose(J, (0, 2, 1)) + s_ind[:, None, None] ** 2 * np.eye(2)
+        c["cov_xx"], c["cov_xy"], c["cov_yy"] = R[:, 0, 0], R[:, 0, 1], R[:, 1, 1]
+        motion = None if register or k == 0 else Motion2D(0.4, 0.0, 0.0)
+        trk.update(k * DT_NS, c, motion, *((pitch_jacobian, S) if give_attitude else (None, None)))
+        raw += list(zip(r, np.hypot(*(z - xy).T)))
+        if k > 20:
+            d = np.hypot(trk.xy[:, None, 0] - xy[None, :, 0], trk.xy[:, None, 1] - xy[None, :, 1])
+            out += list(zip(r, d.min(axis=0)))
+    raw, out = np.array(raw), np.array(out)
+    groups = {}
+    for name, lo, hi in (("4-7", 4, 7), ("7-15", 7, 15)):
+        groups[name] = tuple(float(np.median(e[(e[:, 0] >= lo) & (e[:, 0] < hi), 1])) for e in (raw, out))
+    return groups
+
+
+def test_frame_common_attitude_error_is_not_averaged_as_independent():
+    """A frame's attitude error moves all its cones together and lasts a few frames: fused as independent
+    noise, the track keeps older, farther detections whose error the same attitude made larger, and ends up
+    worse than the raw cones (the bug seen with `replay --attitude fused`); given the attitude's covariance
+    and Jacobian, the tracker treats that part as common and correlated and comes out better."""
+    for register in (False, True):
+        old = attitude_drive(False, register=register)
+        new = attitude_drive(True, register=register)
+        assert old["7-15"][1] > 1.1 * old["7-15"][0]  # the independent treatment: worse than raw
+        assert new["7-15"][1] < 0.95 * old["7-15"][1]
+        assert new["4-7"][1] < 0.98 * old["4-7"][1]
+
+
+def test_registration_does_not_take_a_common_attitude_error_for_motion():
+    """A pitch error common to the frame moves far cones along their rays much more than near ones; the
+    rigid registration alone turns part of that into a wrong translation, the joint one (attitude as a
+    nuisance with its prior) keeps the motion."""
+    rng = np.random.default_rng(3)
+    prev = np.array([[x, s * 1.6] for x in np.arange(3.0, 19.0, 2.0) for s in (1, -1)])
+    true = Motion2D(0.4, 0.0, 0.0)
+    cur = true.to_current(prev)
+    J = pitch_jacobian(cur)
+    S = np.diag([0.1**2, 1e-6])
+    det = cur + J[:, :, 0] * 0.1 + rng.normal(0, 0.01, cur.shape)
+    cls = np.full(len(cur), BLUE)
+    cov_ind = np.broadcast_to(np.eye(2) * 0.01**2, (len(cur), 2, 2))
+    cov_full = cov_ind + J @ S @ np.transpose(J, (0, 2, 1))
+    trk_cov = np.broadcast_to(np.eye(2) * 0.01**2, (len(cur), 2, 2))
+    plain = register_cones(det, cls, prev, cls, true, cov_full, trk_cov, inlier_m=1.0)
+    joint = register_cones(det, cls, prev, cls, true, cov_ind, trk_cov, inlier_m=1.0, det_att_jac=J, att_cov_deg2=S)
+    assert plain.ok and joint.ok
+    err = lambda m: np.hypot(m.dx - true.dx, m.dy - true.dy)  # noqa: E731
+    assert err(plain.motion) > 0.01  # 2.5 % of the distance travelled: the attitude taken for motion
+    assert err(joint.motion) < 0.6 * err(plain.motion)
+
+
+def test_stage_hands_the_frame_attitude_to_the_tracker_and_the_jacobian_matches_the_mapping():
+    """With a mount pose the stage takes d(x, y)/d(pitch, roll) from the mapping: J S J^T is the attitude
+    part the mapping added to each cone's covariance; tracks then carry their error's cross-covariance
+    with the attitude (none with ``attitude_common`` off, none for the fixed attitude)."""
+    from cone_perception.attitude import Attitude
+    from cone_perception.calib import calibration_from_dict
+    from cone_perception.mapping import ConeMapper
+    from cone_perception.records import boxes_from_arrays
+    from cone_perception.synth.config import SynthConfig
+    from cone_perception.tracker import TrackingStage
+
+    calib = calibration_from_dict(SynthConfig(seed=0).calibration().to_dict(), "synth.yaml")
+    mapper = ConeMapper(calib)
+    xy = np.array([[5.0, 1.5], [9.0, -1.8], [14.0, 2.0]])
+    uv = mapper.ground_to_pixels(xy)
+    boxes = boxes_from_arrays(np.column_stack([uv[:, 0] - 10, uv[:, 1] - 30, uv[:, 0] + 10, uv[:, 1]]),
+                              np.full(3, 0.9), np.full(3, BLUE))
+    att = Attitude(0.0, 0.0, 0.3, 0.2, "image", 3)
+    with_att, without = mapper.map_boxes(boxes, att), mapper.map_boxes(boxes)
+    J = mapper.attitude_jacobian(np.c_[with_att["x"], with_att["y"]])
+    added = J @ att.covariance_deg2() @ np.transpose(J, (0, 2, 1))
+    # the mapping takes J at the foot point, 0.15 m nearer than the cone's centre: J there is a few % smaller
+    np.testing.assert_allclose(with_att["cov_xx"] - without["cov_xx"], added[:, 0, 0], rtol=0.15)
+    np.testing.assert_allclose(with_att["cov_yy"] - without["cov_yy"], added[:, 1, 1], rtol=0.15, atol=1e-5)
+    assert added[2, 0, 0] > 10 * added[0, 0, 0]  # far cones: the attitude dominates
+    for common, attitude, expect in ((True, att, True), (False, att, False), (True, Attitude(), False)):
+        stage = TrackingStage(calib, TrackerConfig(attitude_common=common))
+        stage.process(DT_NS, with_att, attitude)
+        assert (np.abs(stage.tracker.C).max() > 0) == expect

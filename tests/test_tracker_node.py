@@ -149,4 +149,7 @@ def test_pipeline_node_with_track_publishes_tracked_cones(ros: RosFixture, tmp_p
     st = _diagnostics(node)
     assert st.level == bytes([WARN]) and "1 tracker gap" in st.message
     values = {kv.key: kv.value for kv in st.values}
-    assert values["tracker:gap"] == "1" and values["tracker:stamp_repeated"] == "1"
+    # stamp_repeated: the repeated frame, plus any copy of a frame the loops above published again before its
+    # /cones/tracked came back (one executor, so how many is a matter of callback order): what the tracker counted
+    n_rep = node.tracking.stage.events["stamp_repeated"]
+    assert values["tracker:gap"] == "1" and n_rep >= 1 and values["tracker:stamp_repeated"] == str(n_rep)

@@ -60,10 +60,11 @@ class NodeTracking:
         if not self.stage.add_twist(_msgs.stamp_ns(header), tw.linear.x, tw.linear.y, tw.angular.z):
             self._report()
 
-    def process(self, cones, header) -> None:
-        """Track one frame's ``CONE_DTYPE`` records; publish with the frame's stamp. Raises ``FrameError``
-        (stamp not after the last frame: not fused)."""
-        tracked, _ = self.stage.process(_msgs.stamp_ns(header), cones)
+    def process(self, cones, header, attitude=None) -> None:
+        """Track one frame's ``CONE_DTYPE`` records; publish with the frame's stamp. ``attitude``: the
+        :class:`~cone_perception.attitude.Attitude` they were mapped with (the fused pipeline knows it).
+        Raises ``FrameError`` (stamp not after the last frame: not fused)."""
+        tracked, _ = self.stage.process(_msgs.stamp_ns(header), cones, attitude)
         h = _msgs.copy_header(header, self.frame_id)
         self.pub.publish(_msgs.tracked_msg(tracked, h))
         if self.markers:

@@ -84,7 +84,7 @@ class PipelineNode(PerceptionNode):
         publish_attitude(self, res.attitude, header)
         if self.tracking is not None:
             try:
-                self.tracking.process(res.cones, header)
+                self.tracking.process(res.cones, header, res.attitude)
             except FrameError as e:  # /cones went out; only this frame's tracking is dropped
                 reason = f"tracker_{e.reason}"
                 n = self.stats.count_drop(reason)
