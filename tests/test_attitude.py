@@ -4,6 +4,8 @@ cones' covariance, and the pipeline / replay wiring."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -516,8 +518,9 @@ def test_eval_fits_each_images_attitude_and_reports_the_uncertainty_per_group(tm
     assert s_img > 1.5 * s_fix
     assert loc["image"]["attitude"]["groups"][far]["within_2sigma"] >= 0.9
     # without a mount pose in the calibration: refused, naming the field
+    no_pose = save_calibration(replace(load_calibration("example_mainhoop"), mount_pose=None), tmp_path / "no_pose.yaml")
     assert main(["eval", "--pred", str(tmp_path / "pred.jsonl"), "--gt", str(tmp_path / "gt.jsonl"), "--calib",
-                 "example_mainhoop", "--out", str(tmp_path / "x"), "--attitude", "image", "--no-progress"]) == 2
+                 str(no_pose), "--out", str(tmp_path / "x"), "--attitude", "image", "--no-progress"]) == 2
     assert "mount_pose" in capsys.readouterr().err
 
 

@@ -34,6 +34,7 @@ def _rot(q):
 def _calib_dict(with_k=True, mount_pose=None):
     d = yaml.safe_load(resolve_calibration_path("example_mainhoop").read_text())
     d.pop("mount", None)
+    d.pop("mount_pose", None)  # the shipped file's pose is for its own H; this helper sets H and the pose itself
     H_F_B = from_pose(K, 1920, 1080, POSE)
     d["H_S_B"] = (np.array([[1, 0, -3.0], [0, 1, 0], [0, 0, 1]]) @ H_F_B).tolist()  # T_F_S is a 3 m x shift
     if with_k:
