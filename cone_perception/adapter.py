@@ -166,24 +166,25 @@ class DriverAdapter:
                 f"image is {width}x{height} but the calibration is for {self.image_width}x{self.image_height}",
             )
 
-    def from_raw(self, encoding: str, width: int, height: int, step: int, data) -> np.ndarray:
-        """sensor_msgs/Image fields -> cropped BGR ``(out_h, out_w, 3) uint8``."""
+    def _raw_view(self, encoding: str, width: int, height: int, step: int, data) -> tuple[str, np.ndarray]:
         name, view = raw_frame_view(encoding, width, height, step, data)
         self._check_size(width, height)
-        return crop_raw_to_bgr(name, view, self.crop)
+        return name, view
+
+    def from_raw(self, encoding: str, width: int, height: int, step: int, data) -> np.ndarray:
+        """sensor_msgs/Image fields -> cropped BGR ``(out_h, out_w, 3) uint8`` (the band only)."""
+        return crop_raw_to_bgr(*self._raw_view(encoding, width, height, step, data), self.crop)
 
     def from_compressed(self, data) -> np.ndarray:
         """sensor_msgs/CompressedImage data (JPEG/PNG/...) -> cropped BGR; a header declaring another
         size than the calibration's is refused before decoding."""
-        img = decode_compressed(data, expect_wh=(self.image_width, self.image_height))
-        return crop_bgr(img, self.crop)
+        return self.bands_from_compressed(data)[0]
 
     def bands_from_raw(self, encoding: str, width: int, height: int, step: int, data
                        ) -> tuple[np.ndarray, np.ndarray | None]:
         """sensor_msgs/Image fields -> (the band as :meth:`from_raw`, the far band's full-resolution
         strip ``(V1 - V0, W, 3)`` BGR or None without one); the frame is validated once."""
-        name, view = raw_frame_view(encoding, width, height, step, data)
-        self._check_size(width, height)
+        name, view = self._raw_view(encoding, width, height, step, data)
         far = crop_raw_to_bgr(name, view, self.far) if self.far is not None else None
         return crop_raw_to_bgr(name, view, self.crop), far
 

@@ -68,18 +68,20 @@ def run(args: argparse.Namespace) -> int:
     # fixed-size backend never letterboxes the band into another input size
     by_band, far_by_size = {}, {}
 
+    def band_for(w: int) -> CropSpec:  # --crop of an image w px wide (U0,U1 default to the whole width)
+        return CropSpec(*(args.crop if len(args.crop) == 4 else (*args.crop, 0, w)), args.downscale)
+
     def detector_for(w: int, h: int):
         if not args.crop or args.imgsz:
             return det
-        v0, v1, u0, u1 = args.crop if len(args.crop) == 4 else (*args.crop, 0, w)
-        return detector_for_size((max(1, (u1 - u0) // args.downscale), max(1, (v1 - v0) // args.downscale)))
+        band = band_for(w)
+        return detector_for_size((max(1, band.out_width), max(1, band.out_height)))
 
     def far_for(w: int, h: int):
         if not args.far_rows:
             return None
         if (w, h) not in far_by_size:
-            crop = CropSpec(*(args.crop if len(args.crop) == 4 else (*args.crop, 0, w)), args.downscale)
-            far_by_size[(w, h)] = FarBand.load(model, args.far_rows, w, h, crop, "--far-rows", backend=backend,
+            far_by_size[(w, h)] = FarBand.load(model, args.far_rows, w, h, band_for(w), "--far-rows", backend=backend,
                                                conf=args.conf, iou=args.iou, bf16=args.bf16)
         return far_by_size[(w, h)]
 

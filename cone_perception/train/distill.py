@@ -63,7 +63,7 @@ class DistillLoss(nn.Module):
             w = p_t.max(1).values  # (B, N): how sure the teacher is that a cone is there
             t_ltrb = dfl_expectation(t_box, self.rt).clamp(0, self.rs - 1 - 0.01)  # (B, 4, N) stride units
         # KL form of the binary cross-entropy: BCE(s, p_t) - BCE(t, p_t) >= 0, zero when the student agrees
-        ent = F.binary_cross_entropy(p_t, p_t, reduction="none") if p_t.numel() else p_t
+        ent = F.binary_cross_entropy(p_t, p_t, reduction="none")
         loss_cls = (F.binary_cross_entropy_with_logits(s_cls, p_t, reduction="none") - ent).sum() / mass
         # distribution focal loss of the student's box bins against the teacher's expected distances
         logits = s_box.view(b, 4, self.rs, -1).permute(0, 3, 1, 2).reshape(-1, self.rs)  # (B*N*4, rs)

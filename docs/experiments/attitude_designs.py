@@ -44,15 +44,15 @@ def cached(bag: str) -> dict:
     return pickle.loads(path.read_bytes())
 
 
-def score(bag: str, d: dict, mode: str, cfg: dict) -> tuple[float, float, float]:
+def run_drive(bag: str, d: dict, make, use_imu: bool) -> tuple[float, float, float]:
+    """One cached drive through the estimator ``make(mapper, imu)``: (median error 7-15 m, median |pitch| and
+    |roll| error in degrees). ``use_imu``: feed the bag's IMU samples up to each frame."""
     m = ConeMapper(load_calibration(bag + "_calib.yaml"))
-    est = m.image_attitude(ImageAttitudeConfig(**cfg))
-    if mode == "fused":
-        imu = ImuAttitude((0.0, 0.0))
-        est = FusedAttitude(est, imu)
+    imu = ImuAttitude((0.0, 0.0))
+    est = make(m, imu)
     rep, ep, er, k = LocalisationReport(max_range_m=m.calib.max_range_m), [], [], 0
     for st, boxes in d["frames"]:
-        while mode == "fused" and k < len(d["imu"]) and d["imu"][k][0] <= st:
+        while use_imu and k < len(d["imu"]) and d["imu"][k][0] <= st:
             imu.add(*d["imu"][k])
             k += 1
         a = attitude_for_boxes(est, boxes, st)
@@ -60,6 +60,14 @@ def score(bag: str, d: dict, mode: str, cfg: dict) -> tuple[float, float, float]
         ep.append(abs(a.pitch_deg - d["att"][st][0]))
         er.append(abs(a.roll_deg - d["att"][st][1]))
     return rep.summary()["groups"]["far 7-15 m"]["median_err_m"], float(np.median(ep)), float(np.median(er))
+
+
+def score(bag: str, d: dict, mode: str, cfg: dict) -> tuple[float, float, float]:
+    def make(m, imu):
+        est = m.image_attitude(ImageAttitudeConfig(**cfg))
+        return FusedAttitude(est, imu) if mode == "fused" else est
+
+    return run_drive(bag, d, make, mode == "fused")
 
 
 BEFORE = {"top_bias_extra_px": (), "bias_tau_frames": 0, "still_frames": 0, "max_range_m": 25.0, "cauchy_c": 2.5}

@@ -19,12 +19,10 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
-from attitude_designs import cached  # noqa: E402
+from attitude_designs import cached, run_drive  # noqa: E402
 
-from cone_perception.attitude import (Attitude, FusedAttitude, ImageAttitudeConfig, ImuAttitude,  # noqa: E402
-                                      attitude_for_boxes, rpy_from_quaternion)
+from cone_perception.attitude import Attitude, FusedAttitude, ImageAttitudeConfig, rpy_from_quaternion  # noqa: E402
 from cone_perception.calib import load_calibration  # noqa: E402
-from cone_perception.evaluation import LocalisationReport  # noqa: E402
 from cone_perception.mapping import ConeMapper  # noqa: E402
 
 
@@ -142,20 +140,8 @@ STILL_DESIGNS = [(f"kept, still test from {n} fits", _still_from(n)) for n in (5
 
 
 def score(bag: str, d: dict, make) -> tuple[float, float, float]:
-    m = ConeMapper(load_calibration(bag + "_calib.yaml"))
-    imu = ImuAttitude((0.0, 0.0))
     Truth.truth = d["att"]
-    est = make(m.image_attitude(ImageAttitudeConfig()), imu)
-    rep, ep, er, k = LocalisationReport(max_range_m=m.calib.max_range_m), [], [], 0
-    for st, boxes in d["frames"]:
-        while k < len(d["imu"]) and d["imu"][k][0] <= st:
-            imu.add(*d["imu"][k])
-            k += 1
-        a = attitude_for_boxes(est, boxes, st)
-        rep.add_frame(m.map_boxes(boxes, a), d["truth"][st])
-        ep.append(abs(a.pitch_deg - d["att"][st][0]))
-        er.append(abs(a.roll_deg - d["att"][st][1]))
-    return rep.summary()["groups"]["far 7-15 m"]["median_err_m"], float(np.median(ep)), float(np.median(er))
+    return run_drive(bag, d, lambda m, imu: make(m.image_attitude(ImageAttitudeConfig()), imu), True)
 
 
 def series(bag: str, d: dict) -> np.ndarray:
