@@ -737,6 +737,28 @@ def imu_rest(stamps_ns, quats_xyzw, rates_rad_s=None, accels=None, source: str =
                    (acc.stamps[-1] - acc.stamps[0]) / 1e9, rate_sd, accel_sd, dropped)
 
 
+@dataclass(frozen=True)
+class GroundGate:
+    """When ``fused`` applies the image's ground offset (the road ahead against the IMU): only as far as
+    the image fits show it, per axis. Two hypotheses: the road ahead has the grade of the calibration
+    ground (offset exactly zero, prior probability ``p_flat``), or it changes grade (offset spread
+    ``grade_deg``); the estimated offset's error is the filter's plus the fits' slowly varying part
+    (``slow_deg``, correlated over seconds, which the filter cannot average away). The offset used is
+    the filter's times the probability of a grade change. Once the fits have shown a grade change, the gate stays open (a latch
+    decaying over ``hold_frames``): a road that changes grade passes through zero offset now and then.
+    With the IMU's rest attitude captured, `fused` so keeps the IMU's accuracy on flat ground
+    (docs/benchmarks.md, "Fused attitude with the ground gate")."""
+
+    slow_deg: tuple[float, float] = (0.03, 0.03)  # (pitch, roll)
+    grade_deg: tuple[float, float] = (0.5, 0.6)
+    p_flat: float = 0.5
+    hold_frames: float = 1000.0
+
+    @property
+    def log_prior_odds(self) -> float:
+        return math.log((1.0 - self.p_flat) / self.p_flat)
+
+
 class FusedAttitude:
     """Attitude from the IMU (``imu``), or the IMU plus a slowly varying ground offset estimated from
     the image fits (``fused``: the IMU feels the body against gravity, not a grade change of the road
@@ -751,8 +773,11 @@ class FusedAttitude:
     image-only bias state (the mean of the raw fits) cannot do, so it may learn faster."""
 
     def __init__(self, image: ImageAttitude, imu: ImuAttitude, use_image: bool = True,
-                 offset_process_sigma_deg: float = 0.05, roll_bias_prior_frames: float = 30.0):
+                 offset_process_sigma_deg: float = 0.05, roll_bias_prior_frames: float = 30.0,
+                 gate: "GroundGate | None" = GroundGate()):
         self.image, self.imu, self.use_image = image, imu, use_image
+        self.gate = gate  # None: the image's ground offset always applied in full
+        self.gate_latch = np.zeros(2)
         self.q = offset_process_sigma_deg**2
         self.g = np.zeros(2)  # ground offset (total attitude minus IMU), degrees
         self.Pg = np.eye(2) * image.cfg.prior_sigma_deg**2
@@ -772,6 +797,22 @@ class FusedAttitude:
             self.n_roll_bias += 1
             self.roll_bias += (d_roll - self.roll_bias) / min(self.n_roll_bias + self.roll_bias_prior, tau)
         return np.array([0.0, self.roll_bias])
+
+    def ground_used(self) -> tuple[np.ndarray, np.ndarray]:
+        """One frame's step of the ground gate: the ground offset to add to the IMU's attitude and its
+        variance, per axis (degrees). Call once per frame (the gate's latch decays per call)."""
+        var = np.diag(self.Pg).copy()
+        gate = self.gate
+        if gate is None:
+            return self.g.copy(), var
+        slow2, grade2 = np.square(gate.slow_deg), np.square(gate.grade_deg)
+        s2 = var + slow2  # the offset's error: the filter's and the fits' slowly varying one
+        t2 = grade2 + s2  # its spread where the road does change grade
+        log_bf = 0.5 * np.log(s2 / t2) + 0.5 * self.g**2 * (1.0 / s2 - 1.0 / t2)  # grade : flat, per axis
+        w = 1.0 / (1.0 + np.exp(-np.clip(gate.log_prior_odds + log_bf, -50.0, 50.0)))
+        self.gate_latch = np.maximum(self.gate_latch * (1.0 - 1.0 / gate.hold_frames), np.where(log_bf > 0, w, 0.0))
+        w = np.maximum(w, self.gate_latch)
+        return w * self.g, w * var + w * (1.0 - w) * self.g**2  # the mixture's mean and variance
 
     def update(self, boxes: np.ndarray, class_ids: np.ndarray, stamp_ns: int | None) -> Attitude:
         body = self.imu.at(stamp_ns)
@@ -799,9 +840,10 @@ class FusedAttitude:
             self.image.counts.fitted += 1
         if wm is None:
             wm = self.image.motion_weight(None, None)
-        att = (body + self.g) * wm  # still body and ground (the image's still test): the calibration's zero
+        g, var_g = self.ground_used()
+        att = (body + g) * wm  # still body and ground (the image's still test): the calibration's zero
         self.image.x = att.copy()  # keeps the image filter warm for frames without IMU
-        sd = self.image.still_sigma(np.sqrt(np.diag(self.Pg) + s_imu**2), wm)
+        sd = self.image.still_sigma(np.sqrt(var_g + s_imu**2), wm)
         return Attitude(float(att[0]), float(att[1]), float(sd[0]), float(sd[1]), "fused", n)
 
 

@@ -550,3 +550,42 @@ def test_fused_learns_the_fits_roll_bias_against_the_imu_not_the_bodys_roll():
     assert abs(bias) > 0.1  # the boxes do bias the fit's roll
     assert est.roll_bias == pytest.approx(bias, abs=0.05)  # learnt: the bias, not bias + the 0.8 degree lean
     assert np.median(np.abs(errs)) < 0.05
+
+
+@pytest.mark.parametrize("offset", [0.06, 0.6])
+def test_fused_ground_gate_applies_the_images_offset_only_where_it_is_significant(offset):
+    """The IMU (rest captured) feels the body; the camera sees body + an offset of the road ahead. An
+    offset of the size of the image fit's slowly varying error (0.06 degree) is not told apart from flat
+    ground: the gate keeps the IMU's attitude, where the ungated filter passes the fits' error with it.
+    A real grade change (0.6 degree) opens the gate, and it stays open (latched) when the road ahead
+    returns to the calibration's grade."""
+    from cone_perception.attitude import FusedAttitude, ImuAttitude
+
+    rng = np.random.default_rng(11)
+    mapper = ConeMapper(_calib())
+    imus = ImuAttitude(), ImuAttitude()
+    gated, plain = FusedAttitude(mapper.image_attitude(), imus[0]), FusedAttitude(mapper.image_attitude(), imus[1], gate=None)
+    for est in (gated, plain):
+        est.image.cfg.top_bias_extra_px = ()
+    err = {id(gated): [], id(plain): []}
+    for k in range(200):
+        body = np.array([0.5 * np.sin(2 * np.pi * k / 31), 0.3 * np.sin(2 * np.pi * k / 23)])
+        boxes = _noisy(_cone_boxes(_tilted_camera(body[0] + offset, body[1]), CONES_XY, CONES_CLS), rng, 0.4)
+        for imu, est in zip(imus, (gated, plain)):
+            imu.add(k * 50_000_000, _q(*body))
+            a = est.update(boxes, CONES_CLS, k * 50_000_000)
+            if k >= 100:
+                err[id(est)].append(a.pitch_deg - body[0] - offset)
+    e_gated, e_plain = np.median(np.abs(err[id(gated)])), np.median(np.abs(err[id(plain)]))
+    if offset < 0.1:
+        # gated: the IMU's attitude (off by the offset it leaves out); ungated: the fits' offset with their
+        # own slow error (here -0.09 degree: box noise and few cones), further off
+        assert np.median(np.abs(np.array(err[id(gated)]) + offset)) < 0.01 and e_gated < e_plain
+    else:
+        # open: both carry the fits' offset (and their slow error), the IMU's 0.6 degree short avoided
+        assert gated.gate_latch[0] > 0.9 and e_gated == pytest.approx(e_plain, abs=0.01) and e_gated < 0.15
+        for k in range(200, 260):  # the road ahead back at the calibration's grade: the gate stays open
+            body = np.zeros(2)
+            imus[0].add(k * 50_000_000, _q(*body))
+            gated.update(_noisy(_cone_boxes(_tilted_camera(0.0, 0.0), CONES_XY, CONES_CLS), rng, 0.4), CONES_CLS, k * 50_000_000)
+        assert gated.gate_latch[0] > 0.8

@@ -25,7 +25,7 @@ def _bag(tmp_path, name: str, pitch_deg: np.ndarray, roll_deg: np.ndarray, seed:
     z = np.zeros(n)
     drive = Drive(z, z, z, z, pitch_deg, roll_deg, pitch_deg, roll_deg)
     bias_roll, bias_pitch = np.degrees(np.radians(np.random.default_rng(seed).normal(0.0, 0.05, 2)))
-    samples = imu_samples(drive, np.full(n, 0.3), FPS, np.random.default_rng(seed))
+    _, samples = imu_samples(drive, np.full(n, 0.3), FPS, np.random.default_rng(seed))
     for i in nan_at:
         samples[i].quat_xyzw = np.array([np.nan, 0.0, 0.0, 1.0])
     stamps = [10**9 + int(i * 1e9 / FPS) for i in range(n)]
@@ -46,7 +46,7 @@ def test_rest_attitude_of_a_still_car_printed_and_written(tmp_path, capsys):
     assert yaml.safe_load(out.read_text())["/**"]["ros__parameters"]["imu_rest_deg"] == [p, r]
     assert main(["imu-rest", str(bag), "--start", "1", "--seconds", "2", "--json"]) == 0
     d = json.loads(capsys.readouterr().out)
-    assert d["n"] == 41 and d["imu_rest_deg"][0] == pytest.approx(p, abs=0.02)
+    assert d["n"] == 40 and d["imu_rest_deg"][0]  # the window is [1 s, 3 s): 40 samples at 20 Hz == pytest.approx(p, abs=0.02)
 
 
 def test_a_moving_car_is_refused_naming_why(tmp_path, capsys):
@@ -76,3 +76,24 @@ def test_core_checks_acceleration_alone():
         imu_rest(stamps, q, np.zeros((n, 3)), acc, "test")
     r = imu_rest(stamps, q, np.zeros((n, 3)), np.tile([0.0, 0.0, 9.81], (n, 1)), "test")
     assert (r.pitch_deg, r.roll_deg, r.n) == (0.0, 0.0, n)
+
+
+def test_a_synthetic_bag_with_a_standing_phase_gives_its_imu_bias(tmp_path, capsys):
+    """`synth bag --stand 2`: two seconds of /imu alone before the drive, which `imu-rest --seconds 2`
+    averages to the IMU's bias (the drive's own IMU readings do not change with the standing phase)."""
+    args = ["synth", "bag", "--seconds", "0.3", "--fps", "20", "--size", "320x180", "--seed", "9", "--no-progress"]
+    assert main(args + ["--out", str(tmp_path / "plain")]) == 0
+    assert main(args + ["--stand", "2", "--out", str(tmp_path / "stand")]) == 0
+    capsys.readouterr()
+    plain = [(m.log_stamp_ns, m.raw) for m in bagio.read_messages(tmp_path / "plain", "/imu")]
+    stand = [(m.log_stamp_ns, m.raw) for m in bagio.read_messages(tmp_path / "stand", "/imu")]
+    assert len(stand) == len(plain) + 40 and stand[40:] == plain
+    assert max(t for t, _ in stand[:40]) < min(t for t, _ in plain)
+    assert main(["imu-rest", str(tmp_path / "stand"), "--seconds", "2", "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    bias_roll, bias_pitch = np.random.default_rng([9, 15]).normal(0.0, 0.05, 2)  # synth/motion.py's first draw
+    assert d["n"] == 40 and d["imu_rest_deg"] == pytest.approx([bias_pitch, bias_roll], abs=0.02)
+    assert main(["imu-rest", str(tmp_path / "stand"), "--seconds", "2.5"]) == 2  # reaches into the drive
+    assert "the car moved" in capsys.readouterr().err
+    assert main(args + ["--stand", "-1", "--out", str(tmp_path / "bad")]) == 2
+    assert "--stand" in capsys.readouterr().err

@@ -52,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
     if len(stamps) == 0:
         raise ConfigError(src, None, "no IMU messages")
     t0 = stamps[0] + int(args.start * 1e9)
-    sel = (stamps >= t0) & (stamps <= t0 + int(args.seconds * 1e9))
+    sel = (stamps >= t0) & (stamps < t0 + int(round(args.seconds * 1e9)))  # [start, start + seconds)
     r = imu_rest(stamps[sel], quats[sel], rates[sel], accels[sel], src)
     value = [round(r.pitch_deg, 4), round(r.roll_deg, 4)]
     if args.out is not None:

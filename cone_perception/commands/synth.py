@@ -62,6 +62,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, required=True, help="bag directory to create (must not exist)")
     p.add_argument("--compressed", action="store_true", help="JPEG CompressedImage on /camera/image_raw/compressed instead of YUYV")
     p.add_argument("--speed", type=float, default=8.0, help="car speed along the centre line in m/s (default 8)")
+    p.add_argument("--stand", type=float, default=0.0, metavar="S",
+                   help="begin with S seconds of /imu alone, the car standing still (for `cone-perception imu-rest BAG "
+                        "--seconds S`; default 0)")
     p.add_argument("--track", default="autocross", help="track kind: autocross, skidpad, acceleration (default autocross)")
     _common(p)
     p = sub.add_parser("preview", help="contact sheet PNG of sample frames with ground-truth boxes")
@@ -113,7 +116,8 @@ def run(args: argparse.Namespace) -> int:
         c = writers.write_dataset(cfg, args.n, args.out, args.frames_per_track, args.val_frac, progress=not args.no_progress)
         print(f"wrote {c['train']} train + {c['val']} val frames, {c['labels']} YOLO labels, {c['cones']} cones in gt.jsonl -> {args.out}")
     elif args.action == "bag":
-        c = writers.write_scene_bag(cfg, args.seconds, args.fps, args.out, args.compressed, args.speed, args.track, not args.no_progress)
+        c = writers.write_scene_bag(cfg, args.seconds, args.fps, args.out, args.compressed, args.speed, args.track,
+                                    not args.no_progress, args.stand)
         calib, gt = writers.bag_side_paths(Path(args.out))
         print(f"wrote {args.out}: " + ", ".join(f"{t} {k}" for t, k in c.items()) + f"; calibration {calib}; ground truth {gt}")
     elif args.action == "preview":

@@ -122,8 +122,11 @@ class ImuSample:
     accel: np.ndarray
 
 
-def imu_samples(drive: Drive, heading_rad: np.ndarray, fps: float, rng: np.random.Generator) -> list[ImuSample]:
-    """IMU readings for each frame of ``drive`` (noise and a constant bias drawn from ``rng``)."""
+def imu_samples(drive: Drive, heading_rad: np.ndarray, fps: float, rng: np.random.Generator,
+                stand: int = 0) -> tuple[list[ImuSample], list[ImuSample]]:
+    """IMU readings (standing, driving): ``stand`` samples of the car standing still at the start pose on
+    level ground (what ``cone-perception imu-rest`` averages), then one for each frame of ``drive``;
+    noise and one constant bias drawn from ``rng`` (the drive's readings do not depend on ``stand``)."""
     n = len(drive.s_m)
     dt = 1.0 / fps
     bias_angle = np.radians(rng.normal(0.0, IMU_ANGLE_BIAS_DEG, 2))
@@ -144,7 +147,14 @@ def imu_samples(drive: Drive, heading_rad: np.ndarray, fps: float, rng: np.rando
         R = rpy_matrix(roll[i], pitch[i], 0.0)
         f = R.T @ np.array([drive.accel_long[i], drive.accel_lat[i], G]) + bias_acc + rng.normal(0.0, IMU_ACCEL_NOISE, 3)
         out.append(ImuSample(q, w, f))
-    return out
+    still = []
+    for _ in range(stand):
+        r = bias_angle[0] + rng.normal(0.0, np.radians(IMU_ANGLE_NOISE_DEG))
+        p = bias_angle[1] + rng.normal(0.0, np.radians(IMU_ANGLE_NOISE_DEG))
+        w = bias_rate + rng.normal(0.0, np.radians(IMU_RATE_NOISE_DPS), 3)
+        f = np.array([0.0, 0.0, G]) + bias_acc + rng.normal(0.0, IMU_ACCEL_NOISE, 3)
+        still.append(ImuSample(quat_from_rpy(r, p, float(yaw[0]) if n else 0.0), w, f))
+    return still, out
 
 
 def rpy_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:

@@ -198,12 +198,17 @@ def write_scene_bag(
     speed_mps: float = 8.0,
     track_kind: str = "autocross",
     progress: bool = True,
+    stand_s: float = 0.0,
 ) -> dict:
-    """Drive a track at ``speed_mps`` for ``seconds`` and record a rosbag2 (MCAP); returns message counts."""
+    """Drive a track at ``speed_mps`` for ``seconds`` and record a rosbag2 (MCAP); returns message counts.
+    ``stand_s``: the bag begins with that many seconds of ``/imu`` alone, the car standing still before
+    the drive (for ``cone-perception imu-rest``)."""
     if not fps > 0:
         raise ConfigError("--fps", None, f"must be > 0, got {fps}")
     if not seconds > 0:
         raise ConfigError("--seconds", None, f"must be > 0, got {seconds}")
+    if not 0 <= stand_s <= 60:
+        raise ConfigError("--stand", None, f"must be within 0-60 s, got {stand_s}")
     if speed_mps < 0:
         raise ConfigError("--speed", None, f"must be >= 0 m/s, got {speed_mps}")
     if track_kind not in TRACK_KINDS:
@@ -221,7 +226,8 @@ def write_scene_bag(
     renderer = cfg.renderer(jpeg_prob=0.0, speed_mps=max(speed_mps, 1e-3), fps=fps, steady_photometric=True)
     look = renderer.new_look(rng)
     poses, drive = _drive(cfg, track, n, fps, speed_mps, rng)
-    imu = imu_samples(drive, np.array([p.yaw_rad for p in poses]), fps, np.random.default_rng([cfg.seed, 15]))
+    n_stand = int(round(stand_s * fps))
+    still, imu = imu_samples(drive, np.array([p.yaw_rad for p in poses]), fps, np.random.default_rng([cfg.seed, 15]), n_stand)
     odom = odometry_samples(np.array([(p.x_m, p.y_m, p.yaw_rad) for p in poses]), fps, START_STAMP_NS,
                             np.random.default_rng([cfg.seed, 17]))
     next_odom = 0
@@ -230,6 +236,9 @@ def write_scene_bag(
               ATTITUDE_GT_TOPIC: VECTOR3_STAMPED, IMU_TOPIC: IMU, ODOM_TOPIC: ODOMETRY}
     cfg.save_calibration(calib_path)
     with BagWriter(out, topics) as bag, open(gt_path, "w", encoding="utf-8") as gt, _progress(n, "synth bag", progress) as bar:
+        for j, s in enumerate(still):
+            stamp = START_STAMP_NS - int(round((n_stand - j) * 1e9 / fps))
+            bag.write(IMU_TOPIC, stamp, _imu_msg(s, stamp))
         for i, pose in enumerate(poses):
             stamp = START_STAMP_NS + int(round(i * 1e9 / fps))
             while next_odom < len(odom) and odom[next_odom].stamp_ns <= stamp:

@@ -44,11 +44,12 @@ def cached(bag: str) -> dict:
     return pickle.loads(path.read_bytes())
 
 
-def run_drive(bag: str, d: dict, make, use_imu: bool) -> tuple[float, float, float]:
+def run_drive(bag: str, d: dict, make, use_imu: bool, rest_deg=(0.0, 0.0)) -> tuple[float, float, float]:
     """One cached drive through the estimator ``make(mapper, imu)``: (median error 7-15 m, median |pitch| and
-    |roll| error in degrees). ``use_imu``: feed the bag's IMU samples up to each frame."""
+    |roll| error in degrees). ``use_imu``: feed the bag's IMU samples up to each frame, relative to
+    ``rest_deg`` (``--imu-rest``)."""
     m = ConeMapper(load_calibration(bag + "_calib.yaml"))
-    imu = ImuAttitude((0.0, 0.0))
+    imu = ImuAttitude(rest_deg)
     est = make(m, imu)
     rep, ep, er, k = LocalisationReport(max_range_m=m.calib.max_range_m), [], [], 0
     for st, boxes in d["frames"]:
