@@ -740,23 +740,27 @@ def imu_rest(stamps_ns, quats_xyzw, rates_rad_s=None, accels=None, source: str =
 @dataclass(frozen=True)
 class GroundGate:
     """When ``fused`` applies the image's ground offset (the road ahead against the IMU): only as far as
-    the image fits show it, per axis. Two hypotheses: the road ahead has the grade of the calibration
-    ground (offset exactly zero, prior probability ``p_flat``), or it changes grade (offset spread
-    ``grade_deg``); the estimated offset's error is the filter's plus the fits' slowly varying part
-    (``slow_deg``, correlated over seconds, which the filter cannot average away). The offset used is
-    the filter's times the probability of a grade change. Once the fits have shown a grade change, the gate stays open (a latch
-    decaying over ``hold_frames``): a road that changes grade passes through zero offset now and then.
-    With the IMU's rest attitude captured, `fused` so keeps the IMU's accuracy on flat ground
-    (docs/benchmarks.md, "Fused attitude with the ground gate")."""
+    the image fits show it, per axis (pitch, roll). Two hypotheses: the road ahead has the calibration
+    ground's grade (offset exactly zero, prior probability ``p_flat``) or it changes grade (offset
+    spread ``grade_deg``); the offset estimate's error is the filter's plus the fits' slowly varying
+    part (``slow_deg``, which the filter cannot average away). The evidence is the offset's mean over
+    ``evidence_frames`` (the fits' error comes in excursions of a second or two; a grade change lasts
+    longer), or the current offset where it alone is overwhelming (prior ``p_flat_instant``). The offset
+    used is the filter's times the probability of a grade change. Once the fits have shown one, the
+    gate stays open (a latch decaying over ``hold_frames``): a road that changes grade passes zero
+    offset now and then. With the IMU's rest attitude captured, ``fused`` so keeps the IMU's accuracy
+    on flat ground (docs/benchmarks.md, "Fused attitude with the ground gate")."""
 
-    slow_deg: tuple[float, float] = (0.03, 0.03)  # (pitch, roll)
+    slow_deg: tuple[float, float] = (0.03, 0.03)
     grade_deg: tuple[float, float] = (0.5, 0.6)
     p_flat: float = 0.5
+    evidence_frames: float = 20.0
+    p_flat_instant: float = 0.99
     hold_frames: float = 1000.0
 
-    @property
-    def log_prior_odds(self) -> float:
-        return math.log((1.0 - self.p_flat) / self.p_flat)
+
+def _log_odds(p_flat: float) -> float:
+    return math.log((1.0 - p_flat) / p_flat)
 
 
 class FusedAttitude:
@@ -777,7 +781,7 @@ class FusedAttitude:
                  gate: "GroundGate | None" = GroundGate()):
         self.image, self.imu, self.use_image = image, imu, use_image
         self.gate = gate  # None: the image's ground offset always applied in full
-        self.gate_latch = np.zeros(2)
+        self.g_mean, self.gate_latch = np.zeros(2), np.zeros(2)
         self.q = offset_process_sigma_deg**2
         self.g = np.zeros(2)  # ground offset (total attitude minus IMU), degrees
         self.Pg = np.eye(2) * image.cfg.prior_sigma_deg**2
@@ -800,17 +804,26 @@ class FusedAttitude:
 
     def ground_used(self) -> tuple[np.ndarray, np.ndarray]:
         """One frame's step of the ground gate: the ground offset to add to the IMU's attitude and its
-        variance, per axis (degrees). Call once per frame (the gate's latch decays per call)."""
+        variance, per axis (degrees). Call once per frame (the evidence mean and the latch step per call)."""
         var = np.diag(self.Pg).copy()
         gate = self.gate
         if gate is None:
             return self.g.copy(), var
-        slow2, grade2 = np.square(gate.slow_deg), np.square(gate.grade_deg)
-        s2 = var + slow2  # the offset's error: the filter's and the fits' slowly varying one
-        t2 = grade2 + s2  # its spread where the road does change grade
-        log_bf = 0.5 * np.log(s2 / t2) + 0.5 * self.g**2 * (1.0 / s2 - 1.0 / t2)  # grade : flat, per axis
-        w = 1.0 / (1.0 + np.exp(-np.clip(gate.log_prior_odds + log_bf, -50.0, 50.0)))
-        self.gate_latch = np.maximum(self.gate_latch * (1.0 - 1.0 / gate.hold_frames), np.where(log_bf > 0, w, 0.0))
+        s2 = var + np.square(gate.slow_deg)  # the offset's error: the filter's and the fits' slow one
+        t2 = np.square(gate.grade_deg) + s2  # its spread where the road does change grade
+        self.g_mean += (self.g - self.g_mean) / max(gate.evidence_frames, 1.0)
+
+        def log_bf(g):  # grade change : flat, per axis
+            return 0.5 * np.log(s2 / t2) + 0.5 * g**2 * (1.0 / s2 - 1.0 / t2)
+
+        def prob(log_odds):
+            return 1.0 / (1.0 + np.exp(-np.clip(log_odds, -50.0, 50.0)))
+
+        b_mean, b_now = log_bf(self.g_mean), log_bf(self.g)
+        w_mean, w_now = prob(_log_odds(gate.p_flat) + b_mean), prob(_log_odds(gate.p_flat_instant) + b_now)
+        w = np.maximum(w_mean, w_now)
+        shown = np.where(w_now > w_mean, b_now, b_mean) > 0  # the evidence favours a grade change
+        self.gate_latch = np.maximum(self.gate_latch * (1.0 - 1.0 / gate.hold_frames), np.where(shown, w, 0.0))
         w = np.maximum(w, self.gate_latch)
         return w * self.g, w * var + w * (1.0 - w) * self.g**2  # the mixture's mean and variance
 

@@ -589,3 +589,28 @@ def test_fused_ground_gate_applies_the_images_offset_only_where_it_is_significan
             imus[0].add(k * 50_000_000, _q(*body))
             gated.update(_noisy(_cone_boxes(_tilted_camera(0.0, 0.0), CONES_XY, CONES_CLS), rng, 0.4), CONES_CLS, k * 50_000_000)
         assert gated.gate_latch[0] > 0.8
+
+
+def test_fused_ground_gate_does_not_open_on_a_short_excursion_of_the_fits():
+    """Flat ground, but for 15 frames (0.75 s) the camera sees 0.3 degree more pitch (as a fit's
+    excursion does): the gate judges the offset's one-second mean, so it stays shut and does not latch;
+    a grade change that lasts opens it."""
+    from cone_perception.attitude import FusedAttitude, ImuAttitude
+
+    rng = np.random.default_rng(13)
+    mapper = ConeMapper(_calib())
+    imu = ImuAttitude()
+    est = FusedAttitude(mapper.image_attitude(), imu)
+    est.image.cfg.top_bias_extra_px = ()
+    used = []
+    for k in range(200):
+        body = np.array([0.5 * np.sin(2 * np.pi * k / 31), 0.0])
+        seen = body[0] + (0.3 if 100 <= k < 115 else 0.0) + (0.8 if k >= 160 else 0.0)
+        imu.add(k * 50_000_000, _q(*body))
+        a = est.update(_noisy(_cone_boxes(_tilted_camera(seen, 0.0), CONES_XY, CONES_CLS), rng, 0.4), CONES_CLS,
+                       k * 50_000_000)
+        used.append(a.pitch_deg - body[0])
+        if k == 150:
+            assert est.gate_latch[0] < 0.1  # the excursion left no latch
+    assert np.max(np.abs(used[100:115])) < 0.06  # held at the IMU's attitude through the excursion
+    assert np.median(used[185:]) == pytest.approx(0.8, abs=0.12) and est.gate_latch[0] > 0.9  # a lasting grade: open

@@ -44,8 +44,9 @@ def designs():
         yield f"IMU alone, rest {r}", (lambda e, i: FusedAttitude(e, i, use_image=False)), rest
         yield f"fused before: no gate, rest {r}", (lambda e, i: FusedAttitude(e, i, gate=None)), rest
         yield f"**kept: gate {GroundGate()}**, rest {r}", (lambda e, i: FusedAttitude(e, i)), rest
-    for kw in ({"p_flat": 0.3}, {"p_flat": 0.8}, {"hold_frames": 1.0}, {"hold_frames": 400.0}, {"hold_frames": 1e9},
-               {"grade_deg": (1.0, 0.6)}, {"grade_deg": (0.3, 0.3)}, {"slow_deg": (0.06, 0.06)}, {"slow_deg": (0.03, 0.1)}):
+    for kw in ({"evidence_frames": 1.0, "p_flat_instant": 0.5}, {"evidence_frames": 1.0, "p_flat_instant": 0.5, "hold_frames": 1.0},
+               {"evidence_frames": 40.0}, {"p_flat_instant": 0.999}, {"p_flat": 0.3}, {"p_flat": 0.8},
+               {"hold_frames": 1.0}, {"hold_frames": 1e9}, {"grade_deg": (1.0, 0.6)}, {"slow_deg": (0.06, 0.15)}):
         yield f"kept but {', '.join(f'{k} {v}' for k, v in kw.items())}, rest captured", gate(**kw), True
 
 
