@@ -178,9 +178,9 @@ class ImageAttitudeConfig:
     #: still body: the spread of the fits over ``still_frames`` frames against their own sigma; below
     #: ``still_ratio`` (pitch and roll) the body is taken as still and the estimate returns to zero,
     #: fully at ``still_ratio - still_ramp``; 0 frames = off
-    still_frames: float = 20.0
+    still_frames: float = 40.0
     still_min_frames: float = 10.0  # fits before the test judges (until then: moving)
-    still_ratio: float = 1.0
+    still_ratio: float = 1.3
     still_ramp: float = 0.4
     #: ... and only while the fits' mean stays within this (degrees, pitch and roll; ramp of half of it):
     #: a body standing still on a slope keeps its estimate
