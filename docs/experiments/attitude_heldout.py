@@ -9,7 +9,7 @@ each attitude mode with `--imu-rest` set to it, scored against /cones_gt and /at
     done
     .venv/bin/python docs/experiments/attitude_heldout.py /tmp/ho/jit31? /tmp/ho/car31? /tmp/ho/flat31?
 
-Prints one row per bag and mode: recall within 15 m, median error 0-4 / 4-7 / 7-15 / 15-25 m, median |pitch|
+`--modes fixed,image,...` limits the modes. Prints one row per bag and mode: recall within 15 m, median error 0-4 / 4-7 / 7-15 / 15-25 m, median |pitch|
 and |roll| error, the attitude's cost per frame. Writes each replay's summary to BAG_MODE.json.
 """
 import json
@@ -18,7 +18,7 @@ import sys
 from pathlib import Path
 
 CLI = [str(Path(sys.executable).parent / "cone-perception")]
-MODES = ("fixed", "image", "imu", "fused")
+MODES = tuple(m for m in ("fixed", "image", "imu", "fused") if m in (sys.argv[sys.argv.index("--modes") + 1].split(",") if "--modes" in sys.argv else "fixed,image,imu,fused"))
 
 
 def rest(bag: str) -> str:
@@ -55,4 +55,7 @@ def main(bags: list[str]) -> None:
 
 
 if __name__ == "__main__":
-    main(sys.argv[1:])
+    args = sys.argv[1:]
+    if "--modes" in args:  # --modes fixed,image: only these
+        del args[args.index("--modes"):args.index("--modes") + 2]
+    main(args)
