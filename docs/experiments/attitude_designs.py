@@ -63,12 +63,27 @@ def run_drive(bag: str, d: dict, make, use_imu: bool, rest_deg=(0.0, 0.0)) -> tu
     return rep.summary()["groups"]["far 7-15 m"]["median_err_m"], float(np.median(ep)), float(np.median(er))
 
 
-def score(bag: str, d: dict, mode: str, cfg: dict) -> tuple[float, float, float]:
+def score(bag: str, d: dict, mode: str, cfg: dict, gate=None) -> tuple[float, float, float]:
+    """``gate``: the fused mode's GroundGate (None: none, fused as of the sections of this script)."""
     def make(m, imu):
         est = m.image_attitude(ImageAttitudeConfig(**cfg))
-        return FusedAttitude(est, imu) if mode == "fused" else est
+        return FusedAttitude(est, imu, gate=gate) if mode == "fused" else est
 
     return run_drive(bag, d, make, mode == "fused")
+
+
+def print_design_table(kinds: dict, designs, scorer) -> None:
+    """One markdown row a design: mean of the per-drive 7-15 m medians per kind of drive, the worst drive,
+    drives above 0.08 m, mean pitch / roll error. ``designs``: (name, design); ``scorer(bag, design)``
+    -> (7-15 m, pitch err, roll err)."""
+    print("| design | " + " | ".join(f"{k} 7-15 m" for k in kinds) + " | worst drive | drives > 0.08 m | pitch / roll err (deg) |")
+    print("|---|" + "---|" * (len(kinds) + 3))
+    for name, design in designs:
+        r = {k: [scorer(b, design) for b in v] for k, v in kinds.items()}
+        a = np.array([x for v in r.values() for x in v])
+        print(f"| {name} | " + " | ".join(f"{np.mean([x[0] for x in r[k]]):.3f}" for k in kinds)
+              + f" | {a[:, 0].max():.3f} | {int((a[:, 0] > 0.08).sum())} of {len(a)} | {a[:, 1].mean():.3f} / {a[:, 2].mean():.3f} |",
+              flush=True)
 
 
 BEFORE = {"top_bias_extra_px": (), "bias_tau_frames": 0, "still_frames": 0, "max_range_m": 25.0, "cauchy_c": 2.5}

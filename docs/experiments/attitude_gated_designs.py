@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
-from attitude_designs import cached, run_drive  # noqa: E402
+from attitude_designs import cached, print_design_table, run_drive  # noqa: E402
 
 from cone_perception.attitude import FusedAttitude, GroundGate, ImageAttitudeConfig  # noqa: E402
 from cone_perception.synth.motion import IMU_ANGLE_BIAS_DEG  # noqa: E402
@@ -55,14 +55,8 @@ def main(argv: list[str]) -> None:
     kinds = {k: [b for b in bags if Path(b).name.startswith(k)] for k in ("jit", "car", "flat")}
     kinds = {k: v for k, v in kinds.items() if v}
     data = {b: cached(b) for b in bags}
-    print("| design | " + " | ".join(f"{k} 7-15 m" for k in kinds) + " | worst drive | drives > 0.08 m | pitch / roll err (deg) |")
-    print("|---|" + "---|" * (len(kinds) + 3))
-    for name, make, rest in designs():
-        r = {k: [score(b, data[b], make, rest) for b in v] for k, v in kinds.items()}
-        a = np.array([x for v in r.values() for x in v])
-        print(f"| {name} | " + " | ".join(f"{np.mean([x[0] for x in r[k]]):.3f}" for k in kinds)
-              + f" | {a[:, 0].max():.3f} | {int((a[:, 0] > 0.08).sum())} of {len(a)} | {a[:, 1].mean():.3f} / {a[:, 2].mean():.3f} |",
-              flush=True)
+    print_design_table(kinds, [(name, (make, rest)) for name, make, rest in designs()],
+                       lambda b, d: score(b, data[b], *d))
 
 
 if __name__ == "__main__":

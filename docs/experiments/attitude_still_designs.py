@@ -9,12 +9,13 @@ import sys
 sys.path.insert(0, "docs/experiments")
 import numpy as np
 from pathlib import Path
-from attitude_designs import cached, score
+from attitude_designs import cached, score  # noqa: E402
+from cone_perception.attitude import GroundGate  # noqa: E402
 bags = [b.rstrip("/") for b in sys.argv[1:]]
 data = {b: cached(b) for b in bags}
 kinds = {k: [b for b in bags if Path(b).name.startswith(k)] for k in ("jit", "car", "flat")}
 for cfg in ({}, {"still_frames": 20.0, "still_ratio": 1.0}, {"still_frames": 20.0, "still_ratio": 1.3}, {"still_ratio": 1.6},
             {"still_ratio": 1.0}, {"still_frames": 20.0, "still_ramp": 0.2}):
     for mode in ("image", "fused"):
-        r = {k: [score(b, data[b], mode, cfg) for b in v] for k, v in kinds.items()}
+        r = {k: [score(b, data[b], mode, cfg, GroundGate()) for b in v] for k, v in kinds.items()}
         print(cfg, mode, " ".join(f"{k} {np.mean([x[0] for x in v]):.4f} (max {np.max([x[0] for x in v]):.3f})" for k, v in r.items()), flush=True)
