@@ -19,7 +19,11 @@ projected; the residual is predicted minus observed top row of the box (px). A r
 (Cauchy) weighted least-squares fit of (pitch, roll) with a weak prior around zero, started
 from the weighted median of single-cone pitch estimates, then a Kalman filter across frames
 (random walk decaying to zero): frames with too few usable cones hold the last estimate,
-decaying to zero; a fit beyond :data:`MAX_ABS_DEG` is rejected and counted. ROS-free.
+decaying to zero; a fit beyond :data:`MAX_ABS_DEG` is rejected and counted.
+
+:class:`ImuAttitude` reads an IMU's orientation relative to its rest attitude;
+:class:`FusedAttitude` adds to it the ground offset the image fits see (the road ahead's grade),
+through a :class:`GroundGate`. ROS-free.
 """
 
 from __future__ import annotations
@@ -774,7 +778,9 @@ class FusedAttitude:
     lap; a running mean shrunk towards zero by ``roll_bias_prior_frames`` pseudo-frames, an
     exponential mean of the image config's ``bias_tau_frames`` once that many fits are in (tau 0:
     off). The IMU takes the body's own roll (cornering) out of that mean, which the
-    image-only bias state (the mean of the raw fits) cannot do, so it may learn faster."""
+    image-only bias state (the mean of the raw fits) cannot do, so it may learn faster.
+
+    The ground offset is applied through ``gate`` (:class:`GroundGate`; None: always in full)."""
 
     def __init__(self, image: ImageAttitude, imu: ImuAttitude, use_image: bool = True,
                  offset_process_sigma_deg: float = 0.05, roll_bias_prior_frames: float = 30.0,
@@ -802,7 +808,7 @@ class FusedAttitude:
             self.roll_bias += (d_roll - self.roll_bias) / min(self.n_roll_bias + self.roll_bias_prior, tau)
         return np.array([0.0, self.roll_bias])
 
-    def ground_used(self) -> tuple[np.ndarray, np.ndarray]:
+    def step_ground_gate(self) -> tuple[np.ndarray, np.ndarray]:
         """One frame's step of the ground gate: the ground offset to add to the IMU's attitude and its
         variance, per axis (degrees). Call once per frame (the evidence mean and the latch step per call)."""
         var = np.diag(self.Pg).copy()
@@ -853,7 +859,7 @@ class FusedAttitude:
             self.image.counts.fitted += 1
         if wm is None:
             wm = self.image.motion_weight(None, None)
-        g, var_g = self.ground_used()
+        g, var_g = self.step_ground_gate()
         att = (body + g) * wm  # still body and ground (the image's still test): the calibration's zero
         self.image.x = att.copy()  # keeps the image filter warm for frames without IMU
         sd = self.image.still_sigma(np.sqrt(var_g + s_imu**2), wm)
