@@ -788,6 +788,9 @@ class FusedAttitude:
         self.image, self.imu, self.use_image = image, imu, use_image
         self.gate = gate  # None: the image's ground offset always applied in full
         self.g_mean, self.gate_latch = np.zeros(2), np.zeros(2)
+        if gate is not None:  # its constants: squared spreads, prior log-odds (mean, instant), latch decay, mean length
+            self._gate_k = (np.square(gate.slow_deg), np.square(gate.grade_deg), _log_odds(gate.p_flat),
+                            _log_odds(gate.p_flat_instant), 1.0 - 1.0 / gate.hold_frames, max(gate.evidence_frames, 1.0))
         self.q = offset_process_sigma_deg**2
         self.g = np.zeros(2)  # ground offset (total attitude minus IMU), degrees
         self.Pg = np.eye(2) * image.cfg.prior_sigma_deg**2
@@ -812,12 +815,12 @@ class FusedAttitude:
         """One frame's step of the ground gate: the ground offset to add to the IMU's attitude and its
         variance, per axis (degrees). Call once per frame (the evidence mean and the latch step per call)."""
         var = np.diag(self.Pg).copy()
-        gate = self.gate
-        if gate is None:
+        if self.gate is None:
             return self.g.copy(), var
-        s2 = var + np.square(gate.slow_deg)  # the offset's error: the filter's and the fits' slow one
-        t2 = np.square(gate.grade_deg) + s2  # its spread where the road does change grade
-        self.g_mean += (self.g - self.g_mean) / max(gate.evidence_frames, 1.0)
+        slow2, grade2, lo_mean, lo_now, decay, n_mean = self._gate_k
+        s2 = var + slow2  # the offset's error: the filter's and the fits' slow one
+        t2 = grade2 + s2  # its spread where the road does change grade
+        self.g_mean += (self.g - self.g_mean) / n_mean
 
         def log_bf(g):  # grade change : flat, per axis
             return 0.5 * np.log(s2 / t2) + 0.5 * g**2 * (1.0 / s2 - 1.0 / t2)
@@ -826,10 +829,10 @@ class FusedAttitude:
             return 1.0 / (1.0 + np.exp(-np.clip(log_odds, -50.0, 50.0)))
 
         b_mean, b_now = log_bf(self.g_mean), log_bf(self.g)
-        w_mean, w_now = prob(_log_odds(gate.p_flat) + b_mean), prob(_log_odds(gate.p_flat_instant) + b_now)
+        w_mean, w_now = prob(lo_mean + b_mean), prob(lo_now + b_now)
         w = np.maximum(w_mean, w_now)
         shown = np.where(w_now > w_mean, b_now, b_mean) > 0  # the evidence favours a grade change
-        self.gate_latch = np.maximum(self.gate_latch * (1.0 - 1.0 / gate.hold_frames), np.where(shown, w, 0.0))
+        self.gate_latch = np.maximum(self.gate_latch * decay, np.where(shown, w, 0.0))
         w = np.maximum(w, self.gate_latch)
         return w * self.g, w * var + w * (1.0 - w) * self.g**2  # the mixture's mean and variance
 

@@ -137,23 +137,18 @@ def imu_samples(drive: Drive, heading_rad: np.ndarray, fps: float, rng: np.rando
     pitch = np.radians(drive.body_pitch_deg)
     yaw = np.asarray(heading_rad, dtype=np.float64)
     rates = np.column_stack([np.gradient(roll, dt), np.gradient(pitch, dt), np.gradient(yaw, dt)]) if n > 1 else np.zeros((n, 3))
-    out = []
-    for i in range(n):
-        r = roll[i] + bias_angle[0] + rng.normal(0.0, np.radians(IMU_ANGLE_NOISE_DEG))
-        p = pitch[i] + bias_angle[1] + rng.normal(0.0, np.radians(IMU_ANGLE_NOISE_DEG))
-        q = quat_from_rpy(r, p, yaw[i])
-        w = rates[i] + bias_rate + rng.normal(0.0, np.radians(IMU_RATE_NOISE_DPS), 3)
+
+    def reading(roll_i: float, pitch_i: float, yaw_i: float, rate_i, a_long: float, a_lat: float) -> ImuSample:
+        r = roll_i + bias_angle[0] + rng.normal(0.0, np.radians(IMU_ANGLE_NOISE_DEG))
+        p = pitch_i + bias_angle[1] + rng.normal(0.0, np.radians(IMU_ANGLE_NOISE_DEG))
+        w = rate_i + bias_rate + rng.normal(0.0, np.radians(IMU_RATE_NOISE_DPS), 3)
         # specific force in the body frame: motion acceleration minus gravity (gravity -z in the world)
-        R = rpy_matrix(roll[i], pitch[i], 0.0)
-        f = R.T @ np.array([drive.accel_long[i], drive.accel_lat[i], G]) + bias_acc + rng.normal(0.0, IMU_ACCEL_NOISE, 3)
-        out.append(ImuSample(q, w, f))
-    still = []
-    for _ in range(stand):
-        r = bias_angle[0] + rng.normal(0.0, np.radians(IMU_ANGLE_NOISE_DEG))
-        p = bias_angle[1] + rng.normal(0.0, np.radians(IMU_ANGLE_NOISE_DEG))
-        w = bias_rate + rng.normal(0.0, np.radians(IMU_RATE_NOISE_DPS), 3)
-        f = np.array([0.0, 0.0, G]) + bias_acc + rng.normal(0.0, IMU_ACCEL_NOISE, 3)
-        still.append(ImuSample(quat_from_rpy(r, p, float(yaw[0]) if n else 0.0), w, f))
+        R = rpy_matrix(roll_i, pitch_i, 0.0)
+        f = R.T @ np.array([a_long, a_lat, G]) + bias_acc + rng.normal(0.0, IMU_ACCEL_NOISE, 3)
+        return ImuSample(quat_from_rpy(r, p, yaw_i), w, f)
+
+    out = [reading(roll[i], pitch[i], yaw[i], rates[i], drive.accel_long[i], drive.accel_lat[i]) for i in range(n)]
+    still = [reading(0.0, 0.0, float(yaw[0]) if n else 0.0, np.zeros(3), 0.0, 0.0) for _ in range(stand)]
     return still, out
 
 

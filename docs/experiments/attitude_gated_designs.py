@@ -6,6 +6,11 @@ seeds); the IMU's rest attitude of each drive is its exact bias, drawn again fro
 standing phase, `synth bag --stand`, gives it within its noise: 0.03 deg / sqrt(samples)).
 
     .venv/bin/python docs/experiments/attitude_gated_designs.py /tmp/att/jit1?? /tmp/att/car1?? /tmp/att/flat1??
+    .venv/bin/python docs/experiments/attitude_gated_designs.py --trace /tmp/ho/jit313
+
+``--trace BAG``: every 10th frame of one drive through the first gate (the current offset alone, no
+one-second mean): the ground offset, its 1-sigma, the latch and the offset used (all
+against the IMU, degrees; on these drives without grade changes the true offset is zero).
 """
 import re
 import sys
@@ -50,7 +55,33 @@ def designs():
         yield f"kept but {', '.join(f'{k} {v}' for k, v in kw.items())}, rest captured", gate(**kw), True
 
 
+def trace(bag: str) -> None:
+    d = cached(bag)
+    gate = GroundGate(evidence_frames=1.0, p_flat_instant=0.5)
+    seen = []
+
+    def make(m, imu):
+        est = FusedAttitude(m.image_attitude(ImageAttitudeConfig()), imu, gate=gate)
+        step = est.step_ground_gate
+
+        def logged():
+            used = step()
+            seen.append((est.g.copy(), np.sqrt(np.diag(est.Pg)), est.gate_latch.copy(), used[0].copy()))
+            return used
+
+        est.step_ground_gate = logged
+        return est
+
+    run_drive(bag, d, make, True, rest_of(bag))
+    print("frame | offset (pitch, roll) | 1-sigma | latch | used")
+    for k in range(0, len(seen), 10):
+        g, sd, latch, used = seen[k]
+        print(f"{k:5d} | {g[0]:+.3f} {g[1]:+.3f} | {sd[0]:.3f} {sd[1]:.3f} | {latch[0]:.2f} {latch[1]:.2f} | {used[0]:+.3f} {used[1]:+.3f}")
+
+
 def main(argv: list[str]) -> None:
+    if argv[:1] == ["--trace"]:
+        return trace(argv[1].rstrip("/"))
     bags = [b.rstrip("/") for b in argv if not b.startswith("--")]
     kinds = {k: [b for b in bags if Path(b).name.startswith(k)] for k in ("jit", "car", "flat")}
     kinds = {k: v for k, v in kinds.items() if v}

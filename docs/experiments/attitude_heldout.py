@@ -2,23 +2,26 @@
 rest attitude from its standing phase (`cone-perception imu-rest BAG --seconds 2`), then `replay` in
 each attitude mode with `--imu-rest` set to it, scored against /cones_gt and /attitude_gt.
 
-    for s in 311 312 313; do
-      cone-perception synth bag --seed $s --seconds 10 --stand 2 --out /tmp/ho/jit$s
-      cone-perception synth bag --seed $s --seconds 10 --stand 2 --car-motion --out /tmp/ho/car$s
-      cone-perception synth bag --seed $s --seconds 10 --stand 2 --no-jitter --out /tmp/ho/flat$s
+    for s in 331 332 333; do
+      cone-perception synth bag --seed $s --seconds 10 --stand 2 --out /tmp/ho3/jit$s
+      cone-perception synth bag --seed $s --seconds 10 --stand 2 --car-motion --out /tmp/ho3/car$s
+      cone-perception synth bag --seed $s --seconds 10 --stand 2 --no-jitter --out /tmp/ho3/flat$s
     done
-    .venv/bin/python docs/experiments/attitude_heldout.py /tmp/ho/jit31? /tmp/ho/car31? /tmp/ho/flat31?
+    .venv/bin/python docs/experiments/attitude_heldout.py /tmp/ho3/jit33? /tmp/ho3/flat33? [--modes fixed,image,fused]
+    .venv/bin/python docs/experiments/attitude_heldout.py /tmp/ho3/jit33? --modes image --far-rows 384,576
 
-`--modes fixed,image,...` limits the modes. Prints one row per bag and mode: recall within 15 m, median error 0-4 / 4-7 / 7-15 / 15-25 m, median |pitch|
-and |roll| error, the attitude's cost per frame. Writes each replay's summary to BAG_MODE.json.
+Prints one row per bag and mode: recall within 15 m, median error 0-4 / 4-7 / 7-15 / 15-25 m, median
+|pitch| and |roll| error, the attitude stage's median ms and the end-to-end median ms per frame.
+Writes each replay's summary to BAG_MODE.json (BAG_MODE_far.json with --far-rows).
 """
+import argparse
 import json
 import subprocess
 import sys
 from pathlib import Path
 
 CLI = [str(Path(sys.executable).parent / "cone-perception")]
-MODES = tuple(m for m in ("fixed", "image", "imu", "fused") if m in (sys.argv[sys.argv.index("--modes") + 1].split(",") if "--modes" in sys.argv else "fixed,image,imu,fused"))
+MODES = ("fixed", "image", "imu", "fused")
 
 
 def rest(bag: str) -> str:
@@ -27,21 +30,29 @@ def rest(bag: str) -> str:
     return f"{p},{r}"
 
 
-def replay(bag: str, mode: str, imu_rest: str) -> dict:
-    js = Path(f"{bag}_{mode}.json")
+def replay(bag: str, mode: str, imu_rest: str, far_rows: str | None) -> dict:
+    js = Path(f"{bag}_{mode}{'_far' if far_rows else ''}.json")
+    extra = ["--far-rows", far_rows] if far_rows else []
     subprocess.run(CLI + ["replay", bag, "--calib", f"{bag}_calib.yaml", "--gt-topic", "/cones_gt", "--attitude", mode,
-                          f"--imu-rest={imu_rest}", "--json", str(js), "--force", "--no-progress"],
+                          f"--imu-rest={imu_rest}", "--json", str(js), "--force", "--no-progress", *extra],
                    check=True, capture_output=True, text=True)
     return json.loads(js.read_text())
 
 
-def main(bags: list[str]) -> None:
-    print("| bag | `--imu-rest` | mode | recall < 15 m | 0-4 m | 4-7 m | 7-15 m | 15-25 m | pitch / roll err (deg) | attitude ms |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
-    for bag in (b.rstrip("/") for b in bags):
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("bags", nargs="+")
+    ap.add_argument("--modes", default=",".join(MODES), help="comma-separated attitude modes (default all four)")
+    ap.add_argument("--far-rows", default=None, metavar="V0,V1", help="replay with the far band on these rows")
+    args = ap.parse_args()
+    modes = [m for m in args.modes.split(",") if m]
+    label = " + far band" if args.far_rows else ""
+    print("| bag | `--imu-rest` | mode | recall < 15 m | 0-4 m | 4-7 m | 7-15 m | 15-25 m | pitch / roll err (deg) | attitude ms | end to end ms |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    for bag in (b.rstrip("/") for b in args.bags):
         r = rest(bag)
-        for mode in MODES:
-            s = replay(bag, mode, r)
+        for mode in modes:
+            s = replay(bag, mode, r, args.far_rows)
             loc = s["localisation"]
             g = [loc["groups"][k] for k in ("near 0-4 m", "mid 4-7 m", "far 7-15 m")]
             recall = sum(x["n_matched"] for x in g) / max(sum(x["n_true"] for x in g), 1)
@@ -49,13 +60,10 @@ def main(bags: list[str]) -> None:
             err = (f"{att['median_abs_err_pitch_deg']:.3f} / {att['median_abs_err_roll_deg']:.3f}"
                    if att.get("median_abs_err_pitch_deg") is not None else "-")
             ms = s["stages"].get("attitude", {}).get("median_ms")
-            print(f"| {Path(bag).name} | {r} | {mode} | {recall:.3f} | " + " | ".join(f"{x['median_err_m']:.3f}" for x in g)
-                  + f" | {loc['extra_groups']['15-25 m']['median_err_m']:.3f} | {err} | " + (f"{ms:.2f}" if ms else "-") + " |",
-                  flush=True)
+            print(f"| {Path(bag).name} | {r} | {mode}{label} | {recall:.3f} | " + " | ".join(f"{x['median_err_m']:.3f}" for x in g)
+                  + f" | {loc['extra_groups']['15-25 m']['median_err_m']:.3f} | {err} | " + (f"{ms:.2f}" if ms else "-")
+                  + f" | {s['stages']['end_to_end']['median_ms']:.1f} |", flush=True)
 
 
 if __name__ == "__main__":
-    args = sys.argv[1:]
-    if "--modes" in args:  # --modes fixed,image: only these
-        del args[args.index("--modes"):args.index("--modes") + 2]
-    main(args)
+    main()
