@@ -198,7 +198,7 @@ def test_the_import_counter_counts_nested_functions_once(tmp_path) -> None:
 
 
 def test_the_checker_sees_imports() -> None:
-    assert "cone_perception.data.sources" in GRAPH["cone_perception.commands.detect"]
+    assert "cone_perception.replay.detect" in GRAPH["cone_perception.commands.detect"]
     assert "cone_perception.commands._args" in GRAPH["cone_perception.commands.detect"]
 
 

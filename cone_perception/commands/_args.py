@@ -5,21 +5,7 @@ from __future__ import annotations
 import argparse
 
 from ..errors import ConfigError
-
-
-def parse_size(text: str, option: str = "--size", example: str = "WxH (e.g. 960x288)", square: bool = False) -> tuple[int, int]:
-    """``"960x288"`` -> ``(960, 288)`` (``*`` works as ``x``; with ``square`` one number means a square).
-    :class:`ConfigError` naming ``option`` otherwise (``example``: what the option looks like)."""
-    parts = str(text).lower().replace("*", "x").split("x")
-    if square and len(parts) == 1:
-        parts *= 2
-    try:
-        a, b = (int(p) for p in parts)
-    except ValueError:
-        raise ConfigError(option, None, f"must look like {example}, got {text!r}") from None
-    if a <= 0 or b <= 0:
-        raise ConfigError(option, None, f"both numbers must be > 0, got {text!r}")
-    return a, b
+from ..words import parse_size
 
 
 def size_arg(text: str) -> tuple[int, int]:

@@ -25,20 +25,14 @@ fresh process, and reports the spread across runs (:func:`timing.summarize_runs`
 from __future__ import annotations
 
 import argparse
-import json
-import sys
-from dataclasses import replace
 from pathlib import Path
 
-from ..bench.frames import rendered_frames
-from ..bench.pipeline import BYTES_PER_PX, bench_adapter, bench_pipeline, bench_tracker, load_for_crop
-from ..bench.table import INPUT_SETTINGS, crop_for_setting
+from ..bench.pipeline import BYTES_PER_PX
+from ..bench.run import run_bench
+from ..bench.table import INPUT_SETTINGS
 from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, RUNTIME_THREADS
-from ..errors import ConfigError
-from ..geometry.calib import DEFAULT_CAMERA, load_calibration
+from ..geometry.calib import DEFAULT_CAMERA
 from ..params import DEFAULT_CONF
-from ..timing import format_table
-from ..words import plural
 from ._args import parse_crop
 
 
@@ -89,110 +83,5 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     t.add_argument("--conf", type=float, default=DEFAULT_CONF, help="table: operating score threshold for recall (default %(default)s)")
 
 
-def _bench_pipeline(args: argparse.Namespace, calib) -> dict:
-    if args.input:
-        calib = replace(calib, crop=crop_for_setting(calib.crop, args.input, calib.image_width, calib.image_height))
-    det = load_for_crop(args.model, args.backend, calib.crop, args.threads, bf16=args.bf16)
-    far = None
-    if args.far_rows:
-        from ..detector.farband import FarBand
-
-        far = FarBand.load(det.source, args.far_rows, calib.image_width, calib.image_height, calib.crop, "--far-rows",
-                           backend=args.backend, threads=args.threads, bf16=args.bf16)
-    result = bench_pipeline(calib, det, rendered_frames(calib, max(1, args.scenes)), args.frames, args.warmup, far)
-    result["far_rows"] = args.far_rows or ""
-    result["setting"] = args.input or "calibration"
-    result["threads"] = args.threads
-    return result
-
-
-def _repeat_pipeline(args: argparse.Namespace) -> int:
-    """``bench pipeline --repeat N``: N runs of ``bench pipeline --json``, each in its own process."""
-    import subprocess
-
-    from tqdm import tqdm
-
-    from ..timing import format_runs, summarize_runs
-
-    cmd = [sys.executable, "-m", "cone_perception.cli", "bench", "pipeline", "--json",
-           "--frames", str(args.frames), "--warmup", str(args.warmup), "--calib", str(args.calib),
-           "--threads", str(args.threads), "--backend", args.backend, "--scenes", str(args.scenes)]
-    cmd += (["--model", str(args.model)] if args.model else []) + (["--bf16"] if args.bf16 else [])
-    cmd += ["--input", args.input] if args.input else []
-    runs = []
-    for i in tqdm(range(args.repeat), unit="run", desc="bench pipeline", file=sys.stderr,
-                  disable=args.json or args.no_progress):
-        proc = subprocess.run(cmd, capture_output=True, text=True)
-        if proc.returncode != 0:
-            raise ConfigError("bench", "--repeat", f"run {i + 1} failed (exit {proc.returncode}): "
-                              f"{proc.stderr.strip().splitlines()[-1] if proc.stderr.strip() else 'no message'}")
-        runs.append(json.loads(proc.stdout))
-    summary = summarize_runs(runs)
-    if args.json:
-        json.dump({"summary": summary, "runs": runs}, sys.stdout, indent=1)
-        print()
-        return 0
-    r0 = runs[0]
-    print(f"bench pipeline ({r0['setting']}) x {args.repeat} processes: {r0['input']} -> {r0['output']}; model "
-          f"{r0['model']} ({r0['backend']}, {plural(r0['threads'], 'thread')}), {args.frames} frames each")
-    print(format_runs(summary))
-    return 0
-
-
 def run(args: argparse.Namespace) -> int:
-    if args.frames < 1 or args.warmup < 0:
-        raise ConfigError("bench", "--frames/--warmup", "need --frames >= 1 and --warmup >= 0")
-    if args.repeat < 1 or (args.repeat > 1 and args.target != "pipeline"):
-        raise ConfigError("bench", "--repeat", "need --repeat >= 1; more than one run is for `bench pipeline`")
-    calib = load_calibration(args.calib)
-    if args.target == "tracker":
-        return _bench_tracker(args, calib)
-    if args.target == "table":
-        from ..bench.table import run_table
-
-        return run_table(args, calib)
-    if args.target == "pipeline" and args.repeat > 1:
-        return _repeat_pipeline(args)
-    if args.target == "pipeline":
-        result = _bench_pipeline(args, calib)
-        if args.json:
-            json.dump(result, sys.stdout, indent=1)
-            print()
-            return 0
-        print(f"bench pipeline ({result['setting']}): {result['input']} -> {result['output']}, model input "
-              f"{result['model_input'][0]}x{result['model_input'][1]}; model {result['model']} "
-              f"({result['backend']}, {plural(result['threads'], 'thread')}), {args.frames} frames, "
-              f"{result['boxes_per_frame']:.1f} boxes/frame")
-        print(format_table(result["stages"]))
-        print(f"frames/s (median end to end): {result['fps']:.1f}   everything but the forward: "
-              f"{result['non_forward_median_ms']:.2f} ms   peak RSS: {result['peak_rss_mb']:.0f} MiB")
-        return 0
-    result = bench_adapter(calib, args.encoding, args.frames, args.warmup)
-    result["threads"] = args.threads
-    s = result["stages"]
-    if args.json:
-        json.dump(result, sys.stdout, indent=1)
-        print()
-        return 0
-    print(f"bench {args.target}: {result['input']} -> {result['output']}, {args.frames} frames, {plural(args.threads, 'thread')}")
-    print(format_table(s))
-    print(f"frames/s (median): {result['fps']:.1f}   peak RSS: {result['peak_rss_mb']:.0f} MiB")
-    return 0
-
-
-def _bench_tracker(args: argparse.Namespace, calib) -> int:
-    """``bench tracker``: :meth:`ConeTracker.update` (motion from the cones: registration, association,
-    Kalman update) per frame of a simulated drive through rows of cones, seen through the calibration's band."""
-    if args.rows < 1:
-        raise ConfigError("bench", "--rows", f"must be >= 1, got {args.rows}")
-    result = bench_tracker(calib, args.rows, args.frames, args.warmup)
-    s = result["stages"]
-    if args.json:
-        json.dump(result, sys.stdout, indent=1)
-        print()
-        return 0
-    print(f"bench tracker: {args.frames} frames of a simulated drive ({args.rows} rows of cones, {calib.camera} band), "
-          f"{result['tracks_mean']:.0f} tracks and {result['cones_per_frame']:.0f} cones a frame on average; "
-          "motion from the cones")
-    print(format_table(s))
-    return 0
+    return run_bench(args)

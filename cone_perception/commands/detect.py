@@ -13,18 +13,11 @@ model's); with ``--crop`` the band is cut (and downscaled by ``--downscale``) as
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
-import cv2
-from tqdm import tqdm
-
-from ..crop import CropSpec
-from ..data.sources import iter_source
-from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, Detector, default_model_path, detect_one, resolve_backend
-from ..detector.farband import FarBand
-from ..errors import ConfigError
+from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND
 from ..params import DEFAULT_CONF, DEFAULT_IOU
+from ..replay.detect import run_detect
 from ._args import parse_crop, size_arg
 
 
@@ -55,75 +48,4 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..data.predictions import write_prediction
-    from ..vis import draw_band, draw_boxes
-
-    if args.far_rows and not args.crop:
-        raise ConfigError("--far-rows", None, "needs --crop: the far band adds to the car's band")
-    model = args.model or default_model_path()
-    backend = resolve_backend(args.backend, model, bf16=args.bf16)
-    det = Detector.load(model, backend=backend, conf=args.conf, iou=args.iou,
-                        imgsz=args.imgsz if backend != "torch" else None, bf16=args.bf16)
-    # with --crop the detector is built for the band's own size (as the pipeline node does), so a
-    # fixed-size backend never letterboxes the band into another input size
-    by_band, far_by_size = {}, {}
-
-    def band_for(w: int) -> CropSpec:  # --crop of an image w px wide (U0,U1 default to the whole width)
-        return CropSpec(*(args.crop if len(args.crop) == 4 else (*args.crop, 0, w)), args.downscale)
-
-    def detector_for(w: int, h: int):
-        if not args.crop or args.imgsz:
-            return det
-        band = band_for(w)
-        return detector_for_size((max(1, band.out_width), max(1, band.out_height)))
-
-    def far_for(w: int, h: int):
-        if not args.far_rows:
-            return None
-        if (w, h) not in far_by_size:
-            far_by_size[(w, h)] = FarBand.load(model, args.far_rows, w, h, band_for(w), "--far-rows", backend=backend,
-                                               conf=args.conf, iou=args.iou, bf16=args.bf16)
-        return far_by_size[(w, h)]
-
-    def detector_for_size(band):
-        if band not in by_band:
-            by_band[band] = Detector.load_for_band(model, band, backend=backend, conf=args.conf, iou=args.iou,
-                                                   bf16=args.bf16)
-        return by_band[band]
-    try:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        fh = args.out.open("w", encoding="utf-8")
-    except OSError as e:
-        raise ConfigError(str(args.out), None, f"cannot write: {e.strerror}") from None
-    if args.save_vis:
-        args.save_vis.mkdir(parents=True, exist_ok=True)
-    n, skipped = 0, []
-    with fh:
-        for name, img, err in tqdm(iter_source(args.source, args.topic, args.every), unit="img",
-                                   disable=args.no_progress, file=sys.stderr):
-            if err:
-                skipped.append(f"{name}: {err}")
-                continue
-            h, w = img.shape[:2]
-            boxes, scale = detect_one(detector_for(w, h), img, name, args.crop, args.downscale, args.imgsz,
-                                      far_for(w, h))
-            write_prediction(fh, name, w, h, boxes, input_scale=scale)
-            n += 1
-            if args.save_vis:
-                out = args.save_vis / (Path(name).stem + ".jpg")
-                vis = draw_boxes(img, boxes)
-                if args.crop:
-                    vis = draw_band(vis, args.crop, args.downscale)
-
-                cv2.imwrite(str(out), vis)
-    from ..words import plural
-
-    print(f"detect: {plural(n, 'image')} -> {args.out}" + (f", {len(skipped)} skipped" if skipped else ""))
-    for s in skipped[:20]:
-        print(f"  skipped {s}", file=sys.stderr)
-    if len(skipped) > 20:
-        print(f"  ... {len(skipped) - 20} more skipped", file=sys.stderr)
-    if n == 0:
-        raise ConfigError(str(args.source), None, f"no image could be read ({plural(len(skipped), 'input')} skipped"
-                                                  + (f", first: {skipped[0]}" if skipped else "") + ")")
-    return 0
+    return run_detect(args)

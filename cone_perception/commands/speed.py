@@ -24,9 +24,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import torch
 
+    from ..bench.forward import gflops, time_forward
     from ..detector import Detector
     from ..model import ConeYOLO, model_config
-    from ..bench.forward import gflops, time_forward
 
     torch.set_num_threads(args.threads)
     rows = []

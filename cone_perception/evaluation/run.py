@@ -1,0 +1,58 @@
+"""The ``cone-perception eval`` run: a prediction file against ground truth -> report.md, metrics.json and
+plots; or a tracked bag against its drive's truth.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def run_eval(args: argparse.Namespace) -> int:
+    import logging
+
+    from ..errors import ConfigError
+    from ..evaluation.report import evaluate_predictions, format_summary, write_report
+
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(message)s")
+    if args.out.exists() and not args.out.is_dir():
+        raise ConfigError(str(args.out), None, "output exists and is not a directory")
+    if args.tracked is not None:
+        return _run_tracked(args)
+    if not args.pred.is_file():
+        raise ConfigError(str(args.pred), None, "prediction file not found")
+    res = evaluate_predictions(args.pred, args.gt, args.gt_names, args.calib, args.conf, args.iou, args.only_predicted,
+                               progress=not args.no_progress, band=args.band, min_height=args.min_height,
+                               attitude=args.attitude)
+    from ..evaluation.report import lowest_score_note
+
+    low = lowest_score_note(res.images)
+    if low:
+        print(f"warning: {low}", file=sys.stderr)
+    try:
+        files = write_report(res, args.out, str(args.pred), str(args.gt), worst=max(0, args.worst))
+    except OSError as e:
+        raise ConfigError(str(args.out), None, f"cannot write: {e.strerror}") from None
+    print(format_summary(res))
+    print(f"wrote {', '.join(p.name for p in files.values())} to {args.out}")
+    return 0
+
+
+def _run_tracked(args: argparse.Namespace) -> int:
+    from ..errors import ConfigError
+    from ..evaluation.tracking import (
+        evaluate_tracking_bag, format_drive_evaluation, load_drive_truth, write_tracking_report,
+    )
+
+    if not args.tracked.is_dir() and not args.tracked.is_file():
+        raise ConfigError(str(args.tracked), None, "bag not found")
+    if args.gt.suffix != ".jsonl":
+        raise ConfigError(str(args.gt), None, "--tracked needs the drive's gt.jsonl of `cone-perception synth bag` as --gt")
+    summary = evaluate_tracking_bag(args.tracked, load_drive_truth(args.gt))
+    try:
+        files = write_tracking_report(summary, args.out, str(args.tracked), str(args.gt))
+    except OSError as e:
+        raise ConfigError(str(args.out), None, f"cannot write: {e.strerror}") from None
+    print(format_drive_evaluation(summary))
+    print(f"wrote {', '.join(p.name for p in files.values())} to {args.out}")
+    return 0

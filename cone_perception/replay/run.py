@@ -1,0 +1,179 @@
+"""The one entry of ``cone-perception replay``: a bag offline (no ROS, :mod:`.offline`) or through live node
+processes (:mod:`cone_perception.nodes.live_replay`), with the tracker when asked (:mod:`.tracking`); prints
+frames, throughput, stage latencies, drops and, with ground truth, the localisation, attitude and tracking
+tables.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from ..attitude import ImuAttitude
+from ..data.bagio import bag_topics, check_new_output
+from ..data.bags import read_attitude_truth, read_ground_truth, read_twists
+from ..data.outfiles import print_written, refuse_existing, remove_bag
+from ..detector import Detector, default_model_path
+from ..detector.farband import FarBand, far_band_crop
+from ..errors import ConfigError
+from ..evaluation import LocalisationReport, format_localisation
+from ..evaluation.attitude import attitude_plot, format_attitude_report
+from ..evaluation.tracking import DriveEvaluation, format_drive_evaluation
+from ..geometry.calib import load_calibration, resolve_calibration_path
+from ..pipeline import Pipeline
+from ..timing import format_table, summarize
+from .offline import offline_replay
+from .tracking import ReplayTracking, drive_truth_beside, format_replay_tracking
+
+
+def _progress(disable: bool):
+    return lambda it, total: tqdm(it, total=total, unit="frame", disable=disable, file=sys.stderr)
+
+
+def run_replay(args: argparse.Namespace) -> int:
+    calib = load_calibration(args.calib)
+    if args.live and (args.drop_detections or args.odom_topic):
+        raise ConfigError("--live", None, "--drop-detections and --odom-topic work offline only")
+    if args.far_rows:  # a bad value fails before any model loads or node starts
+
+        far_band_crop(args.far_rows, calib.image_width, calib.image_height, calib.crop, "--far-rows")
+        if args.live == "separate":
+            raise ConfigError("--far-rows", None, "needs the fused pipeline node (--live fused or offline)")
+    refuse_existing([p for p in (args.out, args.json) if p is not None], args.force, "replay")
+    if args.out is not None:
+        if args.force and args.out.exists():
+            remove_bag(args.out)
+        check_new_output(args.out, "replay")
+    if args.live:
+        summary = _run_live(args, calib)
+    else:
+        summary = _run_offline(args, calib)
+    if args.json:
+        args.json.write_text(json.dumps(summary, indent=1))
+        print_written([args.json], "replay")
+    return 1 if summary.get("died") else 0
+
+
+def _imu_source(args, calib):
+    """An ImuAttitude when the bag has the IMU topic and the mode may use it, else None."""
+    if args.attitude in ("fixed", "image") or not calib.has_attitude_model and args.attitude is None:
+        return None
+    if args.imu_topic not in bag_topics(args.bag):
+        if args.attitude in ("imu", "fused"):
+            raise ConfigError(str(args.bag), args.imu_topic, f"--attitude {args.attitude} needs this IMU topic in the bag")
+        return None
+    try:
+        rest = tuple(float(v) for v in args.imu_rest.split(","))
+        assert len(rest) == 2 and all(np.isfinite(rest))
+    except (ValueError, AssertionError):
+        raise ConfigError("--imu-rest", None, f"must be PITCH,ROLL in degrees, got {args.imu_rest!r}") from None
+    return ImuAttitude(rest)
+
+
+def _run_offline(args, calib) -> dict:
+    tracking = _tracking(args, calib)  # its bad options fail before the model loads
+    # built for the calibration's band, as the pipeline node does (a fixed-size backend never letterboxes)
+    det = Detector.load_for_band(args.model or default_model_path(), (calib.crop.out_width, calib.crop.out_height),
+                                 backend=args.backend, conf=args.conf, threads=args.threads or None, bf16=args.bf16)
+    det.warmup()
+    far = None
+    if args.far_rows:
+        far = FarBand.load(det.source, args.far_rows, calib.image_width, calib.image_height, calib.crop, "--far-rows",
+                           backend=args.backend, conf=args.conf, threads=args.threads or None, bf16=args.bf16)
+    imu = _imu_source(args, calib)
+    res = offline_replay(args.bag, Pipeline(calib, det, args.attitude, imu, far), args.topic, args.out, args.gt_topic,
+                         _progress(args.no_progress), imu_topic=args.imu_topic, tracking=tracking)
+    stages = res.timer.summary()
+    n = res.stats.ok
+    print(f"replay (offline) {args.bag}: {n} frames processed, {res.stats.summary()}")
+    for stamp, why in res.drops[:10]:
+        print(f"  dropped frame at {stamp} ns: {why}")
+    print(f"throughput: {n / res.wall_s if res.wall_s else 0:.1f} frames/s over {res.wall_s:.1f} s")
+    print(format_table(stages))
+    if res.localisation:
+        print(format_localisation(res.localisation))
+        print(format_attitude_report(res.localisation["attitude"]))
+    if res.pipeline_attitude is not None:
+        print(f"attitude ({res.attitude_mode}): " + ", ".join(f"{k} {v}" for k, v in res.pipeline_attitude.items()))
+    if res.tracking:
+        print(format_replay_tracking(res.tracking))
+    if args.out:
+        print_written([args.out], "replay")
+    if args.attitude_png:
+        stamps = sorted(res.attitude)
+        attitude_plot(args.attitude_png, stamps, [res.attitude[s] for s in stamps], read_attitude_truth(args.bag),
+                      f"{args.bag.name}: attitude {res.attitude_mode}")
+        print_written([args.attitude_png], "replay")
+    return {"mode": "offline", "frames": n, "dropped": dict(res.stats.dropped), "wall_s": res.wall_s,
+            "stages": stages, "localisation": res.localisation, "tracking": res.tracking}
+
+
+def _tracking(args, calib):
+    """The replay's tracking (``--track``, ``--drop-detections``), or None."""
+    if not args.track and args.drop_detections == 0:
+        return None
+
+    truth = drive_truth_beside(args.bag) if args.gt_topic else None
+    twists = read_twists(args.bag, args.odom_topic) if (args.odom_topic and args.track) else None
+    return ReplayTracking(calib, args.track, args.drop_detections, args.drop_seed, truth, twists)
+
+
+def _run_live(args, calib) -> dict:
+    from ..nodes.live_replay import live_replay, write_result_bag  # rclpy, and it sets the DDS environment
+
+    params = {"calibration": str(resolve_calibration_path(args.calib)), "backend": args.backend, "conf": args.conf}
+    if args.model:
+        params["model"] = str(Path(args.model).resolve())
+    params["threads"] = args.threads
+    if args.far_rows:
+        params["far_rows"] = args.far_rows
+    if args.bf16:
+        params["bf16"] = True
+    res = live_replay(args.bag, mode=args.live, topic=args.topic, params=params, pace=args.pace,
+                      progress=_progress(args.no_progress), track=args.track)
+    got = len(res.cones)
+    print(f"replay (live, {args.live} nodes, {args.pace}) {args.bag}: {res.sent} frames sent, {got} /cones received, "
+          f"{len(res.lost)} lost" + (f", {len(res.tracked)} /cones/tracked received" if args.track else ""))
+    for exe, code in res.died.items():
+        tail = "\n".join(res.node_output.get(exe, "").strip().splitlines()[-15:])
+        print(f"replay: node {exe} died during the replay (exit code {code}); its last output:\n{tail}", file=sys.stderr)
+    lat = summarize([v / 1e3 for v in res.latency_ms.values()])
+    print(format_table({"frame->/cones": lat}))
+    if got:
+        print(f"throughput: {got / res.wall_s:.1f} frames/s over {res.wall_s:.1f} s")
+    loc = None
+    if args.gt_topic:
+        truth = read_ground_truth(args.bag, args.gt_topic)
+        rep = LocalisationReport(max_range_m=calib.max_range_m)
+        for stamp, cones in sorted(res.cones.items()):
+            if stamp in truth:
+                rep.add_frame(cones, truth[stamp])
+        loc = rep.summary()
+        print(format_localisation(loc))
+    tracking = _live_tracking(args, res) if args.track and args.gt_topic else None
+    if args.out:
+        write_result_bag(res, args.out)
+        print_written([args.out], "replay")
+    return {"mode": f"live-{args.live}", "sent": res.sent, "received": got, "lost": len(res.lost),
+            "latency": lat, "wall_s": res.wall_s, "localisation": loc, "died": res.died, "tracking": tracking}
+
+
+def _live_tracking(args, res) -> dict | None:
+    """The tracking table of a live replay (``--track --gt-topic`` on a synthetic bag); no ego-motion figures."""
+    truth = drive_truth_beside(args.bag)
+    if truth is None:
+        print(f"replay: no {Path(args.bag).name}_gt.jsonl beside the bag: tracking not scored", file=sys.stderr)
+        return None
+    ev = DriveEvaluation(truth)
+    for stamp in sorted(res.cones):
+        ev.add_raw(stamp, res.cones[stamp])
+    for stamp in sorted(res.tracked):
+        ev.add_tracked(stamp, res.tracked[stamp])
+    summary = ev.summary()
+    print(format_drive_evaluation(summary))
+    return summary
