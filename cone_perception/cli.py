@@ -14,6 +14,7 @@ import importlib
 import sys
 
 from . import __version__
+from .errors import ConePerceptionError
 
 # name -> (module under cone_perception.commands, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -59,7 +60,6 @@ def main(argv: list[str] | None = None) -> int:
     sub = argparse.ArgumentParser(prog=f"cone-perception {name}", description=COMMANDS[name][1])
     module.add_arguments(sub)
     args = sub.parse_args(argv[1:])
-    from .errors import ConePerceptionError
 
     try:
         return int(module.run(args) or 0)

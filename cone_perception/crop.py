@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import ConfigError
+from .errors import ConfigError, FrameError
 
 ALLOWED_DOWNSCALE = (1, 2, 4)
 
@@ -149,8 +149,6 @@ def camera_info_crop(
     message naming the field) for a zero or too large image (:data:`MAX_IMAGE_SIDE_PX`), a binning
     other than :data:`ALLOWED_DOWNSCALE`, unequal binning, a roi not inside the image (or not even
     columns, as YUYV needs), a band not divisible by the binning, or a band over :data:`MAX_BAND_PIXELS`."""
-    from .errors import FrameError
-
     def bad(field: str, what: str) -> FrameError:
         return FrameError("bad_camera_info", f"camera_info {field}: {what}")
 

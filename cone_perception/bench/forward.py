@@ -9,6 +9,7 @@ from __future__ import annotations
 import time
 
 import numpy as np
+import torch
 
 from ..detector import Detector
 from ..model import ConeYOLO
@@ -32,8 +33,6 @@ def time_forward(det: Detector, frames: int = 50, warmup: int = 5) -> dict:
 
 def gflops(model: ConeYOLO, imgsz: tuple[int, int]) -> float:
     """Multiply-accumulate count x 2 of one forward at (W, H), in GFLOPs (convolutions only)."""
-    import torch
-
     total = 0
 
     def hook(mod, inp, out):

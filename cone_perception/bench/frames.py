@@ -6,6 +6,8 @@ import cv2
 import numpy as np
 
 from ..adapter import bgr_to_yuyv
+from ..synth.config import SynthConfig
+from ..synth.scene import random_pose
 
 
 def synthetic_frames(width: int, height: int, encoding: str, n: int, seed: int = 0) -> list[bytes]:
@@ -26,9 +28,6 @@ def synthetic_frames(width: int, height: int, encoding: str, n: int, seed: int =
 
 def rendered_frames(calib, n: int, seed: int = 4242) -> list[bytes]:
     """``n`` YUYV frames of rendered scenes with cones, at the calibration's image size."""
-    from ..synth.config import SynthConfig
-    from ..synth.scene import random_pose
-
     cfg = SynthConfig(width=calib.image_width, height=calib.image_height, seed=seed, jitter=False)
     renderer, rng = cfg.renderer(), np.random.default_rng(seed)
     out = []

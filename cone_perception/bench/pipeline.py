@@ -11,7 +11,14 @@ import numpy as np
 
 from ..adapter import DriverAdapter
 from ..crop import CropSpec
+from ..data import bagio
+from ..detector import Detector, default_model_path
+from ..evaluation.tracking import simulated_drive
+from ..pipeline import Pipeline
+from ..records import to_pointcloud2
 from ..timing import StageTimer, peak_rss_mb
+from ..tracking import ConeTracker, FieldOfView, TrackerConfig
+from ..vis.debug_image import DebugImage
 from .frames import synthetic_frames
 
 #: Bytes per pixel of the raw encodings ``bench adapter`` times.
@@ -22,11 +29,6 @@ def bench_pipeline(calib, det, frames: list[bytes], n_frames: int, warmup: int =
     """Time ``det`` in the fused pipeline of ``calib`` (its crop and downscale) on raw YUYV ``frames``
     (cycled): per stage, end to end with the packing of ``cone_boxes`` and ``/cones``. The result
     of ``bench pipeline`` (and one row of ``bench table``). ``far``: a far band (``detector/farband.py``) or None."""
-    from ..data import bagio
-    from ..pipeline import Pipeline
-    from ..records import to_pointcloud2
-    from ..vis.debug_image import DebugImage
-
     pipe = Pipeline(calib, det, far=far)
     debug = DebugImage(pipe.mapper)
     w, h = calib.image_width, calib.image_height
@@ -72,8 +74,6 @@ def bench_pipeline(calib, det, frames: list[bytes], n_frames: int, warmup: int =
 
 def load_for_crop(model: str | None, backend: str, crop: CropSpec, threads: int, **kw):
     """The detector for a band (:meth:`Detector.load_for_band`): no setting is letterboxed into another size."""
-    from ..detector import Detector, default_model_path
-
     return Detector.load_for_band(model or default_model_path(), (crop.out_width, crop.out_height),
                                   backend=backend, threads=threads, **kw)
 
@@ -107,9 +107,6 @@ def bench_tracker(calib, rows: int, n_frames: int, warmup: int) -> dict:
     """Time :meth:`ConeTracker.update` (motion from the cones: registration, association, Kalman update)
     per frame of a simulated drive through ``rows`` rows of cones, seen through the calibration's band:
     the result of ``bench tracker``."""
-    from ..evaluation.tracking import simulated_drive
-    from ..tracking import ConeTracker, FieldOfView, TrackerConfig
-
     fov = FieldOfView.from_calibration(calib)
     rows_m = tuple(float(s * (1.75 + 3.5 * (k // 2))) for k, s in zip(range(rows), [1, -1] * rows))
     trk = ConeTracker(TrackerConfig(), fov)

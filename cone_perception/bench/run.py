@@ -6,15 +6,19 @@ from __future__ import annotations
 
 import argparse
 import json
+import subprocess
 import sys
 from dataclasses import replace
 
+from tqdm import tqdm
+
 from ..bench.frames import rendered_frames
 from ..bench.pipeline import bench_adapter, bench_pipeline, bench_tracker, load_for_crop
-from ..bench.table import crop_for_setting
+from ..bench.table import crop_for_setting, run_table
+from ..detector.farband import FarBand
 from ..errors import ConfigError
 from ..geometry.calib import load_calibration
-from ..timing import format_table
+from ..timing import format_runs, format_table, summarize_runs
 from ..words import plural
 
 
@@ -24,8 +28,6 @@ def _bench_pipeline(args: argparse.Namespace, calib) -> dict:
     det = load_for_crop(args.model, args.backend, calib.crop, args.threads, bf16=args.bf16)
     far = None
     if args.far_rows:
-        from ..detector.farband import FarBand
-
         far = FarBand.load(det.source, args.far_rows, calib.image_width, calib.image_height, calib.crop, "--far-rows",
                            backend=args.backend, threads=args.threads, bf16=args.bf16)
     result = bench_pipeline(calib, det, rendered_frames(calib, max(1, args.scenes)), args.frames, args.warmup, far)
@@ -37,12 +39,6 @@ def _bench_pipeline(args: argparse.Namespace, calib) -> dict:
 
 def _repeat_pipeline(args: argparse.Namespace) -> int:
     """``bench pipeline --repeat N``: N runs of ``bench pipeline --json``, each in its own process."""
-    import subprocess
-
-    from tqdm import tqdm
-
-    from ..timing import format_runs, summarize_runs
-
     cmd = [sys.executable, "-m", "cone_perception.cli", "bench", "pipeline", "--json",
            "--frames", str(args.frames), "--warmup", str(args.warmup), "--calib", str(args.calib),
            "--threads", str(args.threads), "--backend", args.backend, "--scenes", str(args.scenes)]
@@ -77,8 +73,6 @@ def run_bench(args: argparse.Namespace) -> int:
     if args.target == "tracker":
         return _bench_tracker(args, calib)
     if args.target == "table":
-        from ..bench.table import run_table
-
         return run_table(args, calib)
     if args.target == "pipeline" and args.repeat > 1:
         return _repeat_pipeline(args)

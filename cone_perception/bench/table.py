@@ -25,11 +25,15 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
 from ..crop import CropSpec
+from ..data.predictions import write_prediction
 from ..data.sources import iter_source
 from ..detector import detect_one
 from ..errors import ConfigError
+from ..evaluation.groundtruth import load_ground_truth
+from ..evaluation.report import _json_safe, evaluate_predictions
 from ..words import plural
 from .frames import rendered_frames
 from .pipeline import bench_pipeline, load_for_crop
@@ -135,12 +139,6 @@ def format_markdown(doc: dict) -> str:
 
 
 def run_table(args: argparse.Namespace, calib) -> int:
-    from tqdm import tqdm
-
-    from ..data.predictions import write_prediction
-    from ..evaluation.groundtruth import load_ground_truth
-    from ..evaluation.report import _json_safe, evaluate_predictions
-
     _need(args)
     settings = parse_settings(args.settings)
     models = [m.strip() for m in args.models.split(",") if m.strip()] if args.models else [None]

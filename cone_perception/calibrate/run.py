@@ -13,6 +13,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from tqdm import tqdm
 
 from ..classes import CLASS_NAMES
 from ..data.outfiles import print_written, refuse_existing
@@ -179,7 +180,6 @@ def _intrinsics_source(
                 "--views",
                 "needs the board in the views: --views-board/--board and --views-square/--square",
             )
-        from tqdm import tqdm
 
         views = [
             (str(v), read_image(v))

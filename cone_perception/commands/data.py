@@ -5,6 +5,9 @@ from __future__ import annotations
 import argparse
 import logging
 
+from ..data import convert
+from ..words import plural
+
 
 def _aspect(text: str) -> tuple[float, float]:
     try:
@@ -39,8 +42,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..data import convert
-
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(message)s")
     if args.action == "fsoco-to-yolo":
         rep = convert.fsoco_to_yolo(args.src, args.out, args.val_fraction, args.seed, args.border,
@@ -51,7 +52,6 @@ def run(args: argparse.Namespace) -> int:
         rep = convert.restore_aspect(args.src, args.out, args.aspect, width=args.width, clips=clips, names=names,
                                      progress=not args.no_progress)
     skipped = ", ".join(f"{k}: {v}" for k, v in sorted(rep.skipped.items())) or "none"
-    from ..words import plural
 
     print(f"wrote {plural(rep.images, 'image')}, {plural(rep.boxes, 'box', 'boxes')} to {args.out} "
           f"{rep.per_split or ''}; skipped: {skipped}")

@@ -18,6 +18,7 @@ from pathlib import Path
 
 from ..evaluation.run import run_eval
 from ..params import DEFAULT_CONF
+from ._args import parse_crop
 
 
 def _unit(text: str) -> float:
@@ -31,8 +32,6 @@ def _unit(text: str) -> float:
 
 
 def _rows(text: str) -> tuple[int, int]:
-    from ._args import parse_crop
-
     vals = parse_crop(text)
     if len(vals) != 2:
         raise argparse.ArgumentTypeError(f"must be two integer rows V0,V1, got {text!r}")

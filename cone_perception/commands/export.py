@@ -7,12 +7,11 @@ import argparse
 from pathlib import Path
 
 from ..train.export import TOLERANCE, run_export
+from ..train.quantize import ACTIVATION_TYPES, CALIB_METHODS, DEFAULT_CALIB_FRAMES, MIN_MATCHED, MIN_MEAN_IOU
 from ._args import parse_crop, size_arg
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from ..train.quantize import ACTIVATION_TYPES, CALIB_METHODS, DEFAULT_CALIB_FRAMES, MIN_MATCHED, MIN_MEAN_IOU
-
     p.description = (
         "Export a detector checkpoint to TorchScript or ONNX, verified against eager (max |diff| <= "
         f"{TOLERANCE}). With --int8 (ONNX only) the fp32 ONNX is then quantised with ONNX Runtime "

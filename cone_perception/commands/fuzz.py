@@ -16,7 +16,14 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import asdict
 from pathlib import Path
+
+from tqdm import tqdm
+
+from ..data.outfiles import print_written, refuse_existing
+from ..errors import ConfigError
+from ..geometry.calib import resolve_calibration_path
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -33,13 +40,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from dataclasses import asdict
-
-    from tqdm import tqdm
-
-    from ..data.outfiles import print_written, refuse_existing
-    from ..errors import ConfigError
-    from ..nodes.fuzz import TARGETS, bomb_timings, fuzz_target
+    from ..nodes.fuzz import TARGETS, bomb_timings, fuzz_target  # rclpy and the nodes: only when fuzzing
 
     targets = list(TARGETS) if args.targets == "all" else [t.strip() for t in args.targets.split(",") if t.strip()]
     unknown = [t for t in targets if t not in TARGETS]
@@ -51,8 +52,6 @@ def run(args: argparse.Namespace) -> int:
         refuse_existing([args.json], args.force, "fuzz")
     params = {}
     if args.calib:
-        from ..geometry.calib import resolve_calibration_path
-
         params["calibration"] = str(resolve_calibration_path(args.calib))
     if args.model:
         params["model"] = str(Path(args.model).resolve())

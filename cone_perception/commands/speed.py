@@ -5,7 +5,12 @@ from __future__ import annotations
 import argparse
 import json
 
-from ..model import MODEL_SIZES
+import torch
+
+from ..bench.forward import gflops, time_forward
+from ..detector import Detector
+from ..model import MODEL_SIZES, ConeYOLO, model_config
+from ..words import plural
 from ._args import size_arg
 
 
@@ -22,12 +27,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import torch
-
-    from ..bench.forward import gflops, time_forward
-    from ..detector import Detector
-    from ..model import ConeYOLO, model_config
-
     torch.set_num_threads(args.threads)
     rows = []
     cases = [(args.model, None)] if args.model else [(None, s) for s in args.sizes]
@@ -49,7 +48,6 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(rows))
         return 0
-    from ..words import plural
 
     print(f"forward only, input {args.imgsz[0]}x{args.imgsz[1]}, {plural(args.threads, 'thread')}, "
           f"{plural(args.frames, 'frame')}")

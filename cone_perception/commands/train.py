@@ -12,12 +12,11 @@ import argparse
 
 from ..model import MODEL_SIZES, PRETRAINED_BACKBONES
 from ..train.run import run_train
+from ..train.trainer import PRECISIONS, TrainConfig
 from ._args import size_arg
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from ..train.trainer import PRECISIONS, TrainConfig
-
     d = TrainConfig(data="", out="")
     p.add_argument("--data", required=True,
                    help="data YAML: Ultralytics form (path, train, val, test, names as list or dict; what 'synth "

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Iterator, Mapping
 
+import cv2
 import numpy as np
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
@@ -81,8 +82,6 @@ def image_msg_from_bgr(bgr: np.ndarray, stamp: int, frame_id: str, encoding: str
 
 def compressed_msg_from_bgr(bgr: np.ndarray, stamp: int, frame_id: str, quality: int = 90) -> Any:
     """(H, W, 3) uint8 BGR -> ``sensor_msgs/CompressedImage`` (JPEG)."""
-    import cv2
-
     ok, buf = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
     if not ok:
         raise ValueError("JPEG encoding failed")

@@ -33,14 +33,16 @@ import numpy as np
 import torch
 
 from .. import records
-from ..adapter import pin_opencv_threads
+from ..adapter import crop_bgr, pin_opencv_threads
 from ..classes import CLASS_NAMES, class_map_from_names
 from ..crop import CropSpec
 from ..errors import ConfigError
 from ..model.checkpoint import RESTORE_HINT, Checkpoint, load_checkpoint
 from ..model.decode import postprocess
 from ..params import DEFAULT_BACKEND, DEFAULT_CONF, DEFAULT_IOU, DEFAULT_MAX_DET
+from ..records import boxes_from_arrays
 from .backends import BACKEND_CHOICES, OrtRunner, TorchRunner, onnx_input_size, ort_session, resolve_backend
+from .export import onnx_bytes, trace
 from .model_files import external_names, find_sidecar, sidecar_path
 from .preprocess import band_input_size, preprocess
 
@@ -203,16 +205,12 @@ class Detector:
         size = (int(imgsz[0]), int(imgsz[1])) if imgsz else ck.imgsz
         model = ck.build_model()
         if backend == "onnx":
-            from .export import onnx_bytes
-
             sess = ort_session(onnx_bytes(model, size), device, threads, ck.path)
             return cls(OrtRunner(sess), class_map, size, True, "onnx", ck.path, checkpoint=ck, **kw)
         model = model.fuse().to(device)
         if fp16:
             model = model.half()
         if backend == "torchscript":
-            from .export import trace
-
             module = trace(model, size, device=device, fp16=fp16)
             return cls(TorchRunner(module, device, fp16, False), class_map, size, True, "torchscript", ck.path, checkpoint=ck, **kw)
         if backend != "torch":
@@ -310,9 +308,6 @@ def detect_one(det, img: np.ndarray, name: str, crop: tuple[int, ...] | None = N
     model input; and the model input px per image px (the prediction file's ``input_scale``).
     ``far``: a :class:`~.farband.FarBand` whose full-resolution strip runs too (with ``crop``).
     Used by ``detect`` and ``bench table``."""
-    from ..adapter import crop_bgr
-    from ..crop import CropSpec
-
     h, w = img.shape[:2]
     if crop:
         v0, v1, u0, u1 = crop if len(crop) == 4 else (*crop, 0, w)
@@ -323,8 +318,6 @@ def detect_one(det, img: np.ndarray, name: str, crop: tuple[int, ...] | None = N
             boxes = far.merged(boxes, crop_bgr(img, far.crop))
         return boxes, 1.0 / downscale
     if imgsz:
-        from ..records import boxes_from_arrays
-
         b, s, c = det.infer(img, in_size=imgsz)
         return boxes_from_arrays(b, s, c), min(imgsz[0] / w, imgsz[1] / h)
     return det.detect_image(img), min(det.imgsz[0] / w, det.imgsz[1] / h)

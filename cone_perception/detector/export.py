@@ -18,8 +18,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from .. import __version__
 from ..errors import ConfigError
 from ..model import ConeYOLO
+from ..model.checkpoint import FORMAT, VERSION
 
 ONNX_OPSET = 17
 
@@ -62,9 +64,6 @@ def export_metadata(class_names: list[str], imgsz: tuple[int, int], stride: int,
     """What an exported file carries about itself, as strings: ``names`` ("{0: 'blue', ...}"), ``imgsz``
     ("[H, W]", Ultralytics' order), ``stride``, ``model_version`` (checkpoint format and version),
     ``exporter`` (this package's version), ``source`` (the checkpoint), ``layout``, ``task``."""
-    from .. import __version__
-    from ..model.checkpoint import FORMAT, VERSION
-
     meta = {
         "names": repr({i: str(n) for i, n in enumerate(class_names)}),
         "imgsz": f"[{int(imgsz[1])}, {int(imgsz[0])}]",
@@ -82,7 +81,7 @@ def export_metadata(class_names: list[str], imgsz: tuple[int, int], stride: int,
 
 def with_onnx_metadata(model_bytes: bytes, meta: dict[str, str]) -> bytes:
     """The ONNX model with ``meta`` in its ``metadata_props`` (replacing keys of the same name)."""
-    import onnx
+    import onnx  # optional dependency (ONNX export only)
 
     proto = onnx.load_from_string(model_bytes)
     keep = [(p.key, p.value) for p in proto.metadata_props if p.key not in meta]

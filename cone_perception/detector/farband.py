@@ -23,6 +23,7 @@ from ..crop import CropSpec
 from ..errors import ConfigError
 from ..model.decode import nms_per_class
 from ..params import DEFAULT_IOU
+from .detector import Detector
 
 #: A far-band box whose top or bottom is this close to the strip's edge (full-image px) is a cut cone.
 EDGE_PX = 2.0
@@ -80,8 +81,6 @@ class FarBand:
     def load(cls, model, rows: str | tuple[int, int], image_width: int, image_height: int, band: CropSpec,
              source: str = "far_rows", **detector_kw) -> "FarBand":
         """The far band of ``rows`` with ``model`` built for its strip (``Detector.load_for_band``)."""
-        from .detector import Detector
-
         crop = far_band_crop(rows, image_width, image_height, band, source)
         det = Detector.load_for_band(model, (crop.out_width, crop.out_height), **detector_kw)
         det.warmup()

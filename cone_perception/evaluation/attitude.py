@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..attitude import Attitude
+from ..vis import pyplot
 from .localisation import DISTANCE_GROUPS, distance_group
 
 
@@ -79,15 +80,11 @@ def format_attitude_report(summary: dict) -> str:
 
 
 
-# -- IMU --------------------------------------------------------------------------------------------
 def attitude_plot(path, stamps_ns: list[int], used: list[Attitude], truth: dict[int, tuple[float, float]] | None = None,
                   title: str = ""):
     """PNG of the attitude used per frame (pitch and roll, degrees, with its 1-sigma band) against
     time, and the true attitude where known (``stamp -> (pitch, roll)``). Returns the path."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     t0 = stamps_ns[0] if stamps_ns else 0
     t = (np.asarray(stamps_ns, dtype=np.float64) - t0) / 1e9

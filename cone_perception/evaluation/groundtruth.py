@@ -26,9 +26,11 @@ import numpy as np
 
 from ..classes import NUM_CLASSES
 from ..crop import MIN_VISIBLE
+from ..data.datasets import IMAGE_SUFFIXES, load_entry
 from ..data.predictions import ImagePrediction, iter_json_lines
 from ..errors import ConfigError
 from ..records import boxes_to_arrays
+from .metrics import box_iou
 
 #: The synthetic labelling rule (``synth`` writes YOLO labels only for cones passing it).
 LABEL_MIN_BOX_PX = 4.0
@@ -116,8 +118,6 @@ def restrict_to_min_height(images: list[EvalImage], min_height: float, iou: floa
     (IoU >= ``iou``) a kept box of its class, so a cone of 12.5 px found as 11.5 px still counts.
     Returns the new images, the boxes made ignore regions and the detections dropped.
     """
-    from .metrics import box_iou
-
     if not min_height > 0:
         raise ValueError(f"min_height must be > 0 px, got {min_height}")
     out, n_gt, n_pred = [], 0, 0
@@ -157,15 +157,12 @@ def _beside(path: Path, *candidates: str) -> Path | None:
 
 
 def _load_yolo(root: Path, names: list[str] | None) -> GroundTruth:
-    from ..data.datasets import load_entry
-
     images_dir = root / "images"
     if not images_dir.is_dir() or not (root / "labels").is_dir():
         raise ConfigError(str(root), None, "a YOLO ground-truth folder needs images/ and labels/ sub-folders")
     has_names = names or any((root / f).is_file() for f in ("data.yaml", "dataset.yaml", "classes.txt"))
     if not has_names:
         raise ConfigError(str(root), "names", "no data.yaml / classes.txt with class names: add one or pass --gt-names")
-    from ..data.datasets import IMAGE_SUFFIXES
 
     direct = any(p.suffix.lower() in IMAGE_SUFFIXES for p in images_dir.iterdir())
     subdirs = [""] if direct else sorted(p.name for p in images_dir.iterdir() if p.is_dir())

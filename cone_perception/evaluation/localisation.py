@@ -18,6 +18,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..classes import BLUE, YELLOW
+
 #: Distance groups (m from the rear axle): the thesis's three plus one beyond 15 m.
 DISTANCE_GROUPS: tuple[tuple[str, float, float], ...] = (
     ("near 0-4 m", 0.0, 4.0),
@@ -163,8 +165,6 @@ MAX_PAIR_M = 6.0
 
 def blue_yellow_pairs(truth: np.ndarray, max_pair_m: float = MAX_PAIR_M) -> list[tuple[int, int, float]]:
     """Each blue cone with its nearest yellow cone: ``(blue_index, yellow_index, distance_m)``, within ``max_pair_m``."""
-    from ..classes import BLUE, YELLOW
-
     xy = np.c_[truth["x"], truth["y"]].astype(np.float64)
     blue, yellow = np.flatnonzero(truth["class_id"] == BLUE), np.flatnonzero(truth["class_id"] == YELLOW)
     if blue.size == 0 or yellow.size == 0:

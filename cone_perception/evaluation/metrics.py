@@ -61,7 +61,7 @@ class DetectionMetrics:
 
 def coco_map(images: list[ImageDetections], class_names: tuple[str, ...] = CLASS_NAMES, max_dets: int = 300) -> DetectionMetrics:
     """COCO mAP over ``images``; classes without (non-ignored) ground truth are left out of the mean."""
-    from pycocotools.coco import COCO
+    from pycocotools.coco import COCO  # pip only (not on the car), needed by the tools' mAP alone
     from pycocotools.cocoeval import COCOeval
 
     gt_anns, dets, imgs = [], [], []
@@ -155,7 +155,7 @@ def _prf(tp: int, fp: int, fn: int) -> dict:
 def box_iou(a: np.ndarray, b: np.ndarray, b_ignore: np.ndarray | None = None) -> np.ndarray:
     """(K, M) IoU of x1 y1 x2 y2 boxes, as COCO computes it; against an ignore box (``b_ignore``) the
     overlap is divided by the first box's own area instead."""
-    from pycocotools import mask as mask_utils
+    from pycocotools import mask as mask_utils  # pip only, as above
 
     a, b = np.asarray(a, np.float64).reshape(-1, 4), np.asarray(b, np.float64).reshape(-1, 4)
     if len(a) == 0 or len(b) == 0:

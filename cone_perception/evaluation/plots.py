@@ -7,32 +7,28 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from ..classes import CLASS_BGR, CLASS_NAMES, CLASS_RGBA
+from ..data.bags import read_bag_images
+from ..errors import ConePerceptionError
+from ..mapping import ConeMapper
+from ..vis import draw_boxes, frame_strip, legend_strip, outlined_text, pyplot
 from .groundtruth import EvalImage
 from .localisation import DISTANCE_GROUPS, LocalisationReport, PairDistanceReport, distance_group
 from .metrics import RECALL_POINTS, at_conf, match_by_class
 
 
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
 def _save(fig, path: Path) -> Path:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    _plt().close(fig)
+    pyplot().close(fig)
     return path
 
 
 def plot_confusion(cm: np.ndarray, path: Path, title: str) -> Path:
-    plt = _plt()
+    plt = pyplot()
     labels = list(CLASS_NAMES) + ["background"]
     fig, ax = plt.subplots(figsize=(6.4, 5.4))
     rows = cm.sum(axis=1, keepdims=True)
@@ -51,7 +47,7 @@ def plot_confusion(cm: np.ndarray, path: Path, title: str) -> Path:
 
 
 def plot_pr(detection: dict, path: Path, title: str) -> Path:
-    plt = _plt()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(6.4, 4.8))
     curves = detection.get("pr50_per_class", {})
     for name, prec in curves.items():
@@ -74,7 +70,7 @@ def plot_pr(detection: dict, path: Path, title: str) -> Path:
 
 
 def plot_by_distance(groups: dict, path: Path) -> Path:
-    plt = _plt()
+    plt = pyplot()
     names = list(groups)
     series = {
         "mAP@0.5": [g["map50"] for g in groups.values()],
@@ -114,7 +110,7 @@ def _boxplot(ax, data: list[np.ndarray], title: str, ylabel: str) -> None:
 
 
 def plot_localisation(loc: LocalisationReport, path: Path) -> Path:
-    plt = _plt()
+    plt = pyplot()
     ex, ey, er = np.asarray(loc.err_x), np.asarray(loc.err_y), np.asarray(loc.err_range)
     fig, axes = plt.subplots(1, 3, figsize=(13.5, 4.4))
     _boxplot(axes[0], _group_values(ex, er), "error in x (forward)", "predicted - true (m)")
@@ -125,7 +121,7 @@ def plot_localisation(loc: LocalisationReport, path: Path) -> Path:
 
 
 def plot_pairs(pairs: PairDistanceReport, path: Path) -> Path:
-    plt = _plt()
+    plt = pyplot()
     e, er = np.asarray(pairs.err), np.asarray(pairs.err_range)
     fig, ax = plt.subplots(figsize=(6.8, 4.4))
     _boxplot(ax, _group_values(e, er), "blue-yellow pair distance error (thesis metric)", "measured - true distance (m)")
@@ -148,8 +144,6 @@ def frame_errors(im: EvalImage, conf: float, iou: float) -> tuple[np.ndarray, np
 def _frame_images(images: list[EvalImage], ks: list[int]) -> dict[int, np.ndarray]:
     """BGR images of ``images[k]`` for ``k`` in ``ks`` that can be read: image files (only those that exist, so
     OpenCV prints no warnings) and a bag's frames (read from the bag in one pass per bag)."""
-    import cv2
-
     out: dict[int, np.ndarray] = {}
     by_bag: dict[str, dict[int, int]] = {}
     for k in ks:
@@ -161,9 +155,6 @@ def _frame_images(images: list[EvalImage], ks: list[int]) -> dict[int, np.ndarra
             if img is not None:
                 out[k] = img
     if by_bag:
-        from ..data.bags import read_bag_images
-        from ..errors import ConePerceptionError
-
         for bag, stamp_to_k in by_bag.items():
             try:
                 got = read_bag_images(bag, set(stamp_to_k))
@@ -175,10 +166,6 @@ def _frame_images(images: list[EvalImage], ks: list[int]) -> dict[int, np.ndarra
 
 def _fit_text(img: np.ndarray, text: str, org: tuple[int, int], scale: float, color=(255, 255, 255)) -> None:
     """Outlined text at ``org``, its font made smaller until it fits the image's width."""
-    import cv2
-
-    from ..vis import outlined_text
-
     while scale > 0.3 and org[0] + cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, 1)[0][0] > img.shape[1] - 4:
         scale *= 0.9
     outlined_text(img, text, org, color, scale)
@@ -193,10 +180,6 @@ def plot_worst_frames(images: list[EvalImage], conf: float, iou: float, path: Pa
     false detections (red, class and score), missed cones (magenta, class), ignore regions (grey), the
     band's rows (cyan). Images come from their files or, for a bag's frames, from the bag; frames whose
     image can't be read are skipped. -> (file or None, the frames' counts)."""
-    import cv2
-
-    from ..vis import frame_strip, outlined_text
-
     scored = []
     for k, im in enumerate(images):
         tp, fp, missed = frame_errors(im, conf, iou)
@@ -250,12 +233,6 @@ def bag_frames_picture(bag: Path, boxes: dict, stamps: list[int], calib, path: P
     """The picked frames in a 2-column grid: detections (class colour, score), the true cones' foot points
     (class-coloured rings, from ``/cones_gt`` through the calibration), the band, a time stamp per tile and
     a legend strip below."""
-    import cv2
-
-    from ..data.bags import read_bag_images
-    from ..mapping import ConeMapper
-    from ..vis import draw_boxes, frame_strip, legend_strip, outlined_text
-
     mapper = ConeMapper(calib)
     imgs = []
     t0 = stamps[0] if t0_ns is None and stamps else t0_ns

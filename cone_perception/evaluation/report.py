@@ -22,12 +22,19 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
+from ..attitude import FIXED, attitude_estimator
 from ..classes import CLASS_NAMES
-from ..geometry.calib import Calibration
+from ..data.predictions import read_predictions
+from ..errors import ConfigError
+from ..geometry.calib import Calibration, load_calibration
+from ..mapping import ConeMapper
 from ..params import DEFAULT_CONF
 from ..records import CONE_DTYPE, boxes_from_arrays
-from .groundtruth import EvalImage
+from ..words import plural
+from .attitude import AttitudeReport
+from .groundtruth import EvalImage, load_ground_truth, pair_with_predictions, restrict_to_band, restrict_to_min_height
 from .localisation import DISTANCE_GROUPS, LocalisationReport, PairDistanceReport, distance_group
 from .metrics import ImageDetections, coco_map, greedy_match, operating_point
 from .plots import plot_by_distance, plot_confusion, plot_localisation, plot_pairs, plot_pr, plot_worst_frames
@@ -144,12 +151,6 @@ def evaluate(images: list[EvalImage], calib: Calibration | None, conf: float = D
     """Every figure of the report for paired images; ``calib`` maps boxes to metres (optional).
     ``attitude``: ``fixed`` (the calibration's H) or ``image`` (each image's camera attitude fitted from its
     own detections first, as ``map --boxes --attitude image``; needs a mount pose in the calibration)."""
-    from tqdm import tqdm
-
-    from ..attitude import FIXED, attitude_estimator
-    from ..mapping import ConeMapper
-    from .attitude import AttitudeReport
-
     notes: list[str] = []
     range_mapper = ConeMapper(replace(calib, max_range_m=math.inf)) if calib is not None else None
     mapper = ConeMapper(calib) if calib is not None else None
@@ -288,8 +289,6 @@ def _detection_table(d: dict) -> list[str]:
 def write_report(res: EvalResult, out: Path, pred_source: str, gt_source: str, worst: int = 6) -> dict[str, Path]:
     """``metrics.json``, ``report.md`` and the PNGs into ``out`` (with ``worst`` > 0 also a picture of the
     frames with most errors); returns the written files by key."""
-    from ..words import plural
-
     out.mkdir(parents=True, exist_ok=True)
     m = res.metrics
     inp = m["inputs"]
@@ -441,11 +440,6 @@ def evaluate_predictions(pred: Path, gt_path: Path, gt_names: str | None = None,
     """A prediction file against ground truth -> :class:`~cone_perception.evaluation.report.EvalResult`, as ``eval``
     computes it (``gt_names`` comma-separated; ``band``, ``min_height``, ``attitude``: as ``eval --band``, ``--min-height``,
     ``--attitude``). Used by ``eval`` and ``bench table``."""
-    from ..data.predictions import read_predictions
-    from ..errors import ConfigError
-    from ..geometry.calib import load_calibration
-    from .groundtruth import load_ground_truth, pair_with_predictions, restrict_to_band, restrict_to_min_height
-
     names = [n.strip() for n in gt_names.split(",") if n.strip()] if gt_names else None
     gt = load_ground_truth(gt_path, names)
     preds = list(read_predictions(pred))

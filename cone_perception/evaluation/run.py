@@ -5,15 +5,17 @@ plots; or a tracked bag against its drive's truth.
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
+
+from ..errors import ConfigError
+from ..evaluation.report import evaluate_predictions, format_summary, lowest_score_note, write_report
+from ..evaluation.tracking import (
+    evaluate_tracking_bag, format_drive_evaluation, load_drive_truth, write_tracking_report,
+)
 
 
 def run_eval(args: argparse.Namespace) -> int:
-    import logging
-
-    from ..errors import ConfigError
-    from ..evaluation.report import evaluate_predictions, format_summary, write_report
-
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(message)s")
     if args.out.exists() and not args.out.is_dir():
         raise ConfigError(str(args.out), None, "output exists and is not a directory")
@@ -24,7 +26,6 @@ def run_eval(args: argparse.Namespace) -> int:
     res = evaluate_predictions(args.pred, args.gt, args.gt_names, args.calib, args.conf, args.iou, args.only_predicted,
                                progress=not args.no_progress, band=args.band, min_height=args.min_height,
                                attitude=args.attitude)
-    from ..evaluation.report import lowest_score_note
 
     low = lowest_score_note(res.images)
     if low:
@@ -39,11 +40,6 @@ def run_eval(args: argparse.Namespace) -> int:
 
 
 def _run_tracked(args: argparse.Namespace) -> int:
-    from ..errors import ConfigError
-    from ..evaluation.tracking import (
-        evaluate_tracking_bag, format_drive_evaluation, load_drive_truth, write_tracking_report,
-    )
-
     if not args.tracked.is_dir() and not args.tracked.is_file():
         raise ConfigError(str(args.tracked), None, "bag not found")
     if args.gt.suffix != ".jsonl":

@@ -34,8 +34,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from scipy.optimize import linear_sum_assignment
 
+from ..data import bagio
 from ..errors import ConfigError
+from ..records import CONE_DTYPE, TRACKED_CONE_DTYPE, from_pointcloud2
 from ..tracking import Motion2D
 from . import DISTANCE_GROUPS, LocalisationReport, distance_group, match_cones
 
@@ -114,8 +117,6 @@ def idf1(pair_counts: dict[tuple[int, int], int], n_truth: int, n_tracked: int) 
     The one-to-one pairing of ids that maximises the matched frames (linear sum assignment) gives
     IDTP; ``n_truth`` / ``n_tracked`` are the truth and tracked cone-frames counted.
     """
-    from scipy.optimize import linear_sum_assignment
-
     if not pair_counts or n_truth + n_tracked == 0:
         return (0.0 if n_truth + n_tracked else float("nan")), 0
     gts = sorted({g for g, _ in pair_counts})
@@ -317,9 +318,6 @@ def evaluate_tracking_bag(bag: str | os.PathLike, truth: DriveTruth, cones_topic
                           tracked_topic: str = "/cones/tracked", range_m: float = EVAL_RANGE_M) -> dict:
     """:meth:`DriveEvaluation.summary` of a bag with ``/cones`` and ``/cones/tracked`` (e.g. the ``--out`` of
     ``replay --track``), messages taken by header stamp. No ego-motion figures (the bag has no estimate)."""
-    from ..data import bagio
-    from ..records import CONE_DTYPE, TRACKED_CONE_DTYPE, from_pointcloud2
-
     topics = bagio.bag_topics(bag)
     ev = DriveEvaluation(truth, range_m)
     n = {cones_topic: 0, tracked_topic: 0}
@@ -358,8 +356,6 @@ def simulated_drive(n_frames: int, fov, rows_m: tuple[float, ...] = (1.75, -1.75
     (a :class:`~cone_perception.tracking.FieldOfView`), each kept with probability 1 - ``drop`` and
     moved by ``sigma_m`` noise)``. Classes alternate blue / yellow by row.
     """
-    from ..records import CONE_DTYPE
-
     rng = np.random.default_rng(seed)
     length = n_frames * step_m + 60.0
     xs = np.arange(-5.0, length, spacing_m)

@@ -6,6 +6,8 @@ inference (:func:`fuse_conv_bn`, called by :meth:`ConeYOLO.fuse`).
 
 from __future__ import annotations
 
+import math
+
 import torch
 from torch import nn
 
@@ -28,8 +30,6 @@ class Conv(nn.Module):
 
 def DWConv(c_in: int, c_out: int, k: int = 3, s: int = 1) -> Conv:
     """Depth-wise conv (groups = gcd of channels) + BN + SiLU."""
-    import math
-
     return Conv(c_in, c_out, k, s, groups=math.gcd(c_in, c_out))
 
 

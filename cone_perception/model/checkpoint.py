@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 
 from ..classes import CLASS_NAMES, class_map_from_names
@@ -96,8 +97,6 @@ def _safe_globals() -> list:
     """The only classes and functions a checkpoint may name besides torch's own tensors and
     containers: numpy arrays, dtypes and scalars (the numpy RNG state of ``last.pt``, numpy numbers
     in metrics). None of them calls anything else: an array's contents are plain data."""
-    import numpy as np
-
     try:
         from numpy._core import multiarray  # numpy >= 2
     except ImportError:  # numpy 1.x

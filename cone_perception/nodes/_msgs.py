@@ -3,14 +3,17 @@
 from __future__ import annotations
 
 import numpy as np
+from geometry_msgs.msg import Vector3Stamped
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2, PointField
 from std_msgs.msg import Header
 from visualization_msgs.msg import Marker, MarkerArray
 
+from ..adapter import crop_raw_to_bgr, raw_frame_view
+from ..attitude import attitude_vector
 from ..classes import CLASS_RGBA, LARGE_ORANGE
 from ..crop import CropSpec, camera_info_crop
 from ..geometry import covariance_ellipses
-from ..records import BOX_DTYPE, CONE_DTYPE, from_pointcloud2, to_pointcloud2
+from ..records import BOX_DTYPE, CONE_DTYPE, TRACKED_CONE_DTYPE, from_pointcloud2, to_pointcloud2
 
 # FS cone sizes (m): small cones 228 mm base, 325 mm high; large orange 285 mm, 505 mm.
 _CONE_DIAMETER_M = {LARGE_ORANGE: 0.285}
@@ -43,8 +46,6 @@ def bgr_image(bgr: np.ndarray, header: Header) -> Image:
 
 def image_to_bgr(msg: Image) -> np.ndarray:
     """sensor_msgs/Image bgr8 -> (h, w, 3) view (used by detection on ``image_cropped``)."""
-    from ..adapter import crop_raw_to_bgr, raw_frame_view
-
     name, view = raw_frame_view(msg.encoding, msg.width, msg.height, msg.step, msg.data)
     return crop_raw_to_bgr(name, view, CropSpec.full_image(msg.width, msg.height))
 
@@ -136,10 +137,6 @@ def cone_markers(cones: np.ndarray, header: Header, ns: str = "cones") -> Marker
 
 def attitude_msg(att, header):
     """``geometry_msgs/Vector3Stamped`` of the attitude a frame was mapped with (x = roll, y = pitch, radians)."""
-    from geometry_msgs.msg import Vector3Stamped
-
-    from ..attitude import attitude_vector
-
     m = Vector3Stamped()
     m.header = header
     m.vector.x, m.vector.y, m.vector.z = attitude_vector(att)
@@ -148,14 +145,10 @@ def attitude_msg(att, header):
 
 def tracked_msg(records: np.ndarray, header: Header) -> PointCloud2:
     """``TRACKED_CONE_DTYPE`` records -> ``/cones/tracked`` PointCloud2."""
-    from ..records import TRACKED_CONE_DTYPE
-
     return to_pointcloud2(records.astype(TRACKED_CONE_DTYPE, copy=False), header, PointCloud2, PointField)
 
 
 def tracked_from_msg(msg: PointCloud2) -> np.ndarray:
-    from ..records import TRACKED_CONE_DTYPE
-
     return from_pointcloud2(msg, TRACKED_CONE_DTYPE)
 
 

@@ -18,15 +18,23 @@ import time
 from dataclasses import dataclass, field
 from typing import Callable, Iterator
 
+import cv2
 import numpy as np
 import rclpy
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2, PointField
 
+from ..adapter import DriverAdapter, bgr_to_yuyv
 from ..data import hostile
+from ..errors import FrameError
 from ..geometry.calib import DEFAULT_CAMERA, load_calibration
+from ..imageheader import declared_size
 from ..records import BOX_DTYPE, boxes_from_arrays
 from . import _msgs
+from .detection import DetectionNode
+from .driver_adapter import DriverAdapterNode
+from .mapping import MappingNode
+from .pipeline import PipelineNode
 
 U32 = 2**32 - 1
 TARGETS = ("driver_adapter_raw", "driver_adapter_compressed", "detection", "mapping", "pipeline_raw",
@@ -113,10 +121,6 @@ class Generators:
     """Message generators for one calibration, with the few valid payloads made once."""
 
     def __init__(self, calib, seed: int) -> None:
-        import cv2
-
-        from ..adapter import DriverAdapter, bgr_to_yuyv
-
         self.calib = calib
         self.W, self.H = calib.image_width, calib.image_height
         rng = np.random.default_rng(seed)
@@ -266,11 +270,6 @@ def _callback(node, msgtype) -> Callable:
 
 def build_target(name: str, context, gen: Generators, params: dict | None = None):
     """The node of target ``name`` and its feeds: [(callback, generator)] with the mix of messages."""
-    from .detection import DetectionNode
-    from .driver_adapter import DriverAdapterNode
-    from .mapping import MappingNode
-    from .pipeline import PipelineNode
-
     overrides = [Parameter(k, value=v) for k, v in (params or {}).items()]
     if name.startswith(("driver_adapter", "pipeline")):
         transport = name.rsplit("_", 1)[1]
@@ -349,9 +348,6 @@ def fuzz_target(name: str, n: int, seed: int = 0, params: dict | None = None,
 def bomb_timings(calib_name: str = DEFAULT_CAMERA, repeat: int = 20) -> dict[str, dict[str, float]]:
     """The issue's header bombs through the driver adapter (the nodes' and tools' decode path):
     per bomb the worst time (ms) of ``repeat`` refusals and the RSS growth (MB)."""
-    from ..adapter import DriverAdapter
-    from ..errors import FrameError
-
     calib = load_calibration(calib_name)
     adapter = DriverAdapter(calib.crop, calib.image_width, calib.image_height)
     out = {}
@@ -370,7 +366,5 @@ def bomb_timings(calib_name: str = DEFAULT_CAMERA, repeat: int = 20) -> dict[str
 
 
 def hostile_size(data: bytes) -> tuple[int, int]:
-    from ..imageheader import declared_size
-
     return declared_size(data)[1:]
 

@@ -11,17 +11,25 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
+from ..data.bags import read_ground_truth
+from ..detector import Detector, default_model_path
+from ..errors import ConfigError
 from ..evaluation import LocalisationReport, format_localisation
+from ..evaluation.plots import bag_frames_picture
 from ..geometry.calib import load_calibration, resolve_calibration_path
-from ..mapping import expected_truth
+from ..mapping import ConeMapper, expected_truth
+from ..model.checkpoint import RESTORE_HINT
+from ..pipeline import Pipeline
+from ..replay import offline_replay
+from ..synth.config import SynthConfig
+from ..synth.writers import bag_side_paths, write_scene_bag
 from ..timing import format_table, summarize
+from ..vis import birdseye_plot
 
 
 def _bag(args) -> tuple[Path, Path]:
-    from ..synth.config import SynthConfig
-    from ..synth.writers import bag_side_paths, write_scene_bag
-
     name = f"drive_seed{args.seed}_{args.seconds:g}s_{args.fps:g}hz{'' if args.jitter else '_nojitter'}"
     bag = args.out / name
     if not (bag / "metadata.yaml").is_file():
@@ -39,17 +47,9 @@ def _bag(args) -> tuple[Path, Path]:
 
 
 def run_demo(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
-
-    from ..data.bags import read_ground_truth
-    from ..detector import default_model_path
-
     calib = load_calibration(args.calib)
     model = Path(args.model) if args.model else default_model_path()
     if not model.is_file():
-        from ..errors import ConfigError
-        from ..model.checkpoint import RESTORE_HINT
-
         raise ConfigError(str(model), None, f"model file not found; {RESTORE_HINT}")
     args.out.mkdir(parents=True, exist_ok=True)
     bag, _ = _bag(args)
@@ -58,9 +58,6 @@ def run_demo(args: argparse.Namespace) -> int:
 
     if args.offline:
         print("[2/3] offline replay through the pipeline code (no ROS processes)")
-        from ..detector import Detector
-        from ..pipeline import Pipeline
-        from ..replay import offline_replay
 
         det = Detector.load(model)
         det.warmup()
@@ -71,7 +68,7 @@ def run_demo(args: argparse.Namespace) -> int:
         how = "offline"
     else:
         print(f"[2/3] live ROS 2 replay: {args.mode} node(s), shared-memory DDS, lockstep")
-        from ..nodes.live_replay import live_replay
+        from ..nodes.live_replay import live_replay  # rclpy, and it sets the DDS environment
 
         params = {"calibration": str(resolve_calibration_path(args.calib)), "model": str(model.resolve())}
         res = live_replay(bag, mode=args.mode, params=params, progress=progress)
@@ -79,8 +76,6 @@ def run_demo(args: argparse.Namespace) -> int:
         latency = summarize([v / 1e3 for v in res.latency_ms.values()])
         sent, lost = res.sent, len(res.lost)
         how = f"live {args.mode}"
-
-    from ..mapping import ConeMapper
 
     rep, mapper = LocalisationReport(max_range_m=calib.max_range_m), ConeMapper(calib)
     for stamp in sorted(cones):
@@ -96,9 +91,6 @@ def run_demo(args: argparse.Namespace) -> int:
           f"cones per frame: mean {per_frame.mean():.1f}, max {per_frame.max()}")
     print(format_table({"latency": latency}))
     print(format_localisation(loc))
-
-    from ..evaluation.plots import bag_frames_picture
-    from ..vis import birdseye_plot
 
     stamps = sorted(cones)
     picks = [stamps[int(i)] for i in np.linspace(0, len(stamps) - 1, 4)] if stamps else []

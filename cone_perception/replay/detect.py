@@ -12,16 +12,16 @@ import cv2
 from tqdm import tqdm
 
 from ..crop import CropSpec
+from ..data.predictions import write_prediction
 from ..data.sources import iter_source
 from ..detector import Detector, default_model_path, detect_one, resolve_backend
 from ..detector.farband import FarBand
 from ..errors import ConfigError
+from ..vis import draw_band, draw_boxes
+from ..words import plural
 
 
 def run_detect(args: argparse.Namespace) -> int:
-    from ..data.predictions import write_prediction
-    from ..vis import draw_band, draw_boxes
-
     if args.far_rows and not args.crop:
         raise ConfigError("--far-rows", None, "needs --crop: the far band adds to the car's band")
     model = args.model or default_model_path()
@@ -80,7 +80,6 @@ def run_detect(args: argparse.Namespace) -> int:
                     vis = draw_band(vis, args.crop, args.downscale)
 
                 cv2.imwrite(str(out), vis)
-    from ..words import plural
 
     print(f"detect: {plural(n, 'image')} -> {args.out}" + (f", {len(skipped)} skipped" if skipped else ""))
     for s in skipped[:20]:

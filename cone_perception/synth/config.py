@@ -13,7 +13,8 @@ from ..crop import CropSpec
 from ..errors import ConfigError
 from ..geometry.calib import RECOMMENDED_FOOT_OFFSET_M, RECOMMENDED_FOOT_POINTS, Calibration, save_calibration
 from ..geometry.camera import MountPose, PinholeCamera, default_intrinsics
-from .render import Renderer, RenderOptions
+from .look import RenderOptions
+from .render import Renderer
 from .scene import ground_visible
 from .track import TRACK_KINDS, Track, make_track
 

@@ -6,6 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import ConfigError
+from ..mapping import ConeMapper
+from ..records import boxes_from_arrays
 from .config import SynthConfig
 from .scene import random_pose
 
@@ -16,9 +18,6 @@ def mapping_check(cfg: SynthConfig, frames: int, max_range_m: float = 30.0, band
     Returns per distance band ``{"lo_m", "hi_m", "n", "median_m", "p95_m", "max_m"}``: the error that
     remains with a perfect detector (foot-point rule, pixel grid, body jitter if on).
     """
-    from ..mapping import ConeMapper
-    from ..records import boxes_from_arrays
-
     if frames <= 0:
         raise ConfigError("--frames", None, f"must be > 0, got {frames}")
     cfg.validate()

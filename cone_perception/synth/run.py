@@ -10,12 +10,16 @@ from pathlib import Path
 
 import numpy as np
 
+from ..data.outfiles import print_written, refuse_existing
+from ..errors import ConfigError
+from ..geometry.camera import MountPose
+from ..synth import mapcheck, writers
+from ..synth.config import SynthConfig
+from ..synth.scene import random_pose
+from ..words import parse_size
+
 
 def config_from_args(args: argparse.Namespace):
-    from ..geometry.camera import MountPose
-    from ..synth.config import SynthConfig
-    from ..words import parse_size
-
     w, h = parse_size(args.size, "--size", "1920x1080")
     return SynthConfig(
         width=w,
@@ -38,8 +42,6 @@ def config_from_args(args: argparse.Namespace):
 
 
 def run_synth(args: argparse.Namespace) -> int:
-    from ..synth import mapcheck, writers
-
     cfg = config_from_args(args)
     if args.action == "dataset":
         c = writers.write_dataset(cfg, args.n, args.out, args.frames_per_track, args.val_frac, progress=not args.no_progress)
@@ -50,8 +52,6 @@ def run_synth(args: argparse.Namespace) -> int:
         calib, gt = writers.bag_side_paths(Path(args.out))
         print(f"wrote {args.out}: " + ", ".join(f"{t} {k}" for t, k in c.items()) + f"; calibration {calib}; ground truth {gt}")
     elif args.action == "preview":
-        from ..data.outfiles import print_written, refuse_existing
-
         refuse_existing([args.out], args.force, "synth preview")
         print_written([writers.write_preview(cfg, args.out, args.n)], "synth preview")
     elif args.action == "mapcheck":
@@ -67,9 +67,6 @@ def run_synth(args: argparse.Namespace) -> int:
 
 
 def _bench(cfg, frames: int) -> int:
-    from ..errors import ConfigError
-    from ..synth.scene import random_pose
-
     if frames <= 0:
         raise ConfigError("--frames", None, f"must be > 0, got {frames}")
     cfg.validate()

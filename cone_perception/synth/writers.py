@@ -28,6 +28,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import yaml
+from tqdm import tqdm
 
 from ..classes import CLASS_BGR, CLASS_NAMES
 from ..data.bagio import (
@@ -37,6 +38,7 @@ from ..data.bagio import (
 )
 from ..errors import ConfigError
 from ..records import CONE_DTYPE, to_pointcloud2
+from ..vis import frame_strip, outlined_text
 from .config import SynthConfig
 from .motion import (
     IMU_ACCEL_NOISE, IMU_ANGLE_NOISE_DEG, IMU_RATE_NOISE_DPS, constant_speed_drive, drive_motion, imu_samples,
@@ -103,8 +105,6 @@ def truths_to_records(truths: list[ConeTruth]) -> np.ndarray:
 
 
 def _progress(total: int, desc: str, enabled: bool):
-    from tqdm import tqdm
-
     return tqdm(total=total, desc=desc, unit="frame", disable=not enabled)
 
 
@@ -285,8 +285,6 @@ def _imu_msg(s, stamp: int):
 
 def draw_truths(img: np.ndarray, truths: list[ConeTruth], thickness: int = 2) -> np.ndarray:
     """Boxes in class colours; labelled cones solid, unlabelled (too small / hidden) thin."""
-    from ..vis import outlined_text
-
     for t in truths:
         u1, v1, u2, v2 = (int(round(x)) for x in t.box)
         labelled = (u2 - u1 >= MIN_LABEL_BOX_PX and v2 - v1 >= MIN_LABEL_BOX_PX and t.visible_fraction >= MIN_LABEL_VISIBLE)
@@ -313,13 +311,11 @@ def write_preview(cfg: SynthConfig, out: Path, n: int = 8, cols: int = 2, thumb_
         look = renderer.new_look(rng)
         img, truths = renderer.render(track, random_pose(track, rng, cfg.jitter), look, rng)
         img = draw_truths(img, truths, thickness=max(cfg.width // 640, 1))
-        from ..vis import outlined_text
 
         th = int(round(thumb_w * cfg.height / cfg.width))
         thumb = cv2.resize(img, (thumb_w, th), interpolation=cv2.INTER_AREA)
         outlined_text(thumb, f"{track.kind} seed {track.seed}", (8, 24), (255, 255, 255), 0.7, 2)
         thumbs.append(thumb)
-    from ..vis import frame_strip
 
     sheet = frame_strip(thumbs, width=thumb_w, cols=cols)
     if not cv2.imwrite(str(out), sheet):

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from tqdm import tqdm
 
 from ..classes import BLUE, LARGE_ORANGE, NUM_CLASSES, ORANGE, YELLOW
 
@@ -225,8 +226,6 @@ class ConeBank:
 
 def build_bank(items, cfg: CopyPasteConfig, seed: int = 0, progress: bool = False) -> ConeBank:
     """A bank from every frame of ``items`` (a loader's ``_Items``: ``len()`` and ``load(k)`` -> BGR, boxes, classes)."""
-    from tqdm import tqdm
-
     bank = ConeBank(cfg)
     for k in tqdm(range(len(items)), desc="copy-paste bank", disable=not progress, leave=False):
         img, b, c = items.load(k)

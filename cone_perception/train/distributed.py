@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
+import torch.distributed as dist
 from torch.utils.data import Sampler
 
 from ..errors import ConfigError
@@ -68,8 +69,6 @@ def setup(device: str = "auto", batch: int | None = None) -> DistInfo:
                                            f"torchrun: give a multiple of {world} (each process takes batch / {world})")
     dev = resolve_device(device, local)
     if world > 1:
-        import torch.distributed as dist
-
         if dev.type == "cuda":
             torch.cuda.set_device(dev)
         if not dist.is_initialized():
@@ -80,8 +79,6 @@ def setup(device: str = "auto", batch: int | None = None) -> DistInfo:
 def cleanup(info: DistInfo) -> None:
     """Leave the process group (after a last barrier)."""
     if info.ddp:
-        import torch.distributed as dist
-
         if dist.is_initialized():
             dist.barrier()
             dist.destroy_process_group()
@@ -91,7 +88,6 @@ def mean_over_ranks(t: torch.Tensor, info: DistInfo) -> torch.Tensor:
     """The mean of ``t`` over all processes (``t`` itself with one process)."""
     if not info.ddp:
         return t
-    import torch.distributed as dist
 
     t = t.detach().clone().to(info.device if info.device.type == "cuda" else "cpu")
     dist.all_reduce(t)
@@ -102,7 +98,6 @@ def from_main(value, info: DistInfo):
     """Rank 0's ``value`` on every process (any picklable object)."""
     if not info.ddp:
         return value
-    import torch.distributed as dist
 
     box = [value]
     dist.broadcast_object_list(box, src=0)

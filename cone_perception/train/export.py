@@ -7,6 +7,18 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ..data.outfiles import refuse_existing
+from ..detector import Detector, sidecar_path, write_sidecar
+from ..detector.export import export_metadata, export_model, with_onnx_metadata, worst_diff_to_eager
+from ..errors import ConfigError
+from ..model.checkpoint import load_checkpoint
+from ..model.decode import postprocess
+from ..train.quantize import (
+    MIN_MATCHED, MIN_MEAN_IOU, QuantOptions, calibration_blobs, compare_detections, int8_frame_pool, quantize_onnx,
+    spread,
+)
+from ..train.trainer import round_imgsz
+
 #: largest |exported - eager| output allowed
 TOLERANCE = 1e-3
 #: frames the export is verified on
@@ -14,13 +26,6 @@ VERIFY_FRAMES = 8
 
 
 def run_export(args: argparse.Namespace) -> int:
-    from ..data.outfiles import refuse_existing
-    from ..detector import Detector, sidecar_path, write_sidecar
-    from ..detector.export import export_metadata, export_model, worst_diff_to_eager
-    from ..errors import ConfigError
-    from ..model.checkpoint import load_checkpoint
-    from ..train.trainer import round_imgsz
-
     int8_flags = [f"--{k.replace('_', '-')}" for k in ("calib_images", "calib_clips", "calib_crop") if getattr(args, k) is not None]
     if not args.int8 and int8_flags:
         raise ConfigError(int8_flags[0], None, "calibration options need --int8")
@@ -31,7 +36,6 @@ def run_export(args: argparse.Namespace) -> int:
             raise ConfigError("--int8", "calib-images", "give a folder of real frames to calibrate on (--calib-images DIR)")
         if args.calib_frames < 1:
             raise ConfigError("--calib-frames", None, f"must be >= 1, got {args.calib_frames}")
-        from ..train.quantize import int8_frame_pool
 
         # the calibration frames are checked before anything is exported
         pool, dropped = int8_frame_pool(args.calib_images, args.calib_clips.split(",") if args.calib_clips else None)
@@ -67,13 +71,6 @@ def run_export(args: argparse.Namespace) -> int:
 
 def _int8(args, ck, fp32_path: Path, imgsz: tuple[int, int], eager, pool: list[Path], dropped: int) -> None:
     """Quantise ``fp32_path`` into ``<stem>.int8.onnx``, calibrated on frames of ``pool``, and check it."""
-    from ..detector import Detector, write_sidecar
-    from ..errors import ConfigError
-    from ..model.decode import postprocess
-    from ..train.quantize import (
-        MIN_MATCHED, MIN_MEAN_IOU, QuantOptions, calibration_blobs, compare_detections, quantize_onnx, spread,
-    )
-
     files = spread(pool, args.calib_frames)
     opts = QuantOptions(activation=args.int8_activations, per_channel=not args.per_tensor,
                         exclude_head=not args.int8_head, method=args.calib_method, ops=args.int8_ops)
@@ -82,7 +79,6 @@ def _int8(args, ck, fp32_path: Path, imgsz: tuple[int, int], eager, pool: list[P
           + (f" ({dropped} frames of validation clips left out)" if dropped else "") + f"; {opts.describe()}")
     summary = quantize_onnx(fp32_path, out, calibration_blobs(files, imgsz, args.calib_crop, args.calib_downscale),
                             opts, total=len(files), progress=not args.no_progress)
-    from ..detector.export import export_metadata, with_onnx_metadata
 
     meta = export_metadata(ck.class_names, imgsz, max(ck.cfg.strides), str(args.model), {
         "quantisation": opts.describe(), "calibration": f"{len(files)} frames of {args.calib_images}"})

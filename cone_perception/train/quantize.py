@@ -21,9 +21,14 @@ from typing import Iterable, Iterator
 
 import cv2
 import numpy as np
+from tqdm import tqdm
 
+from ..adapter import crop_bgr
 from ..crop import CropSpec
+from ..data.datasets import IMAGE_SUFFIXES, VALIDATION_CLIPS, in_clips
+from ..detector.preprocess import preprocess
 from ..errors import ConfigError
+from ..evaluation.metrics import greedy_match
 
 DEFAULT_CALIB_FRAMES = 64
 ACTIVATION_TYPES = ("uint8", "int8")
@@ -59,8 +64,6 @@ def int8_frame_pool(folder: str | Path, clips: Iterable[str] | None = None) -> t
     many were dropped because they belong to the validation clips
     (:data:`~cone_perception.data.datasets.VALIDATION_CLIPS`, never used; naming one in ``clips`` is an error).
     ``clips`` keeps only frames of these clips (file name before the first '-')."""
-    from ..data.datasets import IMAGE_SUFFIXES, VALIDATION_CLIPS, in_clips
-
     folder = Path(folder)
     src = str(folder)
     if not folder.is_dir():
@@ -102,9 +105,6 @@ def calibration_blobs(files: list[Path], imgsz: tuple[int, int], crop: tuple[int
     With ``crop`` (V0, V1[, U0, U1] in each frame's px; without U0, U1 the full width) the band is
     cut and downscaled like the car's adapter does (:func:`~.adapter.crop_bgr`); then
     :func:`~.detector.preprocess` fits it to the model input ``imgsz`` (W, H)."""
-    from ..adapter import crop_bgr
-    from ..detector.preprocess import preprocess
-
     for f in files:
         img = cv2.imread(str(f), cv2.IMREAD_COLOR)
         if img is None:
@@ -197,8 +197,6 @@ class _Reader:
     """ONNX Runtime calibration data reader over an iterator of blobs, with a progress bar."""
 
     def __init__(self, input_name: str, blobs: Iterator[np.ndarray], total: int | None, progress: bool):
-        from tqdm import tqdm
-
         self.input_name, self.blobs = input_name, iter(blobs)
         self.bar = tqdm(total=total, unit="frame", desc="calibrating", disable=not progress)
 
@@ -218,7 +216,7 @@ def quantize_onnx(fp32_path: str | Path, out_path: str | Path, blobs: Iterable[n
                   total: int | None = None, progress: bool = True) -> dict:
     """Quantise the fp32 ONNX model at ``fp32_path`` into ``out_path`` (QDQ, Conv only), calibrated
     on ``blobs`` ((1, 3, H, W) float32 network inputs). Returns :func:`qdq_summary` of the result."""
-    import onnx
+    import onnx  # optional: the int8 export alone needs onnx and onnxruntime
     from onnxruntime.quantization import CalibrationMethod, QuantFormat, QuantType, quantize_static
     from onnxruntime.quantization.shape_inference import quant_pre_process
 
@@ -269,8 +267,6 @@ def compare_detections(pairs: Iterable[tuple[tuple, tuple]]) -> dict:
     :func:`~.model.decode.postprocess` returns them (x1 y1 x2 y2, best first). Returns the counts,
     the share of reference boxes matched, the mean / min IoU of the pairs, the largest corner
     deviation (px) and score difference of a pair, and ``ok`` (the check above)."""
-    from ..evaluation.metrics import greedy_match
-
     n_ref = n_test = 0
     ious, dev, sdiff = [], 0.0, 0.0
     for (rb, rs, rc), (tb, ts, tc) in pairs:

@@ -6,6 +6,9 @@ import csv
 import re
 from pathlib import Path
 
+from ..errors import ConfigError
+from ..vis import pyplot
+
 #: Where ``cone-perception train`` writes when no ``--out`` is given: ``runs/train/<name>``, numbered.
 RUNS_DIR = Path("runs") / "train"
 
@@ -14,8 +17,6 @@ def next_run_dir(parent: str | Path, name: str) -> Path:
     """A folder under ``parent`` that does not exist yet: ``name``, else ``name2``, ``name3``, ... (never reused)."""
     parent = Path(parent)
     if not re.fullmatch(r"[A-Za-z0-9_.-]+", name or ""):
-        from ..errors import ConfigError
-
         raise ConfigError("--name", None, f"must be letters, digits, '_', '-' or '.', got {name!r}")
     cand, k = parent / name, 2
     while cand.exists():
@@ -41,10 +42,7 @@ def read_results(path: str | Path) -> list[dict]:
 def plot_results(rows: list[dict], png: str | Path, title: str = "") -> Path:
     """``results.png``: training losses, validation mAP and learning rate per epoch (epochs numbered from 1,
     as in the progress bar, the log and results.csv)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     ep = [r["epoch"] for r in rows]
     fig, axes = plt.subplots(1, 3, figsize=(13, 3.8))

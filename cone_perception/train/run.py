@@ -7,19 +7,18 @@ import argparse
 import json
 import logging
 import sys
+from dataclasses import replace
+
+from ..errors import ConfigError
+from ..train.augment import AugmentConfig
+from ..train.distributed import world_from_env
+from ..train.report import RUNS_DIR, next_run_dir
+from ..train.trainer import TrainConfig, train
 
 
 def run_train(args: argparse.Namespace) -> int:
-    from dataclasses import replace
-
-    from ..errors import ConfigError
-    from ..train.augment import AugmentConfig
-    from ..train.report import RUNS_DIR, next_run_dir
-    from ..train.trainer import TrainConfig, train
-
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     aug = AugmentConfig.off() if args.no_augment else replace(AugmentConfig(), mosaic=args.mosaic, copy_paste=args.copy_paste)
-    from ..train.distributed import world_from_env
 
     rank = world_from_env()[0]
     if args.out is None:

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from torch.nn.parallel import DistributedDataParallel
 from torch.utils.data import DataLoader
 from tqdm import tqdm
 
@@ -344,8 +345,6 @@ def _train(cfg: TrainConfig, info: "distributed.DistInfo", resume: bool, progres
         say(f"resuming from {last_path} after epoch {start_epoch}")
     net = model  # what the batches run through: the model, or its DDP wrapper (gradients averaged over processes)
     if info.ddp:
-        from torch.nn.parallel import DistributedDataParallel
-
         net = DistributedDataParallel(model, device_ids=[device.index] if device.type == "cuda" else None)
     scaler = torch.amp.GradScaler(device.type, enabled=prec == "fp16")
 

@@ -4,6 +4,6 @@
 
 from __future__ import annotations
 
-from .draw import birdseye_plot, draw_band, draw_boxes, frame_strip, legend_strip, outlined_text
+from .draw import birdseye_plot, draw_band, draw_boxes, frame_strip, legend_strip, outlined_text, pyplot
 
-__all__ = ["birdseye_plot", "draw_band", "draw_boxes", "frame_strip", "legend_strip", "outlined_text"]
+__all__ = ["birdseye_plot", "draw_band", "draw_boxes", "frame_strip", "legend_strip", "outlined_text", "pyplot"]

@@ -12,6 +12,16 @@ from ..classes import CLASS_BGR, CLASS_NAMES, CLASS_RGBA
 from ..geometry import covariance_ellipses
 
 
+def pyplot():
+    """matplotlib's pyplot with the file-only Agg backend, imported on first use (matplotlib takes about
+    a second to load; only the tools' pictures need it)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
 def draw_boxes(bgr: np.ndarray, boxes: np.ndarray, scale: float = 1.0, thickness: int = 2, labels: bool = True,
                font_scale: float = 0.45, min_label_height: float = 0.0,
                texts: Sequence[str] | None = None) -> np.ndarray:
@@ -67,11 +77,8 @@ def birdseye_plot(
     Detected cones are filled dots with their ``sigma_scale``-sigma covariance ellipse; true cones
     hollow circles. x (forward) is up and y (left) to the left, as a driver sees the track.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.patches import Ellipse
+    plt = pyplot()
+    from matplotlib.patches import Ellipse  # loaded with pyplot above
 
     n = len(panels)
     fig, axes = plt.subplots(1, n, figsize=(3.6 * n, 6.4), squeeze=False)
@@ -95,7 +102,7 @@ def birdseye_plot(
         ax.set_xlabel("y (m, positive = left)")
         ax.set_title(title, fontsize=9)
     axes[0][0].set_ylabel("x (m, forward of rear axle)")
-    from matplotlib.lines import Line2D
+    from matplotlib.lines import Line2D  # loaded with pyplot above
 
     present = sorted({int(c) for _, cones, truth in panels for arr in (cones, truth) if arr is not None
                       for c in np.asarray(arr["class_id"]).tolist()})
