@@ -79,9 +79,7 @@ def run_bench(args: argparse.Namespace) -> int:
     if args.target == "pipeline":
         result = _bench_pipeline(args, calib)
         if args.json:
-            json.dump(result, sys.stdout, indent=1)
-            print()
-            return 0
+            return _print_json(result)
         print(f"bench pipeline ({result['setting']}): {result['input']} -> {result['output']}, model input "
               f"{result['model_input'][0]}x{result['model_input'][1]}; model {result['model']} "
               f"({result['backend']}, {plural(result['threads'], 'thread')}), {args.frames} frames, "
@@ -94,9 +92,7 @@ def run_bench(args: argparse.Namespace) -> int:
     result["threads"] = args.threads
     s = result["stages"]
     if args.json:
-        json.dump(result, sys.stdout, indent=1)
-        print()
-        return 0
+        return _print_json(result)
     print(f"bench {args.target}: {result['input']} -> {result['output']}, {args.frames} frames, {plural(args.threads, 'thread')}")
     print(format_table(s))
     print(f"frames/s (median): {result['fps']:.1f}   peak RSS: {result['peak_rss_mb']:.0f} MiB")
@@ -111,11 +107,16 @@ def _bench_tracker(args: argparse.Namespace, calib) -> int:
     result = bench_tracker(calib, args.rows, args.frames, args.warmup)
     s = result["stages"]
     if args.json:
-        json.dump(result, sys.stdout, indent=1)
-        print()
-        return 0
+        return _print_json(result)
     print(f"bench tracker: {args.frames} frames of a simulated drive ({args.rows} rows of cones, {calib.camera} band), "
           f"{result['tracks_mean']:.0f} tracks and {result['cones_per_frame']:.0f} cones a frame on average; "
           "motion from the cones")
     print(format_table(s))
+    return 0
+
+
+def _print_json(result: dict) -> int:
+    """``--json``: the result on stdout, nothing else."""
+    json.dump(result, sys.stdout, indent=1)
+    print()
     return 0

@@ -28,12 +28,13 @@ import numpy as np
 from tqdm import tqdm
 
 from ..crop import CropSpec
+from ..data.outfiles import json_safe
 from ..data.predictions import write_prediction
 from ..data.sources import iter_source
 from ..detector import detect_one
 from ..errors import ConfigError
 from ..evaluation.groundtruth import load_ground_truth
-from ..evaluation.report import _json_safe, evaluate_predictions
+from ..evaluation.report import evaluate_predictions
 from ..words import plural
 from .frames import rendered_frames
 from .pipeline import bench_pipeline, load_for_crop
@@ -226,7 +227,7 @@ def run_table(args: argparse.Namespace, calib) -> int:
     }
     md = format_markdown(doc)
     (args.out / "table.md").write_text(md, encoding="utf-8")
-    (args.out / "table.json").write_text(json.dumps(_json_safe(doc), indent=1) + "\n", encoding="utf-8")
+    (args.out / "table.json").write_text(json.dumps(json_safe(doc), indent=1) + "\n", encoding="utf-8")
     print(md)
     print(f"wrote {args.out / 'table.md'}, {args.out / 'table.json'} and {len(runs)} prediction files in {args.out / 'preds'}")
     return 0

@@ -16,7 +16,7 @@ import numpy as np
 from tqdm import tqdm
 
 from ..classes import CLASS_NAMES
-from ..data.outfiles import print_written, refuse_existing
+from ..data.outfiles import json_safe, print_written, refuse_existing
 from ..data.sources import read_bag_image, read_image
 from ..errors import ConfigError
 from ..geometry.calib import (
@@ -100,7 +100,7 @@ def run_calibrate(args: argparse.Namespace, command_line: str) -> int:
     text = format_report(rep, title)
     stem = out.with_suffix("")
     Path(f"{stem}.report.txt").write_text(text, encoding="utf-8")
-    Path(f"{stem}.report.json").write_text(json.dumps(_json_safe(rep), indent=1, allow_nan=False), encoding="utf-8")
+    Path(f"{stem}.report.json").write_text(json.dumps(json_safe(rep), indent=1, allow_nan=False), encoding="utf-8")
     print(format_report(rep, title, max_points=8), end="")
     written = [out, Path(f"{stem}.report.txt"), Path(f"{stem}.report.json")]
     if image is not None:
@@ -112,17 +112,6 @@ def run_calibrate(args: argparse.Namespace, command_line: str) -> int:
 
 
 # -- pieces ------------------------------------------------------------------------------------
-def _json_safe(v):
-    """inf/nan (e.g. the error of a point H puts behind the camera) -> None, so the JSON is standard."""
-    if isinstance(v, dict):
-        return {k: _json_safe(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_json_safe(x) for x in v]
-    if isinstance(v, float) and not np.isfinite(v):
-        return None
-    return v
-
-
 def _names(args: argparse.Namespace) -> tuple[str, Path]:
     if args.out is None and not args.camera:
         raise ConfigError("calibrate", "--camera", "give --camera NAME or --out FILE.yaml")

@@ -6,9 +6,12 @@ existing one is an error naming it, unless ``--force``) and prints each file it 
 
 from __future__ import annotations
 
+import math
 import shutil
 from pathlib import Path
 from typing import Iterable
+
+import numpy as np
 
 from ..errors import ConfigError
 
@@ -35,3 +38,17 @@ def remove_bag(path: Path) -> None:
         raise ConfigError(str(path), None, "--force replaces only a rosbag2 directory (with metadata.yaml); "
                                            "this is something else: remove it yourself")
     shutil.rmtree(path)
+
+
+def json_safe(o):
+    """``o`` for ``json.dumps(..., allow_nan=False)``: inf / nan -> None (e.g. the error of a point a homography
+    puts behind the camera), numpy numbers -> Python numbers, dict keys -> str, tuples -> lists."""
+    if isinstance(o, dict):
+        return {str(k): json_safe(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [json_safe(v) for v in o]
+    if isinstance(o, (np.floating, float)):
+        return None if not math.isfinite(float(o)) else float(o)
+    if isinstance(o, np.integer):
+        return int(o)
+    return o

@@ -26,6 +26,7 @@ from tqdm import tqdm
 
 from ..attitude import FIXED, attitude_estimator
 from ..classes import CLASS_NAMES
+from ..data.outfiles import json_safe
 from ..data.predictions import read_predictions
 from ..errors import ConfigError
 from ..geometry.calib import Calibration, load_calibration
@@ -250,18 +251,6 @@ def _f(x, nd: int = 3) -> str:
     return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.{nd}f}"
 
 
-def _json_safe(o):
-    if isinstance(o, dict):
-        return {str(k): _json_safe(v) for k, v in o.items()}
-    if isinstance(o, (list, tuple)):
-        return [_json_safe(v) for v in o]
-    if isinstance(o, (np.floating, float)):
-        return None if not math.isfinite(float(o)) else float(o)
-    if isinstance(o, np.integer):
-        return int(o)
-    return o
-
-
 def _range_cut_text(inp: dict) -> dict[str, str]:
     """What range cut each table has: ``image`` (scored in the image: none) and ``metres`` (mapped to metres:
     the calibration's ``max_range_m``)."""
@@ -379,7 +368,7 @@ def write_report(res: EvalResult, out: Path, pred_source: str, gt_source: str, w
     md += ["", f"Every figure is in [{FILES['metrics']}]({FILES['metrics']}).", ""]
     (out / FILES["report"]).write_text("\n".join(md), encoding="utf-8")
     files["report"] = out / FILES["report"]
-    (out / FILES["metrics"]).write_text(json.dumps(_json_safe(m), indent=1) + "\n", encoding="utf-8")
+    (out / FILES["metrics"]).write_text(json.dumps(json_safe(m), indent=1) + "\n", encoding="utf-8")
     files["metrics"] = out / FILES["metrics"]
     return files
 

@@ -17,7 +17,7 @@ from .. import ros_env
 
 ros_env.use_localhost()  # replay --live and demo keep all traffic on this computer, node processes too
 
-from ._common import QOS_DATA, run_node  # noqa: E402,F401,I001 (sets DDS env first)
+from ._common import QOS_DATA  # noqa: E402,I001 (sets DDS env first)
 
 import os
 import shutil
@@ -36,28 +36,14 @@ from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import CompressedImage, Image, PointCloud2
 
 from ..data import bagio
+from ..data.bags import BOXES_TOPIC, CONES_TOPIC, TRACKED_TOPIC, find_image_topic
 from ..errors import ConfigError
-from ..data.bags import BOXES_TOPIC, CONES_TOPIC, find_image_topic
 from . import _msgs
 
 MODES = {"separate": ("driver_adapter", "detection", "mapping"), "fused": ("pipeline",)}
-TRACKED_TOPIC = "/cones/tracked"
+PACES = ("lockstep", "rate")
 #: how long lockstep waits for a frame's /cones/tracked once its /cones is back
 TRACKED_WAIT_S = 2.0
-_QOS_PLAY = QoSProfile(depth=2, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
-
-
-def node_command(executable: str) -> list[str]:
-    """Command that starts one of this package's node executables here or on the car."""
-    here = Path(sys.executable).parent / executable
-    if here.is_file():
-        return [str(here)]
-    found = shutil.which(executable)
-    if found:
-        return [found]
-    if shutil.which("ros2"):
-        return ["ros2", "run", "cone_perception", executable]
-    raise ConfigError(executable, None, "node executable not found (install the package, or source the workspace)")
 
 
 @dataclass
@@ -75,6 +61,75 @@ class LiveResult:
     died: dict[str, int] = field(default_factory=dict)  # node that exited during the replay -> exit code
 
 
+def check_options(mode: str, pace: str) -> None:
+    """:class:`ConfigError` for an unknown mode or pace."""
+    if mode not in MODES:
+        raise ConfigError("live replay", "mode", f"must be one of {', '.join(MODES)}, got {mode!r}")
+    if pace not in PACES:
+        raise ConfigError("live replay", "pace", f"must be lockstep or rate, got {pace!r}")
+
+
+def node_command(executable: str) -> list[str]:
+    """Command that starts one of this package's node executables here or on the car."""
+    here = Path(sys.executable).parent / executable
+    if here.is_file():
+        return [str(here)]
+    found = shutil.which(executable)
+    if found:
+        return [found]
+    if shutil.which("ros2"):
+        return ["ros2", "run", "cone_perception", executable]
+    raise ConfigError(executable, None, "node executable not found (install the package, or source the workspace)")
+
+
+def read_frames(bag: str | os.PathLike, topic: str | None) -> tuple[str, bool, list[tuple[int, int, bytes]], list[int]]:
+    """The camera topic to play, whether it is compressed, its frames ``(log stamp, header stamp, CDR)`` and
+    the log stamps of the messages that do not deserialise (not sent; reported as lost)."""
+    topic, msgtype = find_image_topic(bag, topic)
+    frames, corrupt = [], []
+    for m in bagio.read_messages(bag, topic):
+        try:
+            frames.append((m.log_stamp_ns, bagio.stamp_ns(m.msg.header), m.raw))
+        except Exception:  # noqa: BLE001 - a corrupt message is not sent; reported in ``lost``
+            corrupt.append(m.log_stamp_ns)
+    return topic, msgtype == bagio.COMPRESSED_IMAGE, frames, corrupt
+
+
+def node_processes(mode: str, track: bool) -> tuple[str, ...]:
+    """The node executables of ``mode`` (and the tracker's after the separate nodes)."""
+    return MODES[mode] + (("cone_tracker",) if track and mode == "separate" else ())
+
+
+def node_arguments(params: dict[str, object] | None, topic: str, compressed: bool) -> list[str]:
+    """``--ros-args`` of every node: ``params`` with ``-p``, the camera topic remapped to the bag's."""
+    ros_args = ["--ros-args"]
+    for k, v in (params or {}).items():
+        ros_args += ["-p", f"{k}:={v}"]
+    if compressed:
+        ros_args += ["-p", "input_transport:=compressed", "-r", f"image_raw/compressed:={topic}"]
+    else:
+        ros_args += ["-r", f"image_raw:={topic}"]
+    return ros_args
+
+
+def tracking_arguments(mode: str) -> list[str]:
+    """The extra ``--ros-args`` of the node that tracks (motion from the cones; the fused node's ``track``)."""
+    return ["-p", "odom_topic:=''"] + (["-p", "track:=true"] if mode == "fused" else [])
+
+
+def write_result_bag(res: LiveResult, out: str | os.PathLike) -> None:
+    """Write the recorded ``/cone_boxes``, ``/cones`` and ``/cones/tracked`` (raw CDR, header stamps as log time)."""
+    topics = {BOXES_TOPIC: bagio.POINTCLOUD2, CONES_TOPIC: bagio.POINTCLOUD2}
+    if res.tracked:
+        topics[TRACKED_TOPIC] = bagio.POINTCLOUD2
+    with bagio.BagWriter(Path(out), topics) as w:
+        for topic, stamp, raw in sorted(res.raw, key=lambda x: (x[1], x[0])):
+            w.write_raw(topic, stamp, raw)
+
+
+_QOS_PLAY = QoSProfile(depth=2, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
+
+
 def _stamp_of(raw: bytes) -> tuple[int, PointCloud2]:
     msg = deserialize_message(raw, PointCloud2)
     return bagio.stamp_ns(msg.header), msg
@@ -86,6 +141,99 @@ def _primer(raw: bytes, msgtype: type, stamps: list[int]) -> tuple[int, bytes]:
     stamp = min(stamps) - 10**9 if min(stamps) >= 10**9 else max(stamps) + 10**9
     msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, 10**9)
     return stamp, serialize_message(msg)
+
+
+class _Recorder:
+    """Records what the nodes publish into a :class:`LiveResult`, by header stamp; the primer apart."""
+
+    def __init__(self, res: LiveResult, primer_stamp: int | None):
+        self.res, self.primer_stamp = res, primer_stamp
+        self.primer_seen: list[int] = []
+        self.primer_tracked: list[int] = []
+        self.sent_at: dict[int, float] = {}
+
+    def subscribe(self, node, track: bool) -> None:
+        node.create_subscription(PointCloud2, "/cones", self.on_cones, QOS_DATA, raw=True)
+        node.create_subscription(PointCloud2, "/cone_boxes", self.on_boxes, QOS_DATA, raw=True)
+        if track:
+            node.create_subscription(PointCloud2, TRACKED_TOPIC, self.on_tracked, QOS_DATA, raw=True)
+
+    def primed(self, track: bool) -> bool:
+        return bool(self.primer_seen) and (not track or bool(self.primer_tracked))
+
+    def on_cones(self, raw: bytes) -> None:
+        stamp, msg = _stamp_of(raw)
+        if stamp == self.primer_stamp:
+            self.primer_seen.append(stamp)
+            return
+        res = self.res
+        if stamp in self.sent_at and stamp not in res.cones:
+            res.latency_ms[stamp] = (time.monotonic() - self.sent_at[stamp]) * 1e3
+        res.cones[stamp] = _msgs.cones_from_msg(msg)
+        res.frame_id = msg.header.frame_id
+        res.raw.append((CONES_TOPIC, stamp, raw))
+
+    def on_boxes(self, raw: bytes) -> None:
+        stamp, msg = _stamp_of(raw)
+        if stamp == self.primer_stamp:
+            return
+        self.res.boxes[stamp] = _msgs.boxes_from_msg(msg)
+        self.res.raw.append((BOXES_TOPIC, stamp, raw))
+
+    def on_tracked(self, raw: bytes) -> None:
+        stamp, msg = _stamp_of(raw)
+        if stamp == self.primer_stamp:
+            self.primer_tracked.append(stamp)
+            return
+        self.res.tracked[stamp] = _msgs.tracked_from_msg(msg)
+        self.res.raw.append((TRACKED_TOPIC, stamp, raw))
+
+
+def _start_nodes(procs: dict, exes: tuple[str, ...], ros_args: list[str], track_args: list[str]) -> None:
+    """Start the node processes into ``procs`` (filled as they start, so a failure stops those started)."""
+    for exe in exes:
+        args = ros_args + (track_args if track_args and exe in ("pipeline", "cone_tracker") else [])
+        procs[exe] = subprocess.Popen(
+            node_command(exe) + args, env=dict(os.environ), stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT, text=True,
+        )
+
+
+def _wait_ready(node, executor, pub, procs: dict, mode: str, track: bool, timeout_s: float) -> float:
+    """Spin until every link of the chain is matched; returns the deadline (monotonic s) it was given."""
+
+    def ready() -> bool:
+        for exe, p in procs.items():
+            if p.poll() is not None:
+                out = p.communicate()[0]
+                raise ConfigError(exe, None, f"node exited with code {p.returncode} before the replay:\n{out}")
+        ok = pub.get_subscription_count() > 0 and node.count_publishers("/cones") > 0
+        if mode == "separate":
+            ok = ok and node.count_subscribers("/image_cropped") > 0 and node.count_subscribers("/cone_boxes") > 1
+        if track:
+            ok = ok and node.count_publishers(TRACKED_TOPIC) > 0
+        return ok
+
+    end = time.monotonic() + timeout_s
+    while not ready():
+        if time.monotonic() > end:
+            raise ConfigError("live replay", None, f"nodes not ready after {timeout_s:.0f} s")
+        executor.spin_once(timeout_sec=0.1)
+    return end
+
+
+def _stop_nodes(procs: dict, res: LiveResult) -> None:
+    """SIGINT every node still running, then collect each one's output (killed after 15 s)."""
+    for exe, p in procs.items():
+        if p.poll() is None:
+            p.send_signal(2)
+    for exe, p in procs.items():
+        try:
+            out, _ = p.communicate(timeout=15)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            out, _ = p.communicate()
+        res.node_output[exe] = out or ""
 
 
 def live_replay(
@@ -111,35 +259,14 @@ def live_replay(
     part of the result (with ``track`` the tracker starts from it: its tracks are predicted over the
     1 s gap to the first frame).
     """
-    if mode not in MODES:
-        raise ConfigError("live replay", "mode", f"must be one of {', '.join(MODES)}, got {mode!r}")
-    if pace not in ("lockstep", "rate"):
-        raise ConfigError("live replay", "pace", f"must be lockstep or rate, got {pace!r}")
-    topic, msgtype = find_image_topic(bag, topic)
-    compressed = msgtype == bagio.COMPRESSED_IMAGE
-    frames, corrupt = [], []
-    for m in bagio.read_messages(bag, topic):
-        try:
-            frames.append((m.log_stamp_ns, bagio.stamp_ns(m.msg.header), m.raw))
-        except Exception:  # noqa: BLE001 - a corrupt message is not sent; reported in ``lost``
-            corrupt.append(m.log_stamp_ns)
-
-    ros_args = ["--ros-args"]
-    for k, v in (params or {}).items():
-        ros_args += ["-p", f"{k}:={v}"]
-    if compressed:
-        ros_args += ["-p", "input_transport:=compressed", "-r", f"image_raw/compressed:={topic}"]
-    else:
-        ros_args += ["-r", f"image_raw:={topic}"]
-    exes = MODES[mode] + (("cone_tracker",) if track and mode == "separate" else ())
-    track_args = ["-p", "odom_topic:=''"] + (["-p", "track:=true"] if mode == "fused" else [])
+    check_options(mode, pace)
+    topic, compressed, frames, corrupt = read_frames(bag, topic)
+    ros_args = node_arguments(params, topic, compressed)
     procs = {}
     res = LiveResult()
     primer_stamp, primer_raw = _primer(frames[0][2], CompressedImage if compressed else Image,
                                        [s for _, s, _ in frames]) if frames else (None, b"")
-    primer_seen: list[int] = []
-    primer_tracked: list[int] = []
-    sent_at: dict[int, float] = {}
+    rec = _Recorder(res, primer_stamp)
     context = rclpy.Context()
     rclpy.init(context=context)
     node = rclpy.create_node("cone_perception_live_replay", context=context)
@@ -147,75 +274,21 @@ def live_replay(
     executor.add_node(node)
     try:
         pub = node.create_publisher(CompressedImage if compressed else Image, topic, _QOS_PLAY)
-
-        def on_cones(raw: bytes) -> None:
-            stamp, msg = _stamp_of(raw)
-            if stamp == primer_stamp:
-                primer_seen.append(stamp)
-                return
-            if stamp in sent_at and stamp not in res.cones:
-                res.latency_ms[stamp] = (time.monotonic() - sent_at[stamp]) * 1e3
-            res.cones[stamp] = _msgs.cones_from_msg(msg)
-            res.frame_id = msg.header.frame_id
-            res.raw.append((CONES_TOPIC, stamp, raw))
-
-        def on_boxes(raw: bytes) -> None:
-            stamp, msg = _stamp_of(raw)
-            if stamp == primer_stamp:
-                return
-            res.boxes[stamp] = _msgs.boxes_from_msg(msg)
-            res.raw.append((BOXES_TOPIC, stamp, raw))
-
-        def on_tracked(raw: bytes) -> None:
-            stamp, msg = _stamp_of(raw)
-            if stamp == primer_stamp:
-                primer_tracked.append(stamp)
-                return
-            res.tracked[stamp] = _msgs.tracked_from_msg(msg)
-            res.raw.append((TRACKED_TOPIC, stamp, raw))
-
-        node.create_subscription(PointCloud2, "/cones", on_cones, QOS_DATA, raw=True)
-        node.create_subscription(PointCloud2, "/cone_boxes", on_boxes, QOS_DATA, raw=True)
-        if track:
-            node.create_subscription(PointCloud2, TRACKED_TOPIC, on_tracked, QOS_DATA, raw=True)
-        for exe in exes:
-            args = ros_args + (track_args if track and exe in ("pipeline", "cone_tracker") else [])
-            procs[exe] = subprocess.Popen(
-                node_command(exe) + args, env=dict(os.environ), stdout=subprocess.PIPE,
-                stderr=subprocess.STDOUT, text=True,
-            )
-
-        def ready() -> bool:
-            for exe, p in procs.items():
-                if p.poll() is not None:
-                    out = p.communicate()[0]
-                    raise ConfigError(exe, None, f"node exited with code {p.returncode} before the replay:\n{out}")
-            ok = pub.get_subscription_count() > 0 and node.count_publishers("/cones") > 0
-            if mode == "separate":
-                ok = ok and node.count_subscribers("/image_cropped") > 0 and node.count_subscribers("/cone_boxes") > 1
-            if track:
-                ok = ok and node.count_publishers(TRACKED_TOPIC) > 0
-            return ok
-
-        end = time.monotonic() + ready_timeout_s
-        while not ready():
-            if time.monotonic() > end:
-                raise ConfigError("live replay", None, f"nodes not ready after {ready_timeout_s:.0f} s")
-            executor.spin_once(timeout_sec=0.1)
-        def primed() -> bool:
-            return bool(primer_seen) and (not track or bool(primer_tracked))
-
-        while frames and not primed():
+        rec.subscribe(node, track)
+        _start_nodes(procs, node_processes(mode, track), ros_args, tracking_arguments(mode) if track else [])
+        end = _wait_ready(node, executor, pub, procs, mode, track, ready_timeout_s)
+        while frames and not rec.primed(track):
             if time.monotonic() > end:
                 raise ConfigError("live replay", None, f"no /cones for the primer frame after {ready_timeout_s:.0f} s")
             pub.publish(primer_raw)
             resend = time.monotonic() + 2.0
-            while not primed() and time.monotonic() < resend:
+            while not rec.primed(track) and time.monotonic() < resend:
                 executor.spin_once(timeout_sec=0.05)
 
         items = progress(frames, len(frames)) if progress else frames
         t0_wall = time.monotonic()
         t0_bag = frames[0][0] if frames else 0
+
         def dead() -> bool:
             for exe, p in procs.items():
                 if p.poll() is not None and exe not in res.died:
@@ -229,7 +302,7 @@ def live_replay(
                 due = t0_wall + (log_ns - t0_bag) / 1e9
                 while time.monotonic() < due:
                     executor.spin_once(timeout_sec=max(0.0, min(0.01, due - time.monotonic())))
-            sent_at[stamp] = time.monotonic()
+            rec.sent_at[stamp] = time.monotonic()
             pub.publish(raw)
             res.sent += 1
             if pace == "lockstep":
@@ -248,27 +321,8 @@ def live_replay(
         dead()
         res.lost = [s for _, s, _ in frames if s not in res.cones] + corrupt
     finally:
-        for exe, p in procs.items():
-            if p.poll() is None:
-                p.send_signal(2)
-        for exe, p in procs.items():
-            try:
-                out, _ = p.communicate(timeout=15)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                out, _ = p.communicate()
-            res.node_output[exe] = out or ""
+        _stop_nodes(procs, res)
         executor.shutdown()
         node.destroy_node()
         rclpy.shutdown(context=context)
     return res
-
-
-def write_result_bag(res: LiveResult, out: str | os.PathLike) -> None:
-    """Write the recorded ``/cone_boxes``, ``/cones`` and ``/cones/tracked`` (raw CDR, header stamps as log time)."""
-    topics = {BOXES_TOPIC: bagio.POINTCLOUD2, CONES_TOPIC: bagio.POINTCLOUD2}
-    if res.tracked:
-        topics[TRACKED_TOPIC] = bagio.POINTCLOUD2
-    with bagio.BagWriter(Path(out), topics) as w:
-        for topic, stamp, raw in sorted(res.raw, key=lambda x: (x[1], x[0])):
-            w.write_raw(topic, stamp, raw)

@@ -26,6 +26,7 @@ from tqdm import tqdm
 
 from ..classes import CLASS_NAMES
 from ..data.datasets import load_data_yaml, summary_table
+from ..detector.preprocess import round_up32
 from ..errors import ConfigError
 from ..evaluation.metrics import ImageDetections, coco_map
 from ..model import PRETRAINED_BACKBONES, ConeYOLO, is_model_name, model_config, model_names
@@ -139,7 +140,7 @@ def resolve_precision(precision: str, device: str = "cpu") -> str:
 
 
 def round_imgsz(imgsz: tuple[int, int]) -> tuple[int, int]:
-    w, h = (int(-(-int(v) // 32) * 32) for v in imgsz)
+    w, h = (round_up32(v) for v in imgsz)
     if (w, h) != tuple(int(v) for v in imgsz):
         log.warning("image size %sx%s is not a multiple of 32: rounded up to %dx%d", imgsz[0], imgsz[1], w, h)
     return w, h
