@@ -199,6 +199,12 @@ class Detector:
         if bf16 and (backend != "torch" or device != "cpu" or fp16):
             raise ConfigError(ck.path, "bf16", f"bf16 is CPU autocast for backend 'torch' (got backend {backend!r}, "
                               f"device {device!r}{', fp16' if fp16 else ''}); on a GPU use fp16")
+        if bf16:
+            from ..train.trainer import native_bf16
+
+            if not native_bf16():
+                log.warning("bf16: this CPU has no native bfloat16 (AVX512-BF16 or AMX), so autocast emulates it "
+                            "and runs slower than fp32; leave bf16 off here (the boxes are the same)")
         class_map = class_map_from_names(ck.class_names, ck.path)
         size = (int(imgsz[0]), int(imgsz[1])) if imgsz else ck.imgsz
         model = ck.build_model()

@@ -112,8 +112,19 @@ class ModelEMA:
 PRECISIONS = ("auto", "fp32", "bf16", "fp16")
 
 
+#: oneDNN instruction-set caps (``ONEDNN_MAX_CPU_ISA``) without AVX512-BF16 or AMX: bfloat16 is emulated there
+ONEDNN_ISAS_WITHOUT_BF16 = ("SSE41", "AVX", "AVX2", "AVX2_VNNI", "AVX2_VNNI_2", "AVX512_CORE", "AVX512_CORE_VNNI")
+
+
 def native_bf16() -> bool:
-    """Whether this CPU computes bfloat16 natively (x86 AVX512-BF16 or AMX), so bf16 autocast pays."""
+    """Whether this CPU computes bfloat16 natively (x86 AVX512-BF16 or AMX), so bf16 autocast pays. A cap on
+    oneDNN's instruction set below that (``ONEDNN_MAX_CPU_ISA``, or the older ``DNNL_MAX_CPU_ISA``, e.g.
+    ``AVX512_CORE`` to act as a CPU without it) counts as none: the convolutions then emulate bfloat16."""
+    import os
+
+    cap = (os.environ.get("ONEDNN_MAX_CPU_ISA") or os.environ.get("DNNL_MAX_CPU_ISA") or "").strip().upper()
+    if cap in ONEDNN_ISAS_WITHOUT_BF16:
+        return False
     cpu = getattr(torch, "cpu", None)
     probes = ("_is_avx512_bf16_supported", "_is_amx_tile_supported")
     try:
@@ -319,7 +330,9 @@ def _train(cfg: TrainConfig, info: "distributed.DistInfo", resume: bool, progres
     say(f"dataset ({cfg.data}):\n" + summary_table({"train": train_entries, "val": val_entries,
                                                      "test (not used)": rest.get("test_entries", [])}))
     if not val_entries:
-        say("no val split: no mAP per epoch; best.pt is the epoch with the lowest training loss")
+        say("no val split: training without validation (no mAP per epoch; best.pt is the epoch with the lowest "
+            "training loss). For one, name a folder of other frames under val: in the data YAML ('synth dataset' "
+            "writes one when --n spans two tracks or more: --n above --frames-per-track)")
 
     model.train()
     model = model.to(device)
