@@ -11,14 +11,15 @@ import torch
 import yaml
 
 from cone_perception import records
-from cone_perception.checkpoint import load_checkpoint, save_checkpoint
 from cone_perception.classes import CLASS_NAMES
 from cone_perception.cli import main as cli_main
 from cone_perception.crop import CropSpec
 from cone_perception.detector import Detector, default_model_path, resolve_backend, write_sidecar
-from cone_perception.errors import ConfigError
 from cone_perception.detector.export import export_model, onnx_bytes
+from cone_perception.errors import ConfigError
 from cone_perception.model import ConeYOLO, model_config
+from cone_perception.model.checkpoint import load_checkpoint, save_checkpoint
+
 from synthetic_cones import SMOKE_SIZE, assert_same_cones, trained_smoke_model
 
 
@@ -105,11 +106,11 @@ def test_bf16_gives_the_fp32_boxes_and_is_refused_where_it_does_not_apply(traine
 def test_bf16_on_a_cpu_without_native_bf16_says_it_is_slower(trained, monkeypatch, caplog):
     """bf16 stays allowed where the CPU emulates it (same boxes), with a warning that fp32 is faster there;
     a cap on oneDNN's instruction set (ONEDNN_MAX_CPU_ISA=AVX512_CORE) counts as such a CPU."""
-    from cone_perception.train import trainer
+    from cone_perception.detector import backends, detector
 
     ckpt, _ = trained
     monkeypatch.setenv("ONEDNN_MAX_CPU_ISA", "avx512_core")
-    assert not trainer.native_bf16()
+    assert not backends.native_bf16()
     with caplog.at_level(logging.WARNING):
         assert Detector.load(ckpt, backend="torch", bf16=True).precision == "bf16"
         Detector.load(ckpt, backend="torch")
@@ -117,7 +118,7 @@ def test_bf16_on_a_cpu_without_native_bf16_says_it_is_slower(trained, monkeypatc
         "bf16: this CPU has no native bfloat16 (AVX512-BF16 or AMX), so autocast emulates it and runs slower than "
         "fp32; leave bf16 off here (the boxes are the same)"]
     caplog.clear()
-    monkeypatch.setattr(trainer, "native_bf16", lambda: True)
+    monkeypatch.setattr(detector, "native_bf16", lambda: True)
     with caplog.at_level(logging.WARNING):
         Detector.load(ckpt, backend="torch", bf16=True)
     assert not [r for r in caplog.records if "bf16" in r.message]
@@ -321,7 +322,7 @@ def test_detect_command_writes_boxes_and_the_model_input_scale(trained, tmp_path
     out = tmp_path / "p.jsonl"
     assert cli_main(["detect", str(folder), "--model", str(ckpt), "--crop", f"0,{2 * h}", "--downscale", "2",
                      "--out", str(out), "--no-progress"]) == 0
-    from cone_perception.predictions import read_predictions
+    from cone_perception.data.predictions import read_predictions
 
     preds = list(read_predictions(out))
     det = Detector.load(ckpt)
@@ -346,7 +347,7 @@ def test_detect_command_onnx_band_runs_at_its_own_size(trained, tmp_path):
     h, w = images[0].shape[:2]
     big = cv2.resize(images[0], (2 * w, 2 * h), interpolation=cv2.INTER_NEAREST)
     cv2.imwrite(str(folder / "f0.png"), big)
-    from cone_perception.predictions import read_predictions
+    from cone_perception.data.predictions import read_predictions
 
     got = {}
     for backend in ("torch", "onnx"):

@@ -34,13 +34,14 @@ import torch
 
 from .. import records
 from ..adapter import pin_opencv_threads
-from ..classes import CLASS_NAMES
-from ..checkpoint import RESTORE_HINT, Checkpoint, class_map_from_names, load_checkpoint
+from ..classes import CLASS_NAMES, class_map_from_names
 from ..crop import CropSpec
 from ..errors import ConfigError
+from ..model.checkpoint import RESTORE_HINT, Checkpoint, load_checkpoint
 from ..model.decode import postprocess
 from ..params import DEFAULT_BACKEND, DEFAULT_CONF, DEFAULT_IOU, DEFAULT_MAX_DET
-from .backends import BACKEND_CHOICES, OrtRunner, TorchRunner, onnx_input_size, ort_session, resolve_backend
+from .backends import (BACKEND_CHOICES, OrtRunner, TorchRunner, native_bf16, onnx_input_size, ort_session,
+                       resolve_backend)
 from .model_files import external_names, find_sidecar, sidecar_path
 from .preprocess import band_input_size, preprocess
 
@@ -200,8 +201,6 @@ class Detector:
             raise ConfigError(ck.path, "bf16", f"bf16 is CPU autocast for backend 'torch' (got backend {backend!r}, "
                               f"device {device!r}{', fp16' if fp16 else ''}); on a GPU use fp16")
         if bf16:
-            from ..train.trainer import native_bf16
-
             if not native_bf16():
                 log.warning("bf16: this CPU has no native bfloat16 (AVX512-BF16 or AMX), so autocast emulates it "
                             "and runs slower than fp32; leave bf16 off here (the boxes are the same)")

@@ -23,17 +23,18 @@ import torch
 from torch.utils.data import DataLoader
 from tqdm import tqdm
 
-from ..checkpoint import load_checkpoint, save_checkpoint
 from ..classes import CLASS_NAMES
+from ..data.datasets import load_data_yaml, summary_table
+from ..detector.backends import native_bf16
 from ..errors import ConfigError
 from ..evaluation.metrics import ImageDetections, coco_map
 from ..model import PRETRAINED_BACKBONES, ConeYOLO, is_model_name, model_config, model_names
-from ..model.pretrained import PretrainedBackbone, load_imagenet
+from ..model.checkpoint import load_checkpoint, save_checkpoint
 from ..model.decode import postprocess
 from ..model.loss import DetectionLoss
-from .augment import AugmentConfig
+from ..model.pretrained import PretrainedBackbone, load_imagenet
 from . import distributed
-from .datasets import load_data_yaml, summary_table
+from .augment import AugmentConfig
 from .distill import DistillLoss, check_teacher
 from .loader import EpochSampler, TrainSet, ValSet, collate
 from .report import plot_results
@@ -110,27 +111,6 @@ class ModelEMA:
 
 
 PRECISIONS = ("auto", "fp32", "bf16", "fp16")
-
-
-#: oneDNN instruction-set caps (``ONEDNN_MAX_CPU_ISA``) without AVX512-BF16 or AMX: bfloat16 is emulated there
-ONEDNN_ISAS_WITHOUT_BF16 = ("SSE41", "AVX", "AVX2", "AVX2_VNNI", "AVX2_VNNI_2", "AVX512_CORE", "AVX512_CORE_VNNI")
-
-
-def native_bf16() -> bool:
-    """Whether this CPU computes bfloat16 natively (x86 AVX512-BF16 or AMX), so bf16 autocast pays. A cap on
-    oneDNN's instruction set below that (``ONEDNN_MAX_CPU_ISA``, or the older ``DNNL_MAX_CPU_ISA``, e.g.
-    ``AVX512_CORE`` to act as a CPU without it) counts as none: the convolutions then emulate bfloat16."""
-    import os
-
-    cap = (os.environ.get("ONEDNN_MAX_CPU_ISA") or os.environ.get("DNNL_MAX_CPU_ISA") or "").strip().upper()
-    if cap in ONEDNN_ISAS_WITHOUT_BF16:
-        return False
-    cpu = getattr(torch, "cpu", None)
-    probes = ("_is_avx512_bf16_supported", "_is_amx_tile_supported")
-    try:
-        return any(bool(getattr(cpu, n)()) for n in probes if hasattr(cpu, n))
-    except RuntimeError:
-        return False
 
 
 def resolve_precision(precision: str, device: str = "cpu") -> str:
