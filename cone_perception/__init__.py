@@ -1,8 +1,9 @@
 """cone_perception: camera cone perception for a Formula Student driverless car.
 
-Core modules (ROS-free): classes, errors, crop, adapter, camera, geometry, calib,
-records. ROS 2 nodes live in :mod:`cone_perception.nodes`; the command line in
-:mod:`cone_perception.cli`.
+The runtime, ROS-free: adapter, crop, detector/, model/, geometry/, attitude/, mapping, tracking/,
+pipeline, on the vocabulary (classes, errors, records). The ROS 2 nodes live in
+:mod:`cone_perception.nodes`. The tools around them: data/, evaluation/, calibrate/, synth/, train/,
+replay/, bench/, and the command line (:mod:`cone_perception.cli`). docs/architecture.md draws it.
 """
 
 __version__ = "0.1.0"

@@ -1,9 +1,11 @@
-"""Camera calibration to the rear axle (``cone-perception calibrate``; the calibration file itself: ``calib.py``).
+"""Camera calibration to the rear axle (``cone-perception calibrate``; the calibration file itself:
+:mod:`cone_perception.geometry.calib`).
 
 * :mod:`.points`: the inputs: point pairs from a CSV file or a chessboard on the ground, ``T_F_S``;
 * :mod:`.fit`: point pairs -> ``H_S_B`` -> ``H_F_B``, mount pose <-> homography, lens intrinsics;
 * :mod:`.report`: the quality report (residuals, distance errors, warnings);
-* :mod:`.pictures`: the pictures that prove a calibration.
+* :mod:`.pictures`: the pictures that prove a calibration;
+* :mod:`.run`: the ``calibrate`` command's run; :mod:`.imu_rest`: ``imu-rest`` (the IMU's rest attitude).
 
 The names below are this package's face (``from cone_perception.calibrate import fit_calibration``).
 """

@@ -1,0 +1,27 @@
+"""The ``cone-perception data`` run: the dataset converters (FSOCO -> YOLO, 16:9 restore) and their summary line.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+
+from ..words import plural
+from . import convert
+
+
+def run_data(args: argparse.Namespace) -> int:
+    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(message)s")
+    if args.action == "fsoco-to-yolo":
+        rep = convert.fsoco_to_yolo(args.src, args.out, args.val_fraction, args.seed, args.border,
+                                    progress=not args.no_progress)
+    else:
+        clips = [c.strip() for c in args.clips.split(",") if c.strip()] if args.clips else None
+        names = [n.strip() for n in args.names.split(",") if n.strip()] if args.names else None
+        rep = convert.restore_aspect(args.src, args.out, args.aspect, width=args.width, clips=clips, names=names,
+                                     progress=not args.no_progress)
+    skipped = ", ".join(f"{k}: {v}" for k, v in sorted(rep.skipped.items())) or "none"
+
+    print(f"wrote {plural(rep.images, 'image')}, {plural(rep.boxes, 'box', 'boxes')} to {args.out} "
+          f"{rep.per_split or ''}; skipped: {skipped}")
+    return 0
