@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -28,11 +29,13 @@ from tqdm import tqdm
 from ..attitude import ATTITUDE_MODES
 from ..data.outfiles import print_written, refuse_existing, remove_bag
 from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, RUNTIME_THREADS, Detector, default_model_path
-from ..evaluation import LocalisationReport, format_localisation
+from ..errors import ConfigError
+from ..evaluation import GT_MIN_VISIBLE, LocalisationReport, format_localisation
 from ..evaluation.attitude import format_attitude_report
 from ..geometry.calib import DEFAULT_CAMERA, load_calibration, resolve_calibration_path
 from ..params import DEFAULT_CONF
 from ..timing import format_table, summarize
+from ..tracking import TrackerConfig
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -60,6 +63,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--odom-topic", default=None,
                    help="offline, --track: the car's motion from this nav_msgs/Odometry or geometry_msgs/TwistStamped topic "
                         "of the bag (default: estimated from the cones)")
+    p.add_argument("--track-conf", type=float, default=None, metavar="S",
+                   help="offline, --track: run the detector at this lower score threshold; detections from S up to --conf "
+                        "go to the tracker only (weak detections: a cone on /cones/tracked once they recur or land on a "
+                        "track; docs/tracking.md 'Weak detections'). Default: off")
+    p.add_argument("--track-range", type=float, default=None, metavar="M",
+                   help="offline, --track: the tracker's max_range_m, detections farther are not tracked (default: "
+                        f"TrackerConfig's {TrackerConfig.max_range_m:g} m)")
+    p.add_argument("--max-range", type=float, default=None, metavar="M",
+                   help="offline: use this max_range_m instead of the calibration's (cones farther are dropped; to "
+                        "measure a range before setting it in a calibration)")
     p.add_argument("--far-rows", default=None, metavar="V0,V1",
                    help="also run these image rows at full resolution (the far band, docs/detector.md 'Far band'); "
                         "live: the pipeline node's far_rows (fused only)")
@@ -88,17 +101,22 @@ def _progress(disable: bool):
 
 def run(args: argparse.Namespace) -> int:
     calib = load_calibration(args.calib)
-    if args.live and (args.drop_detections or args.odom_topic):
-        from ..errors import ConfigError
-
-        raise ConfigError("--live", None, "--drop-detections and --odom-topic work offline only")
+    if args.live and (args.drop_detections or args.odom_topic or args.track_conf is not None
+                      or args.track_range is not None or args.max_range is not None):
+        raise ConfigError("--live", None, "--drop-detections, --odom-topic, --track-conf, --track-range and --max-range "
+                                          "work offline only")
+    if args.track_conf is not None and not (args.track and 0.0 < args.track_conf < args.conf):
+        raise ConfigError("--track-conf", None, f"needs --track and a score in (0, --conf {args.conf:g}), got {args.track_conf:g}")
+    for flag, v in (("--track-range", args.track_range), ("--max-range", args.max_range)):
+        if v is not None and not (np.isfinite(v) and v > 0):
+            raise ConfigError(flag, None, f"must be a positive number of metres, got {v:g}")
+    if args.max_range is not None:
+        calib = replace(calib, max_range_m=float(args.max_range))
     if args.far_rows:  # a bad value fails before any model loads or node starts
         from ..detector.farband import far_band_crop
 
         far_band_crop(args.far_rows, calib.image_width, calib.image_height, calib.crop, "--far-rows")
         if args.live == "separate":
-            from ..errors import ConfigError
-
             raise ConfigError("--far-rows", None, "needs the fused pipeline node (--live fused or offline)")
     refuse_existing([p for p in (args.out, args.json) if p is not None], args.force, "replay")
     if args.out is not None:
@@ -121,7 +139,6 @@ def _imu_source(args, calib):
     """An ImuAttitude when the bag has the IMU topic and the mode may use it, else None."""
     from ..attitude import ImuAttitude
     from ..data.bagio import bag_topics
-    from ..errors import ConfigError
 
     if args.attitude in ("fixed", "image") or not calib.has_attitude_model and args.attitude is None:
         return None
@@ -143,17 +160,19 @@ def _run_offline(args, calib) -> dict:
 
     tracking = _tracking(args, calib)  # its bad options fail before the model loads
     # built for the calibration's band, as the pipeline node does (a fixed-size backend never letterboxes)
+    conf = args.track_conf if args.track_conf is not None else args.conf  # the pipeline splits at --conf
     det = Detector.load_for_band(args.model or default_model_path(), (calib.crop.out_width, calib.crop.out_height),
-                                 backend=args.backend, conf=args.conf, threads=args.threads or None, bf16=args.bf16)
+                                 backend=args.backend, conf=conf, threads=args.threads or None, bf16=args.bf16)
     det.warmup()
     far = None
     if args.far_rows:
         from ..detector.farband import FarBand
 
         far = FarBand.load(det.source, args.far_rows, calib.image_width, calib.image_height, calib.crop, "--far-rows",
-                           backend=args.backend, conf=args.conf, threads=args.threads or None, bf16=args.bf16)
+                           backend=args.backend, conf=conf, threads=args.threads or None, bf16=args.bf16)
     imu = _imu_source(args, calib)
-    res = offline_replay(args.bag, Pipeline(calib, det, args.attitude, imu, far), args.topic, args.out, args.gt_topic,
+    pipeline = Pipeline(calib, det, args.attitude, imu, far, cones_conf=args.conf if args.track_conf is not None else None)
+    res = offline_replay(args.bag, pipeline, args.topic, args.out, args.gt_topic,
                          _progress(args.no_progress), imu_topic=args.imu_topic, tracking=tracking)
     stages = res.timer.summary()
     n = res.stats.ok
@@ -194,7 +213,12 @@ def _tracking(args, calib):
 
     truth = drive_truth_beside(args.bag) if args.gt_topic else None
     twists = read_twists(args.bag, args.odom_topic) if (args.odom_topic and args.track) else None
-    return ReplayTracking(calib, args.track, args.drop_detections, args.drop_seed, truth, twists)
+    config = TrackerConfig()
+    if args.track_conf is not None:
+        config.strong_score = args.conf
+    if args.track_range is not None:
+        config.max_range_m = args.track_range
+    return ReplayTracking(calib, args.track, args.drop_detections, args.drop_seed, truth, twists, config)
 
 
 def _run_live(args, calib) -> dict:
@@ -224,7 +248,7 @@ def _run_live(args, calib) -> dict:
     loc = None
     if args.gt_topic:
         truth = read_ground_truth(args.bag, args.gt_topic)
-        rep = LocalisationReport(max_range_m=calib.max_range_m)
+        rep = LocalisationReport(max_range_m=calib.max_range_m, min_visible=GT_MIN_VISIBLE)
         for stamp, cones in sorted(res.cones.items()):
             if stamp in truth:
                 rep.add_frame(cones, truth[stamp])
