@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import fields as dataclass_fields
 from dataclasses import replace
 from pathlib import Path
 
@@ -67,9 +68,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="offline, --track: run the detector at this lower score threshold; detections from S up to --conf "
                         "go to the tracker only (weak detections: a cone on /cones/tracked once they recur or land on a "
                         "track; docs/tracking.md 'Weak detections'). Default: off")
-    p.add_argument("--track-range", type=float, default=None, metavar="M",
-                   help="offline, --track: the tracker's max_range_m, detections farther are not tracked (default: "
-                        f"TrackerConfig's {TrackerConfig.max_range_m:g} m)")
+    p.add_argument("--tracker", action="append", default=[], metavar="FIELD=VALUE",
+                   help="offline, --track: set a TrackerConfig field (cone_perception/tracking/tracker.py, units in its "
+                        "names), repeatable, e.g. --tracker max_range_m=40 --tracker spawn_max_m=2")
     p.add_argument("--max-range", type=float, default=None, metavar="M",
                    help="offline: use this max_range_m instead of the calibration's (cones farther are dropped; to "
                         "measure a range before setting it in a calibration)")
@@ -102,14 +103,15 @@ def _progress(disable: bool):
 def run(args: argparse.Namespace) -> int:
     calib = load_calibration(args.calib)
     if args.live and (args.drop_detections or args.odom_topic or args.track_conf is not None
-                      or args.track_range is not None or args.max_range is not None):
-        raise ConfigError("--live", None, "--drop-detections, --odom-topic, --track-conf, --track-range and --max-range "
+                      or args.tracker or args.max_range is not None):
+        raise ConfigError("--live", None, "--drop-detections, --odom-topic, --track-conf, --tracker and --max-range "
                                           "work offline only")
     if args.track_conf is not None and not (args.track and 0.0 < args.track_conf < args.conf):
         raise ConfigError("--track-conf", None, f"needs --track and a score in (0, --conf {args.conf:g}), got {args.track_conf:g}")
-    for flag, v in (("--track-range", args.track_range), ("--max-range", args.max_range)):
-        if v is not None and not (np.isfinite(v) and v > 0):
-            raise ConfigError(flag, None, f"must be a positive number of metres, got {v:g}")
+    if args.max_range is not None and not (np.isfinite(args.max_range) and args.max_range > 0):
+        raise ConfigError("--max-range", None, f"must be a positive number of metres, got {args.max_range:g}")
+    if args.tracker and not args.track:
+        raise ConfigError("--tracker", None, "needs --track")
     if args.max_range is not None:
         calib = replace(calib, max_range_m=float(args.max_range))
     if args.far_rows:  # a bad value fails before any model loads or node starts
@@ -204,6 +206,29 @@ def _run_offline(args, calib) -> dict:
             "stages": stages, "localisation": res.localisation, "tracking": res.tracking}
 
 
+def tracker_config(settings: list[str]) -> TrackerConfig:
+    """A :class:`TrackerConfig` with ``FIELD=VALUE`` settings (``--tracker``); a bad one raises ConfigError naming it."""
+    config, fields = TrackerConfig(), {f.name: f for f in dataclass_fields(TrackerConfig)}
+    for item in settings:
+        name, sep, text = item.partition("=")
+        if not sep or name not in fields:
+            raise ConfigError("--tracker", item, f"must be FIELD=VALUE with a TrackerConfig field ({', '.join(fields)})")
+        kind = type(getattr(config, name))
+        try:
+            if kind is bool:
+                if text.lower() not in ("true", "false", "1", "0"):
+                    raise ValueError(text)
+                value = text.lower() in ("true", "1")
+            else:
+                value = kind(text)
+                if not np.isfinite(value) and not (kind is float and np.isposinf(value)):
+                    raise ValueError(text)
+        except ValueError:
+            raise ConfigError("--tracker", item, f"{name} takes a {kind.__name__}, got {text!r}") from None
+        setattr(config, name, value)
+    return config
+
+
 def _tracking(args, calib):
     """The replay's tracking (``--track``, ``--drop-detections``), or None."""
     if not args.track and args.drop_detections == 0:
@@ -213,11 +238,9 @@ def _tracking(args, calib):
 
     truth = drive_truth_beside(args.bag) if args.gt_topic else None
     twists = read_twists(args.bag, args.odom_topic) if (args.odom_topic and args.track) else None
-    config = TrackerConfig()
+    config = tracker_config(args.tracker)
     if args.track_conf is not None:
         config.strong_score = args.conf
-    if args.track_range is not None:
-        config.max_range_m = args.track_range
     return ReplayTracking(calib, args.track, args.drop_detections, args.drop_seed, truth, twists, config)
 
 

@@ -103,29 +103,30 @@ class LocalisationReport:
         self.frames += 1
         t_xy = np.c_[truth["x"], truth["y"]].astype(np.float64)
         t_r = np.hypot(t_xy[:, 0], t_xy[:, 1])
-        keep = t_r <= max(self.max_range_m, BANDS_MAX_M)
-        t_index = np.flatnonzero(keep)
-        truth, t_xy, t_r = truth[keep], t_xy[keep], t_r[keep]
         p_xy = np.c_[pred["x"], pred["y"]].astype(np.float64)
+        # matched against every true cone, so that a detection of a cone beyond the counted range is no false cone
         pairs = match_cones(p_xy, t_xy)
+        keep = t_r <= max(self.max_range_m, BANDS_MAX_M)  # the true cones counted (groups and bands)
         matched = np.zeros(len(truth), dtype=bool)
         for i, j, _ in pairs:
             matched[j] = True
+            if not keep[j]:
+                continue
             self.err_x.append(p_xy[i, 0] - t_xy[j, 0])
             self.err_y.append(p_xy[i, 1] - t_xy[j, 1])
             self.err_range.append(t_r[j])
             self.same_class.append(int(pred["class_id"][i]) == int(truth["class_id"][j]))
-        self.true_range.extend(t_r.tolist())
-        self.true_matched.extend(matched.tolist())
-        self.true_visible.extend(np.asarray(truth["score"], np.float64).tolist() if self.min_visible > 0
-                                 else [1.0] * len(truth))
+        self.true_range.extend(t_r[keep].tolist())
+        self.true_matched.extend(matched[keep].tolist())
+        self.true_visible.extend(np.asarray(truth["score"][keep], np.float64).tolist() if self.min_visible > 0
+                                 else [1.0] * int(keep.sum()))
         # unmatched detections beyond the range are of cones outside it (ignored like those), not false
         unmatched = np.ones(len(pred), dtype=bool)
         unmatched[[i for i, _, _ in pairs]] = False
         p_r = np.hypot(p_xy[:, 0], p_xy[:, 1])
         self.false_positives += int(np.count_nonzero(unmatched & (p_r <= self.max_range_m)))
         self.false_range.extend(p_r[unmatched].tolist())
-        return [(i, int(t_index[j]), d) for i, j, d in pairs]
+        return pairs
 
     def summary(self) -> dict:
         """Per distance group and overall: n_true, recall, n_matched, median / p90 error (m), class accuracy;

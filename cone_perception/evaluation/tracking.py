@@ -222,8 +222,7 @@ class TrackingReport:
         found = np.zeros(len(r_t), dtype=bool)
         for _, j, _ in match_cones(p, fr.xy_m):
             found[j] = True
-        w_xy, _ = self.truth.world_in_frame(stamp_ns)
-        w_xy = w_xy[np.hypot(w_xy[:, 0], w_xy[:, 1]) <= BANDS_MAX_M + 2.0]
+        w_xy, _ = self.truth.world_in_frame(stamp_ns)  # every cone seen so far, at any range
         real = np.zeros(len(p), dtype=bool)
         for i, _, _ in match_cones(p, w_xy):
             real[i] = True

@@ -71,6 +71,8 @@ class TrackerConfig:
     prior_std_rad: float = 0.005  # and yaw per frame
     max_range_m: float = 20.0  # detections farther than this are not used (too uncertain along the ray)
     spawn_chi2: float = 50.0  # an unassigned detection this near (Mahalanobis^2) to a track starts no new one
+    spawn_max_m: float = float("inf")  # ... unless it is farther than this (m) from that track: far cones' covariance
+    # is metres long along the ray, so the next cone of a row 4-5 m behind would otherwise never get a track
     merge_chi2: float = 6.0  # two tracks this near (and of one class) are merged into the older one
     # the attitude part of the cones' covariance (given the frame's Attitude) is one error common to the frame,
     # correlated over attitude_tau_s, not independent noise (docs/tracking.md, "Attitude"); False: as before
@@ -275,7 +277,11 @@ class ConeTracker:
             else:
                 d2 = _mahalanobis2(z, Rz, self.xy, self.P)  # (n_z, n_t)
             gated = d2 <= cfg.gate_chi2
-            gated_any = (d2 <= cfg.spawn_chi2).any(axis=1)
+            near = d2 <= cfg.spawn_chi2
+            if np.isfinite(cfg.spawn_max_m):  # and within spawn_max_m metres (far cones: wide covariance along the ray)
+                dist = np.hypot(z[:, None, 0] - self.xy[None, :, 0], z[:, None, 1] - self.xy[None, :, 1])
+                near &= dist <= cfg.spawn_max_m
+            gated_any = near.any(axis=1)
             pc = self.class_p[:, zc].T  # (n_z, n_t): p(track is the detected class)
             unknown = zc == UNKNOWN
             pc[unknown] = 1.0
