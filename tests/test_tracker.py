@@ -470,3 +470,26 @@ def test_weak_detections_do_not_steer_the_registration():
     assert trk.events["registration_failed"] == 1
     trk.update(2 * DT_NS, cones(pts, BLUE, score=0.9))
     assert trk.events["registration_failed"] == 1
+
+
+def test_spawn_max_m_gives_the_next_far_cone_of_a_row_its_own_track():
+    """Two cones of a row 4.5 m apart at 30 m, each with a covariance metres long along the ray: inside
+    spawn_chi2 of each other, so by default only the first gets a track; with spawn_max_m 2 the second
+    starts its own (they are farther apart than that) and both are kept apart afterwards."""
+
+    def far(xy):
+        c = cones(xy, BLUE, score=0.9)
+        c["cov_xx"], c["cov_yy"] = 2.5**2, 0.2**2
+        return c
+
+    def run(**kw) -> list[list[int]]:
+        trk = ConeTracker(TrackerConfig(max_range_m=40.0, **kw))
+        trk.update(0, far([[30.0, 2.0]]))
+        ids = []
+        for k in range(1, 8):
+            trk.update(k * DT_NS, far([[30.0, 2.0], [34.5, 2.0]]), Motion2D())
+            ids.append(trk.output()["track_id"].tolist())
+        return ids
+
+    assert all(i == [1] for i in run())
+    assert all(i == [1, 2] for i in run(spawn_max_m=2.0))  # the same two ids every frame: not merged, not respawned

@@ -72,7 +72,8 @@ class TrackerConfig:
     max_range_m: float = 20.0  # detections farther than this are not used (too uncertain along the ray)
     spawn_chi2: float = 50.0  # an unassigned detection this near (Mahalanobis^2) to a track starts no new one
     spawn_max_m: float = float("inf")  # ... unless it is farther than this (m) from that track: far cones' covariance
-    # is metres long along the ray, so the next cone of a row 4-5 m behind would otherwise never get a track
+    # is metres long along the ray, so the next cone of a row 4-5 m behind would otherwise never get a track;
+    # two tracks farther apart than this are not merged either
     merge_chi2: float = 6.0  # two tracks this near (and of one class) are merged into the older one
     # the attitude part of the cones' covariance (given the frame's Attitude) is one error common to the frame,
     # correlated over attitude_tau_s, not independent noise (docs/tracking.md, "Attitude"); False: as before
@@ -359,6 +360,9 @@ class ConeTracker:
         d2 = _mahalanobis2(self.xy, self.P, self.xy, self.P)
         cls = self._classes()
         close = (d2 <= self.config.merge_chi2) & (cls[:, None] == cls[None, :])
+        if np.isfinite(self.config.spawn_max_m):  # farther apart than spawn_max_m: two cones, as at spawning
+            close &= np.hypot(self.xy[:, None, 0] - self.xy[None, :, 0], self.xy[:, None, 1] - self.xy[None, :, 1]) \
+                <= self.config.spawn_max_m
         np.fill_diagonal(close, False)
         dup = np.zeros(len(self), dtype=bool)
         if not close.any():
