@@ -16,15 +16,16 @@ from ._common import QOS_DATA, PerceptionNode, run_node  # noqa: I001 (sets DDS 
 
 from sensor_msgs.msg import PointCloud2
 
-from ..calib import DEFAULT_CAMERA, load_calibration
+from ..calib import load_calibration
 from . import _msgs
+from ._params import declare
 from ._tracking import NodeTracking
 
 
 class ConeTrackerNode(PerceptionNode):
     def __init__(self, **node_kwargs):
         super().__init__("cone_tracker", **node_kwargs)
-        calib = load_calibration(self.declare_parameter("calibration", DEFAULT_CAMERA).value)
+        calib = load_calibration(declare(self, "calibration"))
         self.tracking = NodeTracking(self, calib)
         self.subscribe_frames(PointCloud2, "/cones", self.on_cones, QOS_DATA)
         self.get_logger().info(f"calibration {calib.source}, frame {calib.frame_id}")

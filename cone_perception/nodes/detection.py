@@ -46,7 +46,9 @@ class DetectionNode(PerceptionNode):
         self.runtime = RuntimeParameters(self)
         for name in DetectorLoader.RUNTIME:
             self.runtime.register(name, lambda v, name=name: self.loader.set_threshold(self.detector, name, v))
-        self.debug = DebugImagePublisher(self, ConeMapper(load_calibration(declare(self, "calibration"))), self.runtime)
+        calib_name = declare(self, "calibration")  # optional: only the debug image's distances use it
+        self.debug = DebugImagePublisher(self, ConeMapper(load_calibration(calib_name)) if calib_name else None,
+                                         self.runtime)
         self.crop = None
         self.pending = None  # newest image received before any camera_info
         self.networks = [self.detector]  # the model's own and those built for a band (MAX_NETWORK_BANDS more)

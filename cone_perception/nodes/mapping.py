@@ -18,7 +18,7 @@ from ..attitude import attitude_estimator, attitude_for_boxes
 from ..calib import load_calibration
 from ..mapping import ConeMapper, validate_boxes
 from . import _msgs
-from ._attitude import declare_attitude, publish_attitude
+from ._attitude import declare_attitude
 from ._params import RuntimeParameters, declare
 
 
@@ -43,7 +43,7 @@ class MappingNode(PerceptionNode):
         validate_boxes(boxes)  # a bad message is dropped before it can move the attitude filter
         att = attitude_for_boxes(self.attitude, boxes, _msgs.stamp_ns(msg.header))
         self.publish_cones(self.mapper.map_boxes(boxes, att), msg.header)
-        publish_attitude(self, att, msg.header)
+        self.publish_attitude(att, msg.header)
 
 
 def main(args=None) -> int:

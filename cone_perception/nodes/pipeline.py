@@ -22,10 +22,11 @@ from ..calib import load_calibration
 from ..errors import FrameError
 from ..pipeline import FrameResult, Pipeline
 from . import _msgs
-from ._attitude import declare_attitude, publish_attitude
+from ._attitude import declare_attitude
 from ._debug import DebugImagePublisher
 from ._detector_params import DetectorLoader
 from ._params import RuntimeParameters, declare
+from ._tracking import NodeTracking
 
 
 class PipelineNode(PerceptionNode):
@@ -60,28 +61,26 @@ class PipelineNode(PerceptionNode):
             self.runtime.register(name, lambda v, name=name: self._set_threshold(name, v))
         self.debug = DebugImagePublisher(self, self.pipeline.mapper, self.runtime)
         self.tracking = None
-        if bool(self.declare_parameter("track", False).value):
-            from ._tracking import NodeTracking
-
+        if bool(declare(self, "track")):
             self.tracking = NodeTracking(self, calib)
         self.subscribe_camera(transport)
         self.get_logger().info(f"calibration {calib.source}, frame {calib.frame_id}, attitude {self.pipeline.attitude_mode}")
 
     def on_raw(self, msg: Image) -> None:
         t0 = time.perf_counter()
-        self.pipeline.frame_stamp_ns = _msgs.stamp_ns(msg.header)
-        self._publish(self.pipeline.process_raw(msg.encoding, msg.width, msg.height, msg.step, msg.data), msg.header, t0)
+        res = self.pipeline.process_raw(msg.encoding, msg.width, msg.height, msg.step, msg.data,
+                                        stamp_ns=_msgs.stamp_ns(msg.header))
+        self._publish(res, msg.header, t0)
 
     def on_compressed(self, msg: CompressedImage) -> None:
         t0 = time.perf_counter()
-        self.pipeline.frame_stamp_ns = _msgs.stamp_ns(msg.header)
-        self._publish(self.pipeline.process_compressed(msg.data), msg.header, t0)
+        self._publish(self.pipeline.process_compressed(msg.data, stamp_ns=_msgs.stamp_ns(msg.header)), msg.header, t0)
 
     def _publish(self, res: FrameResult, header, t0: float) -> None:
         self.pub_boxes.publish(_msgs.boxes_msg(res.boxes, header))
         self.publish_cones(res.cones, header)
         self.debug.publish(res.band, res.boxes, self.pipeline.calib.crop, header)
-        publish_attitude(self, res.attitude, header)
+        self.publish_attitude(res.attitude, header)
         if self.tracking is not None:
             try:
                 self.tracking.process(res.cones, header, res.attitude)
