@@ -315,7 +315,7 @@ def param_groups(node: str) -> list[tuple[str, tuple[ParamSpec, ...]]]:
     for other, when in spec.also:
         more = tuple(p for p in node_params(other).values() if p.name not in seen and p not in COMMON_PARAMS)
         seen.update(p.name for p in more)
-        groups.append((f"of {other}{' (' + when + ')' if when else ''}", more))
+        groups.append((f"of {other}{', ' + when if when else ''}", more))
     groups.append(("of every node", COMMON_PARAMS))
     return groups
 

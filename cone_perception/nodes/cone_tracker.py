@@ -3,11 +3,19 @@
 A local map of the cones around the car with ids (:mod:`cone_perception.tracker`): tracks survive
 missed frames, positions are fused over frames, each output keeps the capture stamp of its frame.
 
-Parameters
-  calibration (str, "example_mainhoop"): the camera's calibration (its band's ground footprint
-    tells where a cone should be seen).
-  and those of :mod:`cone_perception.nodes._tracking` (odom_topic, odom_type, odom_max_age_s,
-  publish_tracked_markers).
+Parameters (generated from cone_perception/params.py by ``cone-perception params --write``):
+  calibration (string, default example_mainhoop; a YAML path or a camera name in calib/): the
+    camera's calibration YAML: a path, or a camera name in calib/ (its band's ground footprint tells
+    where a cone should be seen)
+  odom_topic (string, default odom): the car's motion (odom_type); empty = none (motion estimated
+    from the cones)
+  odom_type (string, default odometry; odometry | twist): odom_topic's type: odometry =
+    nav_msgs/Odometry (twist.twist), twist = geometry_msgs/TwistStamped
+  odom_max_age_s (double, default 0.1; > 0.0): odometry older than this (s) at a frame is not used
+    for it (counted)
+  publish_tracked_markers (bool, default true): also publish /cones/tracked/markers: cylinders with
+    the track ids as text, for rviz2
+  Also those of every node (input_timeout_s, max_frame_age_s, input_rate_hz).
 """
 
 from __future__ import annotations

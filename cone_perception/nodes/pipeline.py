@@ -2,12 +2,20 @@
 
 ``image_raw`` (or ``image_raw/compressed``) in; ``cone_boxes``, ``/cones`` and ``/cones/markers`` out.
 
-Parameters: those of ``driver_adapter`` (calibration, input_transport), ``mapping``
-(publish_markers, attitude, imu_rest_deg; ``imu`` in for attitude imu / fused) and ``detection`` (model,
-backend, device, fp16, bf16, conf, iou, max_det, threads, debug_image, debug_image_hz; the debug image is
-the band of ``image_raw`` after the adapter); ``track`` (bool, false): also the tracker stage,
-``/cones/tracked`` out (parameters as ``cone_tracker``).
-Changeable at run time: publish_markers, conf, iou, max_det, debug_image, debug_image_hz.
+The network is built for the calibration's band at start-up; with ``track: true`` the tracker stage
+runs too and gets each frame's attitude.
+
+Parameters (generated from cone_perception/params.py by ``cone-perception params --write``):
+  far_rows (string, default ""; V0,V1 or empty): image rows V0,V1 also run at full resolution, the
+    whole width (the far band for small, far cones; a second forward, about a third of the frames/s;
+    docs/detector.md, Far band); empty = off
+  track (bool, default false): also the tracker stage: /cones/tracked out (the parameters of
+    cone_tracker); it gets each frame's attitude, which a separate cone_tracker does not
+  Also those of driver_adapter (calibration, input_transport); those of detection (model, backend,
+    device, fp16, bf16, threads, conf, iou, max_det, debug_image, debug_image_hz); those of mapping
+    (publish_markers, attitude, imu_rest_deg); those of cone_tracker, with track: true (odom_topic,
+    odom_type, odom_max_age_s, publish_tracked_markers); those of every node (input_timeout_s,
+    max_frame_age_s, input_rate_hz).
 """
 
 from __future__ import annotations
