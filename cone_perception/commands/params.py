@@ -5,11 +5,11 @@
   cone-perception params --write         # rewrite the README's tables and the node docstrings
   cone-perception params --check         # exit 1, naming the files, when they differ from the schema
 
-One home: :mod:`cone_perception.params` (name, type, default, range, description, set at run time or
-not, per node). Generated from it, between markers, in a source checkout: the README's tables and
-topic lists (and any in docs/*.md) between ``<!-- params:NODE -->`` and ``<!-- /params -->`` (NODE
-``every_node``: the parameters every node has), and the ``Parameters (generated ...)`` block of each
-node module's docstring. A test runs ``--check``.
+One home: cone_perception/params.py (name, type, default, range, description, set at run time or
+not, per node). Generated from it, in a source checkout: the README's topic lists and tables (and any
+in docs/*.md) between <!-- params:NODE --> and <!-- /params --> (NODE every_node: the parameters every
+node has), and the "Parameters (generated ...)" block of each node module's docstring. A test runs
+--check (tests/test_param_schema.py).
 """
 
 from __future__ import annotations
