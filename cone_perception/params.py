@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import textwrap
 from dataclasses import dataclass
 from typing import Union
 
@@ -322,8 +323,6 @@ def param_groups(node: str) -> list[tuple[str, tuple[ParamSpec, ...]]]:
 
 def help_text(node: str, width: int = 100) -> str:
     """What ``<node> --help`` prints: usage, topics and every parameter (plain text)."""
-    import textwrap
-
     spec = NODES[node]
 
     def wrap(text: str, first: str = "  ", rest: str = "      ") -> list[str]:
