@@ -346,3 +346,54 @@ def help_text(node: str, width: int = 100) -> str:
             out += wrap(param_line(p))
     out += ["", "Every node: the README, \"Nodes and parameters\"; docs/robustness.md for the counts on /diagnostics."]
     return "\n".join(out) + "\n"
+
+
+# -- the docs generated from the schema (cone-perception params --write writes them into the files) --------
+#: What regenerates the README's tables and the node docstrings.
+REGENERATE = "cone-perception params --write"
+#: The README's and docs' marker of the table of the parameters every node has.
+EVERY_NODE = "every_node"
+
+
+def _md(text: str) -> str:
+    return text.replace("|", "\\|")
+
+
+def _md_range(p: ParamSpec) -> str:
+    if p.choices is not None:
+        return ", ".join(f"`{c}`" if c else '`""`' for c in p.choices)
+    return _md(p.range_text())
+
+
+def markdown_block(key: str) -> str:
+    """The Markdown between the markers of ``key`` (a node, or :data:`EVERY_NODE`): the node's topics
+    and the table of its own parameters."""
+    head = "| parameter | type | default | range | set at run time | meaning |\n|---|---|---|---|---|---|\n"
+    if key == EVERY_NODE:
+        rows, out = COMMON_PARAMS, ""
+    else:
+        spec = NODES[key]
+        rows = spec.params
+        out = f"- Subscribed: {'; '.join(spec.subscribes)}\n- Published: {'; '.join(spec.publishes)}\n\n"
+    out += head + "".join(f"| `{p.name}` | {p.ros_type} | `{p.default_text()}` | {_md_range(p)} | "
+                          f"{'yes' if p.dynamic else ''} | {_md(p.description)} |\n" for p in rows)
+    if key != EVERY_NODE and NODES[key].also:
+        more = [f"`{o}`" + (f" ({w})" if w else "") for o, w in NODES[key].also]
+        mine = node_params(key)
+        differ = sorted({n for o, _ in NODES[key].also for n, p in node_params(o).items() if mine[n] != p})
+        where = f"; where two differ ({', '.join(f'`{n}`' for n in differ)}), the first's" if differ else ""
+        out += f"\nAlso the parameters of {', '.join(more[:-1])} and {more[-1]}, as in their tables{where}.\n"
+    return out
+
+
+def docstring_block(node: str) -> str:
+    """The ``Parameters (generated ...)`` block of the node module's docstring."""
+    lines = [f"Parameters (generated from cone_perception/params.py by ``{REGENERATE}``):"]
+    groups = param_groups(node)
+    for p in groups[0][1]:
+        lines += textwrap.wrap(param_line(p), 100, initial_indent="  ", subsequent_indent="    ",
+                               break_on_hyphens=False, break_long_words=False)
+    also = [f"those {title} ({', '.join(p.name for p in specs)})" for title, specs in groups[1:] if specs]
+    lines += textwrap.wrap("Also " + "; ".join(also) + ".", 100, initial_indent="  ", subsequent_indent="    ",
+                           break_on_hyphens=False, break_long_words=False)
+    return "\n".join(lines) + "\n"

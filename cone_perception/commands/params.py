@@ -17,15 +17,11 @@ from __future__ import annotations
 import argparse
 import re
 import sys
-import textwrap
 from pathlib import Path
 
 from ..errors import ConfigError
-from ..params import COMMON_PARAMS, NODES, ParamSpec, help_text, node_params, param_groups, param_line
+from ..params import EVERY_NODE, NODES, REGENERATE, docstring_block, help_text, markdown_block
 
-#: The README's and docs' marker of the table of the parameters every node has.
-EVERY_NODE = "every_node"
-COMMAND = "cone-perception params --write"
 _BLOCK = re.compile(r"<!-- params:(\w+)[^\n]*-->\n.*?<!-- /params -->", re.S)
 _DOC_BLOCK = re.compile(r"^Parameters \(generated[^\n]*\n(?:  [^\n]*\n)*", re.M)
 
@@ -42,50 +38,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the source checkout (default: the one this package runs from)")
 
 
-def _md(text: str) -> str:
-    return text.replace("|", "\\|")
-
-
-def _md_range(p: ParamSpec) -> str:
-    if p.choices is not None:
-        return ", ".join(f"`{c}`" if c else '`""`' for c in p.choices)
-    return _md(p.range_text())
-
-
-def markdown_block(key: str) -> str:
-    """The Markdown between the markers of ``key`` (a node, or :data:`EVERY_NODE`): the node's topics
-    and the table of its own parameters."""
-    head = "| parameter | type | default | range | set at run time | meaning |\n|---|---|---|---|---|---|\n"
-    if key == EVERY_NODE:
-        rows, out = COMMON_PARAMS, ""
-    else:
-        spec = NODES[key]
-        rows = spec.params
-        out = f"- Subscribed: {'; '.join(spec.subscribes)}\n- Published: {'; '.join(spec.publishes)}\n\n"
-    out += head + "".join(f"| `{p.name}` | {p.ros_type} | `{p.default_text()}` | {_md_range(p)} | "
-                          f"{'yes' if p.dynamic else ''} | {_md(p.description)} |\n" for p in rows)
-    if key != EVERY_NODE and NODES[key].also:
-        more = [f"`{o}`" + (f" ({w})" if w else "") for o, w in NODES[key].also]
-        mine = node_params(key)
-        differ = sorted({n for o, _ in NODES[key].also for n, p in node_params(o).items() if mine[n] != p})
-        where = f"; where two differ ({', '.join(f'`{n}`' for n in differ)}), the first's" if differ else ""
-        out += f"\nAlso the parameters of {', '.join(more[:-1])} and {more[-1]}, as in their tables{where}.\n"
-    return out
-
-
-def docstring_block(node: str) -> str:
-    """The ``Parameters (generated ...)`` block of the node module's docstring."""
-    lines = [f"Parameters (generated from cone_perception/params.py by ``{COMMAND}``):"]
-    groups = param_groups(node)
-    for p in groups[0][1]:
-        lines += textwrap.wrap(param_line(p), 100, initial_indent="  ", subsequent_indent="    ",
-                               break_on_hyphens=False, break_long_words=False)
-    also = [f"those {title} ({', '.join(p.name for p in specs)})" for title, specs in groups[1:] if specs]
-    lines += textwrap.wrap("Also " + "; ".join(also) + ".", 100, initial_indent="  ", subsequent_indent="    ",
-                           break_on_hyphens=False, break_long_words=False)
-    return "\n".join(lines) + "\n"
-
-
 def regenerate(root: Path) -> dict[Path, tuple[str, str]]:
     """``file -> (text now, text generated)`` for every file with generated parts under ``root``."""
     readme = root / "README.md"
@@ -99,7 +51,7 @@ def regenerate(root: Path) -> dict[Path, tuple[str, str]]:
             key = m.group(1)
             if key != EVERY_NODE and key not in NODES:
                 raise ConfigError(str(f), f"params:{key}", f"no such node; known: {', '.join(NODES)}, {EVERY_NODE}")
-            return (f"<!-- params:{key} (generated from cone_perception/params.py by `{COMMAND}`) -->\n"
+            return (f"<!-- params:{key} (generated from cone_perception/params.py by `{REGENERATE}`) -->\n"
                     f"{markdown_block(key)}<!-- /params -->")
 
         out[f] = (text, _BLOCK.sub(block, text))
@@ -129,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
         bad = stale(root)
         if bad:
             print(f"out of date with cone_perception/params.py: {', '.join(str(f.relative_to(root)) for f in bad)}; "
-                  f"run `{COMMAND}`", file=sys.stderr)
+                  f"run `{REGENERATE}`", file=sys.stderr)
             return 1
         print("README tables and node docstrings match cone_perception/params.py")
         return 0
