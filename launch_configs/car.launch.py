@@ -10,7 +10,7 @@
 calibration file). ``image_topic`` is remapped to the nodes' ``image_raw`` input.
 ``tf:=true`` starts tf2_ros ``static_transform_publisher`` for ``rear_axle`` ->
 ``<calibration camera>_optical_frame`` (or ``camera_frame:=...``) from the calibration's mount pose
-(``cone_perception.transforms``). ``rviz:=true`` starts rviz2 with ``launch_configs/cone_perception.rviz``.
+(``cone_perception.geometry.transforms``). ``rviz:=true`` starts rviz2 with ``launch_configs/cone_perception.rviz``.
 """
 
 import os
@@ -38,8 +38,8 @@ def _nodes(context):
     remap = [("image_raw", image_topic), ("image_raw/compressed", image_topic + "/compressed")]
     extra = []
     if _true(context, "tf"):
-        from cone_perception.calib import DEFAULT_CAMERA, load_calibration
-        from cone_perception.transforms import calibration_in_params_file, optical_frame_transform
+        from cone_perception.geometry.calib import DEFAULT_CAMERA, load_calibration
+        from cone_perception.geometry.transforms import calibration_in_params_file, optical_frame_transform
 
         calib = load_calibration(calibration_in_params_file(params) or DEFAULT_CAMERA)
         tf = optical_frame_transform(calib, LaunchConfiguration("camera_frame").perform(context) or None)

@@ -10,11 +10,10 @@ import numpy as np
 import pytest
 
 from cone_perception.attitude import ImuAttitude
-from cone_perception.calib import load_calibration
-from cone_perception.egomotion import Motion2D
+from cone_perception.geometry.calib import load_calibration
 from cone_perception.pipeline import Pipeline
 from cone_perception.records import BOX_DTYPE, CONE_DTYPE
-from cone_perception.tracker import ConeTracker, TrackerConfig
+from cone_perception.tracking import ConeTracker, Motion2D, TrackerConfig
 
 CALIB = load_calibration("example_mainhoop")
 

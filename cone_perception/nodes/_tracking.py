@@ -1,9 +1,9 @@
 """The tracker in a node (``cone_tracker``, and ``pipeline`` with ``track: true``): its parameters
 (``odom_topic``, ``odom_type``, ``odom_max_age_s``, ``publish_tracked_markers``: the ``cone_tracker``
 table of :mod:`cone_perception.params`), odometry in, ``/cones/tracked`` and ``/cones/tracked/markers``
-out. The logic is :class:`cone_perception.tracker.TrackingStage`.
+out. The logic is :class:`cone_perception.tracking.TrackingStage`.
 
-Health: the tracker's event counts (:attr:`cone_perception.tracker.ConeTracker.events`) are values
+Health: the tracker's event counts (:attr:`cone_perception.tracking.ConeTracker.events`) are values
 ``tracker:<event>`` of the node's ``/diagnostics`` status; a gap, stale odometry, a refused twist, a
 failed registration or a bad cone in the period makes it WARN.
 """
@@ -15,7 +15,7 @@ from nav_msgs.msg import Odometry
 from sensor_msgs.msg import PointCloud2
 from visualization_msgs.msg import MarkerArray
 
-from ..tracker import INPUT_EVENTS, TrackingStage
+from ..tracking import INPUT_EVENTS, TrackingStage
 from . import _msgs
 from ._common import QOS_DATA, WARN_THROTTLE_S
 from ._params import declare
