@@ -172,6 +172,15 @@ def test_node_executable_help_prints_usage_parameters_and_topics_without_rclpy(n
     assert "subscribed:" in p.stdout and "published:" in p.stdout and "/diagnostics" in p.stdout
 
 
+@pytest.mark.parametrize("flag", ["--help", "-h"])
+def test_the_command_answers_help_without_rclpy_too(flag, no_rclpy):
+    for argv in ([flag], ["params", flag], ["params", "pipeline"]):
+        p = subprocess.run([str(BIN / "cone-perception"), *argv], env=no_rclpy, capture_output=True, text=True,
+                           timeout=60)
+        assert p.returncode == 0 and p.stdout.startswith("usage:"), (argv, p.stderr)
+    assert p.stdout == help_text("pipeline")
+
+
 def test_help_is_checked_in_process_too_and_ros_args_pass_through(monkeypatch, capsys):
     """Without help the node module gets argv untouched (--ros-args included); -h inside --ros-args is ROS's."""
     code = ("import sys; from cone_perception.nodes.executables import launch; rc = launch('pipeline', "
