@@ -2,6 +2,7 @@
 
   cone-perception replay BAG [--calib CAL] [--model M] [--out OUT] [--gt-topic /cones_gt]
   cone-perception replay BAG --track [--drop-detections P] [--odom-topic odom] [--gt-topic /cones_gt] [...]
+  cone-perception replay BAG --track [--tracker FIELD=VALUE ...] [--track-conf S] [--max-range M] [...]
   cone-perception replay BAG --live fused|separate [--track] [...]
 
 Offline: every frame of the bag's camera topic (YUYV, bgr8/rgb8 or JPEG/PNG) goes through the
@@ -9,7 +10,8 @@ same code as the fused node; ``/cone_boxes`` and ``/cones`` are written to OUT (
 with the original stamps. Live: the frames are published (raw CDR) into node processes - the
 three separate nodes or the fused ``pipeline`` node - and what they publish is recorded.
 Prints frames, throughput, per-stage latency percentiles, dropped frames by cause, and with
-``--gt-topic`` the localisation table (recall and position error per distance group).
+``--gt-topic`` the localisation table (recall and position error per distance group) and the range
+bands to 40 m (recall and false cones; issue 26).
 ``--track`` adds the cone tracker (``/cones/tracked``); on a synthetic bag with ``--gt-topic`` it prints
 recall, false cones, error, id switches, IDF1 and ego-motion error within 15 m, tracked against raw
 (live: no ego-motion error, the nodes do not publish their estimate).
@@ -52,6 +54,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--odom-topic", default=None,
                    help="offline, --track: the car's motion from this nav_msgs/Odometry or geometry_msgs/TwistStamped topic "
                         "of the bag (default: estimated from the cones)")
+    p.add_argument("--track-conf", type=float, default=None, metavar="S",
+                   help="offline, --track: run the detector at this lower score threshold; detections from S up to --conf "
+                        "go to the tracker only (weak detections: a cone on /cones/tracked once they recur or land on a "
+                        "track; docs/tracking.md 'Weak detections'). Default: off")
+    p.add_argument("--tracker", action="append", default=[], metavar="FIELD=VALUE",
+                   help="offline, --track: set a TrackerConfig field (cone_perception/tracking/tracker.py, units in its "
+                        "names), repeatable, e.g. --tracker max_range_m=40 --tracker spawn_max_m=2")
+    p.add_argument("--max-range", type=float, default=None, metavar="M",
+                   help="offline: use this max_range_m instead of the calibration's (cones farther are dropped; to "
+                        "measure a range before setting it in a calibration)")
     p.add_argument("--far-rows", default=None, metavar="V0,V1",
                    help="also run these image rows at full resolution (the far band, docs/detector.md 'Far band'); "
                         "live: the pipeline node's far_rows (fused only)")

@@ -9,6 +9,8 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import fields as dataclass_fields
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -21,12 +23,13 @@ from ..data.outfiles import print_written, refuse_existing, remove_bag
 from ..detector import Detector, default_model_path
 from ..detector.farband import FarBand, far_band_crop
 from ..errors import ConfigError
-from ..evaluation import LocalisationReport, format_localisation
+from ..evaluation import GT_MIN_VISIBLE, LocalisationReport, format_localisation
 from ..evaluation.attitude import attitude_plot, format_attitude_report
 from ..evaluation.tracking import DriveEvaluation, format_drive_evaluation
 from ..geometry.calib import load_calibration, resolve_calibration_path
 from ..pipeline import Pipeline
 from ..timing import format_table, summarize
+from ..tracking import TrackerConfig
 from .offline import offline_replay
 from .tracking import ReplayTracking, drive_truth_beside, format_replay_tracking
 
@@ -37,8 +40,18 @@ def _progress(disable: bool):
 
 def run_replay(args: argparse.Namespace) -> int:
     calib = load_calibration(args.calib)
-    if args.live and (args.drop_detections or args.odom_topic):
-        raise ConfigError("--live", None, "--drop-detections and --odom-topic work offline only")
+    if args.live and (args.drop_detections or args.odom_topic or args.track_conf is not None
+                      or args.tracker or args.max_range is not None):
+        raise ConfigError("--live", None, "--drop-detections, --odom-topic, --track-conf, --tracker and --max-range "
+                                          "work offline only")
+    if args.track_conf is not None and not (args.track and 0.0 < args.track_conf < args.conf):
+        raise ConfigError("--track-conf", None, f"needs --track and a score in (0, --conf {args.conf:g}), got {args.track_conf:g}")
+    if args.max_range is not None and not (np.isfinite(args.max_range) and args.max_range > 0):
+        raise ConfigError("--max-range", None, f"must be a positive number of metres, got {args.max_range:g}")
+    if args.tracker and not args.track:
+        raise ConfigError("--tracker", None, "needs --track")
+    if args.max_range is not None:
+        calib = replace(calib, max_range_m=float(args.max_range))
     if args.far_rows:  # a bad value fails before any model loads or node starts
 
         far_band_crop(args.far_rows, calib.image_width, calib.image_height, calib.crop, "--far-rows")
@@ -78,15 +91,17 @@ def _imu_source(args, calib):
 def _run_offline(args, calib) -> dict:
     tracking = _tracking(args, calib)  # its bad options fail before the model loads
     # built for the calibration's band, as the pipeline node does (a fixed-size backend never letterboxes)
+    conf = args.track_conf if args.track_conf is not None else args.conf  # the pipeline splits at --conf
     det = Detector.load_for_band(args.model or default_model_path(), (calib.crop.out_width, calib.crop.out_height),
-                                 backend=args.backend, conf=args.conf, threads=args.threads or None, bf16=args.bf16)
+                                 backend=args.backend, conf=conf, threads=args.threads or None, bf16=args.bf16)
     det.warmup()
     far = None
     if args.far_rows:
         far = FarBand.load(det.source, args.far_rows, calib.image_width, calib.image_height, calib.crop, "--far-rows",
-                           backend=args.backend, conf=args.conf, threads=args.threads or None, bf16=args.bf16)
+                           backend=args.backend, conf=conf, threads=args.threads or None, bf16=args.bf16)
     imu = _imu_source(args, calib)
-    res = offline_replay(args.bag, Pipeline(calib, det, args.attitude, imu, far), args.topic, args.out, args.gt_topic,
+    pipeline = Pipeline(calib, det, args.attitude, imu, far, cones_conf=args.conf if args.track_conf is not None else None)
+    res = offline_replay(args.bag, pipeline, args.topic, args.out, args.gt_topic,
                          _progress(args.no_progress), imu_topic=args.imu_topic, tracking=tracking)
     stages = res.timer.summary()
     n = res.stats.ok
@@ -113,6 +128,29 @@ def _run_offline(args, calib) -> dict:
             "stages": stages, "localisation": res.localisation, "tracking": res.tracking}
 
 
+def tracker_config(settings: list[str]) -> TrackerConfig:
+    """A :class:`TrackerConfig` with ``FIELD=VALUE`` settings (``--tracker``); a bad one raises ConfigError naming it."""
+    config, fields = TrackerConfig(), {f.name: f for f in dataclass_fields(TrackerConfig)}
+    for item in settings:
+        name, sep, text = item.partition("=")
+        if not sep or name not in fields:
+            raise ConfigError("--tracker", item, f"must be FIELD=VALUE with a TrackerConfig field ({', '.join(fields)})")
+        kind = type(getattr(config, name))
+        try:
+            if kind is bool:
+                if text.lower() not in ("true", "false", "1", "0"):
+                    raise ValueError(text)
+                value = text.lower() in ("true", "1")
+            else:
+                value = kind(text)
+                if not np.isfinite(value) and not (kind is float and np.isposinf(value)):
+                    raise ValueError(text)
+        except ValueError:
+            raise ConfigError("--tracker", item, f"{name} takes a {kind.__name__}, got {text!r}") from None
+        setattr(config, name, value)
+    return config
+
+
 def _tracking(args, calib):
     """The replay's tracking (``--track``, ``--drop-detections``), or None."""
     if not args.track and args.drop_detections == 0:
@@ -120,7 +158,10 @@ def _tracking(args, calib):
 
     truth = drive_truth_beside(args.bag) if args.gt_topic else None
     twists = read_twists(args.bag, args.odom_topic) if (args.odom_topic and args.track) else None
-    return ReplayTracking(calib, args.track, args.drop_detections, args.drop_seed, truth, twists)
+    config = tracker_config(args.tracker)
+    if args.track_conf is not None:
+        config.strong_score = args.conf
+    return ReplayTracking(calib, args.track, args.drop_detections, args.drop_seed, truth, twists, config)
 
 
 def _run_live(args, calib) -> dict:
@@ -149,7 +190,7 @@ def _run_live(args, calib) -> dict:
     loc = None
     if args.gt_topic:
         truth = read_ground_truth(args.bag, args.gt_topic)
-        rep = LocalisationReport(max_range_m=calib.max_range_m)
+        rep = LocalisationReport(max_range_m=calib.max_range_m, min_visible=GT_MIN_VISIBLE)
         for stamp, cones in sorted(res.cones.items()):
             if stamp in truth:
                 rep.add_frame(cones, truth[stamp])
