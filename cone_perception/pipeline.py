@@ -42,16 +42,19 @@ class Pipeline:
     ``fixed``). ``imu``: an :class:`~cone_perception.attitude.ImuAttitude` the caller feeds; set
     :attr:`frame_stamp_ns` before each frame. ``far``: a :class:`~cone_perception.detector.farband.FarBand`
     (full-resolution rows near the horizon, a second forward; its boxes merge with the band's), or None.
+    ``attitude_config``: the image fit's :class:`~cone_perception.attitude.ImageAttitudeConfig` (e.g. with the
+    detector's measured ``box_model``); None: the defaults (the rendered drives' box table).
     """
 
-    def __init__(self, calib: Calibration, detector, attitude: str | None = None, imu=None, far: FarBand | None = None):
+    def __init__(self, calib: Calibration, detector, attitude: str | None = None, imu=None, far: FarBand | None = None,
+                 attitude_config=None):
         self.calib = calib
         self.far = far  # the far band (full-resolution rows near the horizon, detector/farband.py), or None
         self.adapter = DriverAdapter(calib.crop, calib.image_width, calib.image_height, far.crop if far else None)
         self.detector = detector
         self.mapper = ConeMapper(calib)
         self.imu = imu  # an ImuAttitude the caller feeds (modes imu, fused), or None
-        self.attitude_mode, self.attitude = attitude_estimator(self.mapper, attitude, imu)
+        self.attitude_mode, self.attitude = attitude_estimator(self.mapper, attitude, imu, attitude_config)
         self.frame_stamp_ns: int | None = None  # the capture stamp of the frame being processed (for the IMU)
 
     def _run(self, band: np.ndarray, t_adapter_s: float, strip: np.ndarray | None = None) -> FrameResult:

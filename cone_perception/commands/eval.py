@@ -81,6 +81,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="localisation: fixed (the calibration's H, default) or image (each image's camera pitch/roll fitted "
                         "from its own detections first, as `map --boxes --attitude image`; needs mount_pose and "
                         "camera_matrix in the calibration); the table gives each group's median predicted 1-sigma")
+    p.add_argument("--box-model-out", type=Path, default=None, metavar="FILE.yaml",
+                   help="also measure the detector's box model (issue 27: median detected/labelled height and top/bottom "
+                        "offsets per box height at the model input, and per class; whole labelled cones inside --band, "
+                        "matched at --iou and --conf) and write it to FILE.yaml; beside the model as "
+                        "MODEL.pt.box_model.yaml the image attitude uses it")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -111,7 +116,29 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(str(args.out), None, f"cannot write: {e.strerror}") from None
     print(format_summary(res))
     print(f"wrote {', '.join(p.name for p in files.values())} to {args.out}")
+    if args.box_model_out is not None:
+        _write_box_model(args, res)
     return 0
+
+
+def _write_box_model(args: argparse.Namespace, res) -> None:
+    from ..detector.model_files import write_box_model
+    from ..errors import ConfigError
+    from ..evaluation.boxfit import format_box_model, measure_box_model
+
+    cmd = "cone-perception eval " + " ".join(sys.argv[2:]) if len(sys.argv) > 2 else ""
+    try:
+        bm = measure_box_model(res.images, args.conf, args.iou, args.band,
+                               note=f"{args.pred.name} against {args.gt}, band {args.band}, conf {args.conf}, IoU {args.iou}")
+    except ValueError as e:
+        raise ConfigError(str(args.pred), None, f"--box-model-out: {e}") from None
+    try:
+        write_box_model(args.box_model_out, bm, cmd)
+    except OSError as e:
+        raise ConfigError(str(args.box_model_out), None, f"cannot write: {e.strerror}") from None
+    print("box model (detected box against the labelled cone):")
+    print(format_box_model(bm))
+    print(f"wrote {args.box_model_out}")
 
 
 def _run_tracked(args: argparse.Namespace) -> int:

@@ -8,6 +8,10 @@
   cone-perception map --calib CAL --boxes boxes.csv --attitude image
       -> the same, the boxes taken as ONE frame whose camera attitude is fitted from them first
          (default with a mount pose in the calibration; the attitude used goes to stderr)
+  cone-perception map --calib CAL --boxes preds.jsonl [--model MODEL.pt] [--conf 0.25]
+      -> the frames of a prediction file of `detect` (JSON lines), mapped IN ORDER with one attitude
+         filter as the node runs it: one line ``image,x,y,class_id,score,cov_xx,cov_xy,cov_yy`` per
+         kept cone; the attitude per frame and the fit's outcome counts go to stderr
 """
 
 from __future__ import annotations
@@ -18,11 +22,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ..attitude import attitude_estimator
+from ..attitude import ImageAttitudeConfig, attitude_estimator, attitude_for_boxes
+from ..data.predictions import read_predictions
+from ..detector.model_files import box_model_or_default
 from ..errors import ConfigError, FrameError
 from ..geometry.calib import DEFAULT_CAMERA, load_calibration
 from ..mapping import ConeMapper, validate_boxes
-from ..records import read_boxes_csv
+from ..params import DEFAULT_CONF
+from ..records import BOX_DTYPE, read_boxes_csv
 
 
 def _pixel(text: str) -> tuple[float, float]:
@@ -43,10 +50,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--calib", default=DEFAULT_CAMERA, help="calibration YAML or shipped camera name (default: %(default)s)")
     g = p.add_mutually_exclusive_group(required=True)
     g.add_argument("--pixel", type=_pixel, action="append", metavar="U,V", help="a full-image pixel; repeatable")
-    g.add_argument("--boxes", type=Path, metavar="FILE.csv", help="CSV of boxes u1,v1,u2,v2,score,class_id")
+    g.add_argument("--boxes", type=Path, metavar="FILE",
+                   help="CSV of boxes u1,v1,u2,v2,score,class_id (one frame), or a prediction file of `detect` "
+                        "(.jsonl: many frames, mapped in order with one attitude filter)")
     p.add_argument("--attitude", choices=("fixed", "image"), default=None,
                    help="--boxes: fixed (the calibration's H) or image (the boxes are one frame: fit its pitch/roll "
                         "first; needs mount_pose and camera_matrix). Default: image when the calibration has both, else fixed")
+    p.add_argument("--model", type=Path, default=None, metavar="MODEL",
+                   help="--attitude image: the detector that drew the boxes; the fit reads them through its box model "
+                        "(MODEL.box_model.yaml, measured on real frames by `eval --box-model-out`; a model without one "
+                        "gets a conservative default and a warning). Default: the rendered drives' box table (synthetic boxes)")
+    p.add_argument("--conf", type=float, default=DEFAULT_CONF,
+                   help="a .jsonl prediction file: map only boxes of at least this score (default %(default)s)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -59,12 +74,15 @@ def run(args: argparse.Namespace) -> int:
         for (u, v), (x, y) in zip(uv, xy):
             out.write(f"{u:g},{v:g},{x:.4f},{y:.4f}\n")
         return 0
+    config = ImageAttitudeConfig(box_model=box_model_or_default(args.model)) if args.model is not None else None
+    mode, est = attitude_estimator(mapper, args.attitude, None, config)
+    if args.boxes.suffix == ".jsonl":
+        return _run_sequence(args, calib, mapper, mode, est)
     boxes = read_boxes_csv(args.boxes)
     try:
         validate_boxes(boxes)
     except FrameError as e:
         raise ConfigError(str(args.boxes), None, str(e)) from None
-    mode, est = attitude_estimator(mapper, args.attitude)
     att = None
     if est is not None:
         b = np.column_stack([boxes["u1"], boxes["v1"], boxes["u2"], boxes["v2"]]).astype(np.float64)
@@ -77,4 +95,30 @@ def run(args: argparse.Namespace) -> int:
             f"{c['x']:.4f},{c['y']:.4f},{int(c['class_id'])},{c['score']:.4f},"
             f"{c['cov_xx']:.6g},{c['cov_xy']:.6g},{c['cov_yy']:.6g}\n"
         )
+    return 0
+
+
+def _run_sequence(args: argparse.Namespace, calib, mapper: ConeMapper, mode: str, est) -> int:
+    """The frames of a prediction file in order, one attitude filter across them (as the node sees a stream)."""
+    out = sys.stdout
+    n_frames = 0
+    for pred in read_predictions(args.boxes):
+        b = pred.boxes[pred.boxes["score"] >= args.conf].astype(BOX_DTYPE)
+        sx, sy = calib.image_width / pred.width, calib.image_height / pred.height  # image px -> the calibration's px
+        b["u1"] *= sx
+        b["u2"] *= sx
+        b["v1"] *= sy
+        b["v2"] *= sy
+        att = attitude_for_boxes(est, b)
+        n_frames += 1
+        if est is not None:
+            print(f"{pred.image}: attitude ({mode}, {att.source}, {att.n_cones} cones): pitch {att.pitch_deg:+.3f} +- "
+                  f"{att.sigma_pitch_deg:.3f} deg, roll {att.roll_deg:+.3f} +- {att.sigma_roll_deg:.3f} deg", file=sys.stderr)
+        for c in mapper.map_boxes(b, att):
+            out.write(f"{pred.image},{c['x']:.4f},{c['y']:.4f},{int(c['class_id'])},{c['score']:.4f},"
+                      f"{c['cov_xx']:.6g},{c['cov_xy']:.6g},{c['cov_yy']:.6g}\n")
+    summary = f"{n_frames} frames of {args.boxes}"
+    if est is not None:
+        summary += ", attitude fits: " + ", ".join(f"{k} {v}" for k, v in est.counts.as_dict().items())
+    print(summary, file=sys.stderr)
     return 0

@@ -71,6 +71,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="camera attitude per frame: fixed (the calibration's H), image (from the cone boxes), imu (the "
                         "bag's IMU), fused (IMU + image); all but fixed need mount_pose in the calibration. Default: "
                         "fused when the bag has the IMU topic, else image, fixed without a mount pose")
+    p.add_argument("--box-model", choices=("auto", "model", "rendered"), default="auto",
+                   help="offline, attitude image/fused: which box model the image fit reads the detector's boxes with: "
+                        "model (measured on real frames, MODEL.box_model.yaml beside the model file; a model without one "
+                        "gets a conservative default and a warning), rendered (the rendered drives' table, for synthetic "
+                        "bags), auto (rendered with --gt-topic, i.e. a synthetic drive with truth; else model; "
+                        "default %(default)s)")
     p.add_argument("--imu-topic", default="/imu", help="offline: the bag's sensor_msgs/Imu topic (default %(default)s)")
     p.add_argument("--imu-rest", default="0,0", metavar="PITCH,ROLL",
                    help="the IMU's pitch and roll (degrees) with the car at rest on the level calibration ground "
@@ -153,7 +159,13 @@ def _run_offline(args, calib) -> dict:
         far = FarBand.load(det.source, args.far_rows, calib.image_width, calib.image_height, calib.crop, "--far-rows",
                            backend=args.backend, conf=args.conf, threads=args.threads or None, bf16=args.bf16)
     imu = _imu_source(args, calib)
-    res = offline_replay(args.bag, Pipeline(calib, det, args.attitude, imu, far), args.topic, args.out, args.gt_topic,
+    att_cfg = None
+    if args.box_model == "model" or (args.box_model == "auto" and not args.gt_topic):
+        from ..attitude import ImageAttitudeConfig
+        from ..detector.model_files import box_model_or_default
+
+        att_cfg = ImageAttitudeConfig(box_model=box_model_or_default(det.source))
+    res = offline_replay(args.bag, Pipeline(calib, det, args.attitude, imu, far, att_cfg), args.topic, args.out, args.gt_topic,
                          _progress(args.no_progress), imu_topic=args.imu_topic, tracking=tracking)
     stages = res.timer.summary()
     n = res.stats.ok
