@@ -17,6 +17,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from ..errors import ConfigError
+from ..evaluation.boxfit import format_box_model, measure_box_model
 from ..params import DEFAULT_CONF
 
 
@@ -92,7 +94,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import logging
 
-    from ..errors import ConfigError
     from ..evaluation.report import evaluate_predictions, format_summary, write_report
 
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(message)s")
@@ -122,9 +123,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _write_box_model(args: argparse.Namespace, res) -> None:
-    from ..detector.model_files import write_box_model
-    from ..errors import ConfigError
-    from ..evaluation.boxfit import format_box_model, measure_box_model
+    from ..detector.model_files import write_box_model  # loads torch (detector/__init__)
 
     cmd = "cone-perception eval " + " ".join(sys.argv[2:]) if len(sys.argv) > 2 else ""
     try:
@@ -142,7 +141,6 @@ def _write_box_model(args: argparse.Namespace, res) -> None:
 
 
 def _run_tracked(args: argparse.Namespace) -> int:
-    from ..errors import ConfigError
     from ..evaluation.tracking import (
         evaluate_tracking_bag, format_drive_evaluation, load_drive_truth, write_tracking_report,
     )

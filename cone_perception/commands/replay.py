@@ -25,9 +25,10 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from ..attitude import ATTITUDE_MODES
+from ..attitude import ATTITUDE_MODES, ImageAttitudeConfig
 from ..data.outfiles import print_written, refuse_existing, remove_bag
 from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, RUNTIME_THREADS, Detector, default_model_path
+from ..detector.model_files import box_model_or_default
 from ..evaluation import LocalisationReport, format_localisation
 from ..evaluation.attitude import format_attitude_report
 from ..geometry.calib import DEFAULT_CAMERA, load_calibration, resolve_calibration_path
@@ -161,9 +162,6 @@ def _run_offline(args, calib) -> dict:
     imu = _imu_source(args, calib)
     att_cfg = None
     if args.box_model == "model" or (args.box_model == "auto" and not args.gt_topic):
-        from ..attitude import ImageAttitudeConfig
-        from ..detector.model_files import box_model_or_default
-
         att_cfg = ImageAttitudeConfig(box_model=box_model_or_default(det.source))
     res = offline_replay(args.bag, Pipeline(calib, det, args.attitude, imu, far, att_cfg), args.topic, args.out, args.gt_topic,
                          _progress(args.no_progress), imu_topic=args.imu_topic, tracking=tracking)
