@@ -83,7 +83,7 @@ class ImageAttitudeConfig:
     box_model: BoxModel | None = None
     #: per frame, the image attitude is used only where it beats the calibrated H (:meth:`ImageAttitude.trusted`):
     #: at least ``trust_min_cones`` cones in the fit, the fit's residuals no more than ``trust_max_scale``
-    #: times their expected size (RMS of the normalised residuals of the inliers), and the estimate's
+    #: times their expected size (1.4826 times the median absolute normalised residual), and the estimate's
     #: 1-sigma below ``trust_max_sigma_deg``; otherwise the frame is mapped with the calibration's H (counted)
     trust_min_cones: int = 3
     trust_max_scale: float = 2.5
@@ -290,9 +290,10 @@ class ImageAttitude:
         if n_used < c.min_cones:
             return None
         A = Jo.T @ ((w / so**2)[:, None] * Jo) + lam
-        raw = float(np.sum(w[inl] * e[inl] ** 2) / max(n_used - 2, 1))
-        self.last_scale = float(np.sqrt(raw))  # RMS normalised residual (1: as expected); see trusted()
-        return theta, inv2(A) * max(1.0, raw), n_used
+        scale = max(1.0, float(np.sum(w[inl] * e[inl] ** 2) / max(n_used - 2, 1)))
+        # the residuals' robust spread in sigmas (1: as the cone model expects; all cones, outliers too): trusted()
+        self.last_scale = 1.4826 * float(np.median(np.abs(e)))
+        return theta, inv2(A) * scale, n_used
 
     def trusted(self, n_cones: int, sd_deg: np.ndarray) -> bool:
         """Whether this frame's image attitude (from a fit of ``n_cones`` cones whose residual scale is
