@@ -192,7 +192,8 @@ def _run_offline(args, calib) -> dict:
                       f"{args.bag.name}: attitude {res.attitude_mode}")
         print_written([args.attitude_png], "replay")
     return {"mode": "offline", "frames": n, "dropped": dict(res.stats.dropped), "wall_s": res.wall_s,
-            "stages": stages, "localisation": res.localisation, "tracking": res.tracking}
+            "stages": stages, "localisation": res.localisation, "tracking": res.tracking,
+            "attitude_fits": res.pipeline_attitude}
 
 
 def _tracking(args, calib):
