@@ -367,7 +367,7 @@ def test_map_boxes_of_one_frame_with_the_image_attitude(tmp_path, capsys):
         f"{b[0]},{b[1]},{b[2]},{b[3]},0.9,{c}\n" for b, c in zip(boxes, CONES_CLS[near])))
     errs = {}
     for mode in ("fixed", "image"):
-        assert main(["map", "--calib", str(cal_path), "--boxes", str(csv), "--attitude", mode]) == 0
+        assert main(["map", "--calib", str(cal_path), "--boxes", str(csv), "--attitude", mode, "--box-model", "rendered"]) == 0
         cap = capsys.readouterr()
         xy = np.array([[float(v) for v in line.split(",")[:2]] for line in cap.out.splitlines()])
         assert len(xy) == 12

@@ -160,7 +160,7 @@ def test_map_boxes_of_a_prediction_file_runs_one_filter_in_order(tmp_path, capsy
     pred.write_text("\n".join(lines) + "\n")
     assert main(["map", "--calib", str(cal_path), "--boxes", str(pred), "--attitude", "fixed"]) == 0
     fixed = np.array([[float(v) for v in line.split(",")[1:3]] for line in capsys.readouterr().out.splitlines()[-12:]])
-    assert main(["map", "--calib", str(cal_path), "--boxes", str(pred), "--attitude", "image"]) == 0
+    assert main(["map", "--calib", str(cal_path), "--boxes", str(pred), "--attitude", "image", "--box-model", "rendered"]) == 0
     cap = capsys.readouterr()
     out = [line.split(",") for line in cap.out.splitlines()]
     assert [o[0] for o in out] == [f"f{k}" for k in range(6) for _ in range(2 if k == 3 else 12)]

@@ -7,7 +7,9 @@
          ``u1,v1,u2,v2,score,class_id``, full-image px, optional header line)
   cone-perception map --calib CAL --boxes boxes.csv --attitude image
       -> the same, the boxes taken as ONE frame whose camera attitude is fitted from them first
-         (default with a mount pose in the calibration; the attitude used goes to stderr)
+         (default with a mount pose in the calibration; the attitude used goes to stderr), read through
+         the box model of the detector that drew them (--model, default the shipped model;
+         --box-model rendered for boxes of a synthetic drive)
   cone-perception map --calib CAL --boxes preds.jsonl [--model MODEL.pt] [--conf 0.25]
       -> the frames of a prediction file of `detect` (JSON lines), mapped IN ORDER with one attitude
          filter as the node runs it: one line ``image,x,y,class_id,score,cov_xx,cov_xy,cov_yy`` per
@@ -24,7 +26,7 @@ import numpy as np
 
 from ..attitude import ImageAttitudeConfig, attitude_estimator, attitude_for_boxes
 from ..data.predictions import read_predictions
-from ..detector.model_files import box_model_or_default
+from ..detector.model_files import box_model_or_default, default_model_path
 from ..errors import ConfigError, FrameError
 from ..geometry.calib import DEFAULT_CAMERA, load_calibration
 from ..mapping import ConeMapper, validate_boxes
@@ -59,7 +61,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", type=Path, default=None, metavar="MODEL",
                    help="--attitude image: the detector that drew the boxes; the fit reads them through its box model "
                         "(MODEL.box_model.yaml, measured on real frames by `eval --box-model-out`; a model without one "
-                        "gets a conservative default and a warning). Default: the rendered drives' box table (synthetic boxes)")
+                        "gets a conservative default and a warning). Default: the shipped default model")
+    p.add_argument("--box-model", choices=("model", "rendered"), default="model",
+                   help="--attitude image: model (the --model's box model, for real frames; default) or rendered (the "
+                        "rendered drives' box table, for boxes of a synthetic drive)")
     p.add_argument("--conf", type=float, default=DEFAULT_CONF,
                    help="a .jsonl prediction file: map only boxes of at least this score (default %(default)s)")
 
@@ -74,7 +79,9 @@ def run(args: argparse.Namespace) -> int:
         for (u, v), (x, y) in zip(uv, xy):
             out.write(f"{u:g},{v:g},{x:.4f},{y:.4f}\n")
         return 0
-    config = ImageAttitudeConfig(box_model=box_model_or_default(args.model)) if args.model is not None else None
+    config = None
+    if args.box_model == "model" and (args.attitude == "image" or args.attitude is None and calib.has_attitude_model):
+        config = ImageAttitudeConfig(box_model=box_model_or_default(args.model or default_model_path()))
     mode, est = attitude_estimator(mapper, args.attitude, None, config)
     if args.boxes.suffix == ".jsonl":
         return _run_sequence(args, calib, mapper, mode, est)
