@@ -9,7 +9,7 @@ from typing import Callable
 
 from .. import ros_env
 from ..errors import ConePerceptionError, ConfigError, FrameError
-from ..stats import ERROR, NodeHealth, StreamMonitor
+from ..stats import ERROR, NodeHealth, StreamMonitor, cdr_stamp_ns
 
 try:
     ros_env.apply()  # before rclpy loads the middleware
@@ -26,7 +26,8 @@ try:  # noqa: E402 - Jazzy; Humble has the same classes in rclpy.qos_event
     from rclpy.event_handler import SubscriptionEventCallbacks, UnsupportedEventTypeError
 except ImportError:  # pragma: no cover - Humble
     from rclpy.qos_event import SubscriptionEventCallbacks, UnsupportedEventTypeError
-from rclpy.executors import ExternalShutdownException  # noqa: E402
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup  # noqa: E402
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 
@@ -34,6 +35,9 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 QOS_IMAGE_IN = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.BEST_EFFORT)
 #: Images out: reliable, so both reliable and best-effort subscribers match.
 QOS_IMAGE_OUT = QoSProfile(depth=2, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
+#: The counting path of an image input (:meth:`PerceptionNode.subscribe_frames`): every frame, as bytes,
+#: with a queue deep enough for the counting thread's hiccups (0.25 s at 200 Hz); only the stamp is read.
+QOS_IMAGE_COUNT = QoSProfile(depth=50, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.BEST_EFFORT)
 #: Small messages (boxes, cones, markers): reliable, short queue.
 QOS_DATA = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
 
@@ -49,8 +53,14 @@ class PerceptionNode(Node):
     Parameters (every node): ``input_timeout_s`` (1.0; silence on an input longer than this is an
     ERROR, 0 = never), ``max_frame_age_s`` (0.0 = off; a frame whose header stamp is older than this
     on arrival is counted stale: set it on the car, where the camera stamps with the node's clock),
-    ``input_rate_hz`` (0.0 = learnt from the stamps; the publisher's rate, for counting the frames
-    replaced before processing from the gaps in its stamps).
+    ``input_rate_hz`` (0.0 = learnt from the stamps; the publisher's nominal rate, for counting the
+    frames missing from its stamps).
+
+    Every image input (best effort, depth 1: newest frame only) has a counting path beside it
+    (:meth:`subscribe_frames`) that sees every frame that reaches the node, so that the frames
+    replaced in the depth-1 queue and those lost upstream are counted (:mod:`cone_perception.stats`).
+    It runs on its own thread: :func:`run_node` spins the node with a two-thread executor, every
+    other callback in the node's default (mutually exclusive) group, as before.
     """
 
     def __init__(self, name: str, **kwargs):
@@ -63,6 +73,7 @@ class PerceptionNode(Node):
         self._last_warn: dict[str, float] = {}
         self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._diag_timer = self.create_timer(1.0, self._publish_diagnostics)
+        self._counting_group = MutuallyExclusiveCallbackGroup()
 
     def _now_ns(self) -> int:
         return self.get_clock().now().nanoseconds
@@ -141,18 +152,44 @@ class PerceptionNode(Node):
         self, msgtype, topic: str, handler: Callable, qos: QoSProfile = QOS_IMAGE_IN, frames: bool = True
     ):
         """A guarded subscription (:meth:`guarded`) whose middleware-lost messages are counted too
-        (``lost`` on the topic's monitor; where the middleware has no such event, stamp gaps only)."""
+        (``lost`` on the topic's monitor, where the middleware has such an event).
+
+        With the image QoS (best effort, depth 1) the topic also gets a counting path: a second
+        subscription (depth :data:`QOS_IMAGE_COUNT`, raw bytes, its own callback group) whose callback
+        reads only the header stamp of every frame (:func:`~cone_perception.stats.cdr_stamp_ns`) for
+        the topic's :class:`~cone_perception.stats.StreamMonitor`: frames replaced before processing
+        and frames lost upstream are counted from it."""
         callback = self.guarded(handler, topic, frames)
         stream = self.health.streams[self.resolve_topic_name(topic)]
+        counting = frames and qos == QOS_IMAGE_IN
+        if counting:
+            stream.counted = True
+
+            def on_arrival(raw: bytes) -> None:
+                try:
+                    stream.arrive(cdr_stamp_ns(raw), self._now_ns())
+                except Exception as e:  # noqa: BLE001 - counting must never stop the node
+                    if self._may_warn("counting"):
+                        self.get_logger().warning(f"counting path of {stream.topic}: {type(e).__name__}: {e}")
+
+            self._subscribe_counting_lost(msgtype, topic, on_arrival, QOS_IMAGE_COUNT, stream,
+                                          callback_group=self._counting_group, raw=True)
+        return self._subscribe_counting_lost(msgtype, topic, callback, qos, None if counting else stream)
+
+    def _subscribe_counting_lost(self, msgtype, topic: str, callback: Callable, qos: QoSProfile,
+                                 stream: StreamMonitor | None, **kwargs):
+        """``create_subscription`` that adds the middleware's lost messages to ``stream.lost`` (if a stream)."""
+        if stream is None:
+            return self.create_subscription(msgtype, topic, callback, qos, **kwargs)
 
         def on_lost(info) -> None:
             stream.lost += int(info.total_count_change)
 
         try:
-            return self.create_subscription(msgtype, topic, callback, qos,
+            return self.create_subscription(msgtype, topic, callback, qos, **kwargs,
                                             event_callbacks=SubscriptionEventCallbacks(message_lost=on_lost))
         except (UnsupportedEventTypeError, TypeError):  # no such event in this middleware / rclpy
-            return self.create_subscription(msgtype, topic, callback, qos)
+            return self.create_subscription(msgtype, topic, callback, qos, **kwargs)
 
     def advertise_cones(self, frame_id: str, markers: bool) -> None:
         """Publishers of ``/cones`` (and ``/cones/markers`` if ``markers``) in ``frame_id``."""
@@ -201,10 +238,12 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None, name: s
     """``main()`` of a node: init, build (a config error exits 1 with one line), spin, shut down."""
     args = sys.argv if args is None else args
     rclpy.init(args=args)
-    node = None
+    node = executor = None
     try:
         node = factory()
-        rclpy.spin(node)
+        executor = MultiThreadedExecutor(num_threads=2)  # the counting paths run beside the processing
+        executor.add_node(node)
+        executor.spin()
     except ConePerceptionError as e:
         print(f"[{name}] error: {e}", file=sys.stderr)
         return 1
@@ -213,6 +252,8 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None, name: s
     except ExternalShutdownException:
         pass
     finally:
+        if executor is not None:
+            executor.shutdown(timeout_sec=1.0)
         if node is not None:
             if hasattr(node, "stats"):
                 print(f"[{name}] stopping: {node.health.summary() if hasattr(node, 'health') else node.stats.summary()}",
