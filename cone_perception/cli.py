@@ -31,6 +31,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "speed": ("speed", "forward micro-benchmark of detector sizes and backends"),
     "eval": ("eval", "evaluate a prediction file against ground truth -> report.md, metrics.json, plots"),
     "fuzz": ("fuzz", "malformed messages through the nodes' callbacks: crashes, counts, time, RSS"),
+    "soak": ("soak", "a drive at a given rate for a given time into a live node: every frame accounted for, RSS, latency"),
 }
 
 
