@@ -143,14 +143,18 @@ class StampGaps:
             return self.period_s * 1e9
         return median(self._deltas) if len(self._deltas) >= MIN_PERIOD_SAMPLES else None
 
-    def _gap(self, delta: int, period: float) -> int:
-        return max(0, round(delta / period) - 1) if delta > GAP_FACTOR * period else 0
+    def _gap(self, delta: int, frames: int, period: float) -> int:
+        """Frames missing in a stamp step of ``delta`` ns over ``frames`` publisher frames."""
+        return max(0, round(delta / period) - frames) if delta > (frames + GAP_FACTOR - 1) * period else 0
 
-    def step(self, stamp_ns: int) -> list[str]:
-        """The next stamp; returns the faults it shows (``missing``, ``backwards``, ``repeated``, ``silence``)."""
+    def step(self, stamp_ns: int, frames: int = 1) -> list[str]:
+        """The next stamp, ``frames`` publisher frames after the last one (1: the next frame; more
+        when the publisher's sequence numbers say frames were sent in between); returns the faults it
+        shows (``missing``, ``backwards``, ``repeated``, ``silence``)."""
         last, self.last_ns = self.last_ns, stamp_ns
         if last is None:
             return []
+        frames = max(1, int(frames))
         delta = stamp_ns - last
         if delta == 0:
             self.repeated += 1
@@ -160,16 +164,18 @@ class StampGaps:
             self._deltas.clear()  # a clock jump or a restarted publisher: learn the period anew
             self._unsettled.clear()
             return ["backwards"]
-        if self.silence_s > 0 and delta > self.silence_s * 1e9:
+        period = self.period_ns
+        unexplained = delta - (frames - 1) * period if period else delta / frames
+        if self.silence_s > 0 and unexplained > self.silence_s * 1e9:
             self.silences += 1
             return ["silence"]
         if self.period_s <= 0:
-            self._deltas.append(delta)
+            self._deltas.append(delta / frames)
         period = self.period_ns
         if period is None:
-            self._unsettled.append(delta)
+            self._unsettled.append((delta, frames))
             return []
-        n = sum(self._gap(d, period) for d in self._unsettled) + self._gap(delta, period)
+        n = sum(self._gap(d, f, period) for d, f in self._unsettled) + self._gap(delta, frames, period)
         self._unsettled.clear()
         self.missing += n
         return ["missing"] if n else []
@@ -281,6 +287,10 @@ class StreamMonitor:
     silences: int = 0
     optional: bool = False  # an input the node works without: silence and no publisher are no error
     counted: bool = False  # a counting path calls :meth:`arrive` with every message
+    sequenced: bool = False  # the processing path gets the publisher's sequence numbers
+    seq_gaps: int = 0  # frames the publisher sent between two the processing path took (sequence numbers)
+    seq_resets: int = 0  # sequence numbers going back: a restarted (or a second) publisher
+    last_seq: int | None = None
     last_arrival_ns: int | None = None
     started_ns: int | None = None
     gaps: StampGaps = field(default_factory=StampGaps)
@@ -306,11 +316,18 @@ class StreamMonitor:
 
     @property
     def missing(self) -> int:
-        """Frames missing from the stamp sequence: lost upstream (``counted``), or replaced or lost."""
+        """Frames lost upstream: with sequence numbers, those the middleware reports lost in transport
+        plus those never published (stamp gaps the sequence numbers do not explain); with a counting
+        path, its stamp gaps; else every stamp gap (which then also holds the replaced frames)."""
+        if self.sequenced:
+            return min(self.lost, self.seq_gaps) + self.gaps.missing
         return max(0, self.gaps.missing - self.ledger.unseen) if self.counted else self.gaps.missing
 
     @property
     def replaced(self) -> int:
+        """Frames replaced in the depth-1 queue before processing (sequence numbers or counting path)."""
+        if self.sequenced:
+            return max(0, self.seq_gaps - self.lost)
         return self.ledger.replaced if self.counted else 0
 
     @property
@@ -333,23 +350,33 @@ class StreamMonitor:
         self.last_arrival_ns = now_ns
         self._silent = False
 
-    def observe(self, stamp_ns: int | None, now_ns: int) -> list[str]:
+    def observe(self, stamp_ns: int | None, now_ns: int, seq: int | None = None) -> list[str]:
         """One message reached the processing callback (``stamp_ns`` its header stamp, ``None`` if it
-        has none); returns the faults it shows (``missing``, ``backwards``, ``repeated``,
-        ``stale``), each counted."""
+        has none; ``seq`` the publisher's sequence number of it, where the middleware gives one);
+        returns the faults it shows (``missing``, ``backwards``, ``repeated``, ``stale``), each counted."""
         self.received += 1
         if not self.counted:
             self._arrival(now_ns)
-        faults = []
+        frames = 1
+        if seq is not None and not self.counted:  # a stream is accounted for one way: the counting path's, else these
+            self.sequenced = True
+            if self.last_seq is not None:
+                if seq > self.last_seq:
+                    frames = seq - self.last_seq
+                    self.seq_gaps += frames - 1
+                else:  # a restarted publisher (or a second one): a new sequence
+                    self.seq_resets += 1
+            self.last_seq = seq
+        faults = ["replaced"] if frames > 1 else []
         if stamp_ns is None:
             return faults
         if self.max_age_s > 0 and now_ns - stamp_ns > self.max_age_s * 1e9:
             self.stale += 1
             faults.append("stale")
-        if self.counted:
+        if self.counted and not self.sequenced:
             self.ledger.take(stamp_ns)
         else:
-            faults += [f for f in self.gaps.step(stamp_ns) if f != "silence"]
+            faults += [f for f in self.gaps.step(stamp_ns, frames) if f != "silence"]
         return faults
 
     def arrive(self, stamp_ns: int | None, now_ns: int) -> list[str]:
@@ -378,9 +405,12 @@ class StreamMonitor:
         return silent
 
     def counts(self) -> dict[str, int]:
-        c = {"received": self.received, "ok": self.ok, "dropped": self.dropped}
+        c = {"received": self.received, "ok": self.ok, "dropped": self.dropped, "replaced": self.replaced,
+             "queued": self.queued}
         if self.counted:
-            c.update(arrived=self.arrived, replaced=self.replaced, queued=self.queued)
+            c.update(arrived=self.arrived)
+        if self.sequenced:
+            c.update(seq_resets=self.seq_resets)
         c.update(missing=self.missing, lost=self.lost, backwards=self.backwards, repeated=self.repeated,
                  stale=self.stale, silences=self.silences)
         return c
@@ -400,7 +430,7 @@ class HealthReport:
 #: What each stream count means in a ``/diagnostics`` message (``missing``: by whether the stream is counted).
 _LABELS = {"replaced": "replaced in the queue before processing", "lost": "lost in transport (middleware)",
            "backwards": "stamps going backwards", "repeated": "stamps repeated", "stale": "stale frames"}
-_MISSING = {True: "lost upstream (stamp gaps)", False: "missing (stamp gaps: replaced or lost upstream)"}
+_MISSING = {True: "lost upstream", False: "missing (stamp gaps: replaced or lost upstream)"}
 
 
 class NodeHealth:
@@ -467,7 +497,7 @@ class NodeHealth:
             for k in ("replaced", "missing", "lost", "backwards", "repeated", "stale"):
                 v = new.get(f"{s.topic}:{k}", 0)
                 if v:
-                    label = _MISSING[s.counted] if k == "missing" else _LABELS[k]
+                    label = _MISSING[s.counted or s.sequenced] if k == "missing" else _LABELS[k]
                     warns.append(f"{v} {label} on {s.topic}")
                     fell_behind |= k in ("replaced", "missing")
             sent, ok = new.get(f"{s.topic}:total", 0), new.get(f"{s.topic}:ok", 0)

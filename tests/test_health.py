@@ -17,7 +17,8 @@ def _feed(mon: StreamMonitor, stamps_ms, lag_ms: float = 5.0) -> list[list[str]]
 def test_a_steady_stream_has_no_faults() -> None:
     mon = StreamMonitor("/image_raw")
     faults = _feed(mon, [i * 33 for i in range(100)])
-    assert not any(faults) and mon.counts() == {"received": 100, "ok": 0, "dropped": 0, "missing": 0, "lost": 0,
+    assert not any(faults) and mon.counts() == {"received": 100, "ok": 0, "dropped": 0, "replaced": 0, "queued": 0,
+                                                "missing": 0, "lost": 0,
                                                 "backwards": 0, "repeated": 0, "stale": 0, "silences": 0}
 
 
@@ -144,10 +145,23 @@ def test_middleware_lost_messages_are_counted_and_warned(ros) -> None:  # noqa: 
     assert rep.level == WARN and "3 lost in transport" in rep.message
 
 
-def test_frames_replaced_in_the_depth1_queue_add_up_through_dds(ros) -> None:  # noqa: F811
-    """A burst through DDS into the best-effort depth-1 queue: the node takes only the newest, its
-    counting path sees every frame, and taken + replaced + missing is every frame sent (the period
-    learnt from the stamps, no camera rate given)."""
+@pytest.fixture(params=["sequence numbers", "counting path"])
+def accounting(request, monkeypatch):
+    """Both ways a node accounts for the frames it never took: the publisher's sequence numbers in
+    the message info (rclpy >= Iron), and the counting path (Humble's rclpy, forced here)."""
+    from cone_perception.nodes import _common
+
+    counting = request.param == "counting path"
+    monkeypatch.setattr(_common, "COUNTING_PATH", counting)
+    if not counting and not _common.MESSAGE_INFO:
+        pytest.skip("this rclpy passes no message info")  # Humble: the counting path is the one used
+    return request.param
+
+
+def test_frames_replaced_in_the_depth1_queue_add_up_through_dds(ros, accounting) -> None:  # noqa: F811
+    """A burst through DDS into the best-effort depth-1 queue: the node takes only the newest, and
+    taken + replaced + missing is every frame sent (the period learnt, no camera rate given); the
+    3 frames the camera never published are missing."""
     import time as _time
 
     from sensor_msgs.msg import Image
@@ -156,7 +170,8 @@ def test_frames_replaced_in_the_depth1_queue_add_up_through_dds(ros) -> None:  #
 
     node = ros.add(DriverAdapterNode(context=ros.context))
     pub = ros.node("camera").create_publisher(Image, "image_raw", 10)
-    assert ros.spin_until(lambda: pub.get_subscription_count() > 1)  # the processing and the counting path
+    subs = 2 if accounting == "counting path" else 1
+    assert ros.spin_until(lambda: pub.get_subscription_count() >= subs)
     stream = node.health.streams["/image_raw"]
     sent = 0
 
@@ -168,15 +183,18 @@ def test_frames_replaced_in_the_depth1_queue_add_up_through_dds(ros) -> None:  #
         sent += 1
         return m
 
-    assert ros.spin_until(lambda: (pub.publish(frame(0)) or True) and stream.received > 0 and stream.arrived > 0)
-    for i in range(1, 41):  # a burst, nothing spun: the depth-1 queue keeps the newest
-        if i not in (7, 8, 20):  # lost upstream: never published
+    ros.spin_until(lambda: False, 0.5)  # matched on both sides: the first frame is delivered
+    for i in range(6):  # frame by frame: each one taken
+        pub.publish(frame(i))
+        assert ros.spin_until(lambda: stream.received > i, 5)
+    for i in range(6, 41):  # a burst, nothing spun: the depth-1 queue keeps the newest
+        if i not in (12, 13, 20):  # never published (a camera dropping frames)
             pub.publish(frame(i))
     _time.sleep(0.2)
     last = 1_000_000_000 + 40 * 33_333_333
     assert ros.spin_until(lambda: stream.last_stamp_ns == last and stream.queued == 0, 5)
     assert stream.received < sent  # frames were replaced before the node took them ...
-    assert stream.replaced > 30 and stream.missing == 3  # ... counted as replaced, and the 3 never sent as missing
+    assert stream.replaced > 30 and stream.missing == 3  # ... counted as replaced, the 3 never sent as missing
     assert stream.received + stream.replaced + stream.missing == sent + 3  # ... and every frame is accounted for
     assert stream.ok + stream.dropped == stream.received
 
@@ -304,7 +322,7 @@ def test_the_stamp_is_read_from_the_serialized_message() -> None:
 
 
 @pytest.mark.parametrize("ratio", [2, 5])
-def test_every_frame_is_accounted_for_under_overload_through_dds(ros, ratio: int) -> None:  # noqa: F811
+def test_every_frame_is_accounted_for_under_overload_through_dds(ros, accounting, ratio: int) -> None:  # noqa: F811
     """A node that needs ``ratio`` frame periods per frame, spun as run_node spins it (two threads),
     fed at 60 Hz through DDS: sent = processed + dropped + replaced + missing, and replaced > 0."""
     import threading
@@ -332,7 +350,8 @@ def test_every_frame_is_accounted_for_under_overload_through_dds(ros, ratio: int
     spinner.start()
     try:
         pub = ros.node("camera").create_publisher(Image, "image_raw", 10)
-        assert ros.spin_until(lambda: pub.get_subscription_count() >= 2)  # processing and counting path matched
+        subs = 2 if accounting == "counting path" else 1  # the processing (and the counting) path matched
+        assert ros.spin_until(lambda: pub.get_subscription_count() >= subs)
         _time.sleep(0.3)
         stream = node.health.streams["/image_raw"]
         n, t0 = 90, _time.monotonic()
@@ -355,3 +374,62 @@ def test_every_frame_is_accounted_for_under_overload_through_dds(ros, ratio: int
         ex.shutdown(timeout_sec=2)
         node.destroy_node()
         rclpy.shutdown(context=ctx)
+
+
+# -- sequence numbers (ROS-free) ------------------------------------------------------------------
+
+def _simulate_seq(ratio: int, n: int = 600, never_sent=lambda i: False, lost_in_transport=lambda i: False,
+                  silence_after: int | None = None) -> tuple[StreamMonitor, dict]:
+    """A camera at 30 Hz (``never_sent(i)``: frame i dropped by the driver, no sequence number); each
+    frame published gets the next sequence number; ``lost_in_transport(i)``: it never reaches the node
+    (the middleware's lost event counts it); the node takes one of every ``ratio`` that reach it."""
+    mon = StreamMonitor("/image_raw", timeout_s=1.0)
+    t, seq, queue, arrived, taken, published, first = 0, 0, None, 0, 0, 0, None
+    for i in range(n):
+        stamp = t
+        t += PERIOD + (3000 * MS if silence_after is not None and i == silence_after else 0)
+        if never_sent(i):
+            continue
+        seq += 1
+        published += 1
+        if lost_in_transport(i):
+            mon.lost += 1
+            continue
+        queue = (stamp, seq)
+        arrived += 1
+        if arrived % ratio == 0:
+            first = i if first is None else first
+            mon.observe(queue[0], queue[0], queue[1])
+            mon.ok += 1
+            taken += 1
+            queue = None
+    if queue is not None:
+        mon.observe(queue[0], queue[0], queue[1])
+        mon.ok += 1
+        taken += 1
+    # the node knows of the frames from the first it took on: those before are not its to count
+    return mon, {"published": published, "taken": taken, "replaced": arrived - taken - (ratio - 1), "first": first}
+
+
+def test_sequence_numbers_account_for_every_frame_at_any_overload() -> None:
+    for ratio in (1, 2, 3, 5, 10):
+        mon, truth = _simulate_seq(ratio, never_sent=lambda i: i % 53 == 20, lost_in_transport=lambda i: i % 61 == 30)
+        never = sum(1 for i in range(600) if i % 53 == 20)
+        assert mon.received + mon.replaced + mon.missing == 600 - truth["first"], ratio  # every frame since
+        assert mon.replaced == truth["replaced"] and mon.missing == never + mon.lost, ratio
+        assert mon.period_ns == PERIOD, ratio  # the camera's period, learnt at any ratio
+
+
+def test_sequence_numbers_a_silence_is_no_missing_frame() -> None:
+    for ratio in (1, 5):
+        mon, truth = _simulate_seq(ratio, silence_after=299)
+        assert mon.received + mon.replaced == 600 - truth["first"] and mon.missing == 0 and mon.gaps.silences == 1, ratio
+
+
+def test_a_restarted_publisher_starts_a_new_sequence() -> None:
+    mon = StreamMonitor("/image_raw")
+    for i in range(10):
+        mon.observe(i * PERIOD, i * PERIOD, 100 + i)
+    for i in range(10, 20):  # restarted: its sequence numbers begin at 1 again
+        mon.observe(i * PERIOD, i * PERIOD, i - 9)
+    assert mon.seq_resets == 1 and mon.replaced == 0 and mon.missing == 0 and mon.received == 20

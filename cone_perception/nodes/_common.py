@@ -30,6 +30,15 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup  # noqa: E402
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
+from rclpy.subscription import Subscription  # noqa: E402
+
+#: rclpy passes a callback of two arguments the message info, with the publisher's sequence number
+#: (Iron and later; Humble's rclpy passes the message only).
+MESSAGE_INFO = hasattr(Subscription, "CallbackType")
+#: Image inputs get a counting path (a second, raw subscription) where the callbacks get no sequence numbers.
+COUNTING_PATH = not MESSAGE_INFO
+#: The message info's value when the middleware has no sequence numbers (RMW_MESSAGE_INFO_SEQUENCE_NUMBER_UNSUPPORTED).
+_SEQ_UNSUPPORTED = 2**64 - 1
 
 #: Images in: best effort, newest frame only (a slow frame never builds a queue of stale ones).
 QOS_IMAGE_IN = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.BEST_EFFORT)
@@ -56,11 +65,13 @@ class PerceptionNode(Node):
     ``input_rate_hz`` (0.0 = learnt from the stamps; the publisher's nominal rate, for counting the
     frames missing from its stamps).
 
-    Every image input (best effort, depth 1: newest frame only) has a counting path beside it
-    (:meth:`subscribe_frames`) that sees every frame that reaches the node, so that the frames
-    replaced in the depth-1 queue and those lost upstream are counted (:mod:`cone_perception.stats`).
-    It runs on its own thread: :func:`run_node` spins the node with a two-thread executor, every
-    other callback in the node's default (mutually exclusive) group, as before.
+    Every frame sent on an image input (best effort, depth 1: newest frame only) is accounted for
+    (:mod:`cone_perception.stats`): the publisher's sequence number of each frame taken (in the
+    message info, :data:`MESSAGE_INFO`) says how many were sent in between, replaced in the queue or
+    lost in transport (the middleware's lost-message event). Where the callbacks get no sequence
+    numbers (Humble), a counting path beside each image input sees every frame that reaches the node
+    (:meth:`subscribe_frames`), on its own thread: :func:`run_node` spins the node with a two-thread
+    executor, every other callback in the node's default (mutually exclusive) group, as before.
     """
 
     def __init__(self, name: str, **kwargs):
@@ -95,13 +106,20 @@ class PerceptionNode(Node):
         if optional:
             stream.timeout_s, stream.optional = 0.0, True
 
-        def callback(msg):
+        def on_message(msg, info=None):
             try:
-                stream.observe(_stamp_ns(msg), self._now_ns())
+                stream.observe(_stamp_ns(msg), self._now_ns(), _seq(info))
             except Exception:  # noqa: BLE001 - a header that is not one: the handler's guard counts the message
                 pass
             self.run_guarded(handler, msg, stream, frames)
 
+        if not MESSAGE_INFO:
+            return on_message
+
+        def callback(msg, info):  # two arguments: rclpy passes the message info
+            on_message(msg, info)
+
+        callback.message_only = on_message  # for calling it directly (tests, fuzz)
         return callback
 
     def _may_warn(self, reason: str) -> bool:
@@ -154,14 +172,15 @@ class PerceptionNode(Node):
         """A guarded subscription (:meth:`guarded`) whose middleware-lost messages are counted too
         (``lost`` on the topic's monitor, where the middleware has such an event).
 
-        With the image QoS (best effort, depth 1) the topic also gets a counting path: a second
+        Where the callbacks get no sequence numbers (:data:`COUNTING_PATH`), an image input (best
+        effort, depth 1) also gets a counting path: a second
         subscription (depth :data:`QOS_IMAGE_COUNT`, raw bytes, its own callback group) whose callback
         reads only the header stamp of every frame (:func:`~cone_perception.stats.cdr_stamp_ns`) for
         the topic's :class:`~cone_perception.stats.StreamMonitor`: frames replaced before processing
         and frames lost upstream are counted from it."""
         callback = self.guarded(handler, topic, frames)
         stream = self.health.streams[self.resolve_topic_name(topic)]
-        counting = frames and qos == QOS_IMAGE_IN
+        counting = COUNTING_PATH and frames and qos == QOS_IMAGE_IN
         if counting:
             stream.counted = True
 
@@ -227,6 +246,15 @@ class PerceptionNode(Node):
         if rep.level:
             what = "input lost" if rep.level == ERROR else "input degraded"
             self.get_logger().warning(f"{what}: {rep.message}", throttle_duration_sec=5.0)
+
+
+def _seq(info) -> int | None:
+    """The publisher's sequence number in a message info, or None where there is none."""
+    try:
+        seq = info["publication_sequence_number"] if info is not None else None
+    except (KeyError, TypeError):
+        return None
+    return int(seq) if isinstance(seq, int) and 0 < seq < _SEQ_UNSUPPORTED else None
 
 
 def _stamp_ns(msg) -> int | None:

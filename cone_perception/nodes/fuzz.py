@@ -253,7 +253,7 @@ def _callback(node, msgtype) -> Callable:
     subs = [s for s in node.subscriptions if s.msg_type is msgtype and not s.raw]  # not the counting path
     if len(subs) != 1:
         raise RuntimeError(f"{node.get_name()}: expected one {msgtype.__name__} subscription, found {len(subs)}")
-    return subs[0].callback
+    return getattr(subs[0].callback, "message_only", subs[0].callback)
 
 
 def build_target(name: str, context, gen: Generators, params: dict | None = None):
