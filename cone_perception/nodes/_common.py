@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 import traceback
 from typing import Callable
 
-from .. import ros_env
+from .. import ros_env, shm
 from ..errors import ConePerceptionError, ConfigError, FrameError
 from ..stats import ERROR, NodeHealth, StreamMonitor, cdr_stamp_ns
 
@@ -51,6 +52,8 @@ QOS_IMAGE_COUNT = QoSProfile(depth=50, history=HistoryPolicy.KEEP_LAST, reliabil
 QOS_DATA = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
 
 WARN_THROTTLE_S = 2.0
+#: ``CONE_PERCEPTION_SHM_CLEAN=0``: a node's start does not remove stale shared-memory files (:func:`clean_stale_shm`).
+SHM_CLEAN_VAR = "CONE_PERCEPTION_SHM_CLEAN"
 
 
 class PerceptionNode(Node):
@@ -262,9 +265,26 @@ def _stamp_ns(msg) -> int | None:
     return None if header is None else _msgs.stamp_ns(header)
 
 
+def clean_stale_shm(name: str) -> None:
+    """Before the participant starts: remove the shared-memory files of dead processes (a node killed
+    with ``kill -9``, its predecessor under launch's respawn), never a live one's
+    (:func:`cone_perception.shm.clean_stale`). Not in the ``system`` DDS mode (the car's own set-up
+    is left alone) nor with ``CONE_PERCEPTION_SHM_CLEAN=0``."""
+    if ros_env.mode_of() == "system" or os.environ.get(SHM_CLEAN_VAR, "1").strip() == "0":
+        return
+    try:
+        rep = shm.clean_stale()
+    except Exception as e:  # noqa: BLE001 - a failed clean-up must not keep the node from starting
+        print(f"[{name}] shared-memory clean-up failed: {type(e).__name__}: {e}", file=sys.stderr)
+        return
+    if rep.removed:
+        print(f"[{name}] {rep.line()}", file=sys.stderr)
+
+
 def run_node(factory: Callable[[], Node], args: list[str] | None = None, name: str = "cone_perception") -> int:
     """``main()`` of a node: init, build (a config error exits 1 with one line), spin, shut down."""
     args = sys.argv if args is None else args
+    clean_stale_shm(name)
     rclpy.init(args=args)
     node = executor = None
     try:
