@@ -28,7 +28,7 @@ try:  # noqa: E402 - Jazzy; Humble has the same classes in rclpy.qos_event
 except ImportError:  # pragma: no cover - Humble
     from rclpy.qos_event import SubscriptionEventCallbacks, UnsupportedEventTypeError
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup  # noqa: E402
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor  # noqa: E402
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from rclpy.subscription import Subscription  # noqa: E402
@@ -73,8 +73,8 @@ class PerceptionNode(Node):
     message info, :data:`MESSAGE_INFO`) says how many were sent in between, replaced in the queue or
     lost in transport (the middleware's lost-message event). Where the callbacks get no sequence
     numbers (Humble), a counting path beside each image input sees every frame that reaches the node
-    (:meth:`subscribe_frames`), on its own thread: :func:`run_node` spins the node with a two-thread
-    executor, every other callback in the node's default (mutually exclusive) group, as before.
+    (:meth:`subscribe_frames`), on its own thread: :func:`run_node` then spins the node with a
+    two-thread executor, every other callback in the node's default (mutually exclusive) group.
     """
 
     def __init__(self, name: str, **kwargs):
@@ -194,11 +194,11 @@ class PerceptionNode(Node):
                     if self._may_warn("counting"):
                         self.get_logger().warning(f"counting path of {stream.topic}: {type(e).__name__}: {e}")
 
-            self._subscribe_counting_lost(msgtype, topic, on_arrival, QOS_IMAGE_COUNT, stream,
+            self._subscribe_with_lost(msgtype, topic, on_arrival, QOS_IMAGE_COUNT, stream,
                                           callback_group=self._counting_group, raw=True)
-        return self._subscribe_counting_lost(msgtype, topic, callback, qos, None if counting else stream)
+        return self._subscribe_with_lost(msgtype, topic, callback, qos, None if counting else stream)
 
-    def _subscribe_counting_lost(self, msgtype, topic: str, callback: Callable, qos: QoSProfile,
+    def _subscribe_with_lost(self, msgtype, topic: str, callback: Callable, qos: QoSProfile,
                                  stream: StreamMonitor | None, **kwargs):
         """``create_subscription`` that adds the middleware's lost messages to ``stream.lost`` (if a stream)."""
         if stream is None:
@@ -289,7 +289,8 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None, name: s
     node = executor = None
     try:
         node = factory()
-        executor = MultiThreadedExecutor(num_threads=2)  # the counting paths run beside the processing
+        # with counting paths (Humble) they run on a second thread beside the processing
+        executor = MultiThreadedExecutor(num_threads=2) if COUNTING_PATH else SingleThreadedExecutor()
         executor.add_node(node)
         executor.spin()
     except ConePerceptionError as e:
