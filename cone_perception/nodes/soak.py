@@ -125,6 +125,8 @@ def soak(frames: list[bytes], compressed: bool, topic: str, rate_hz: float, seco
         start_stamp = time.time_ns() // period_ns * period_ns + 10 * 10**9
 
         def alive() -> bool:
+            if not context.ok():  # rclpy's SIGINT handler shut the context down: Ctrl-C
+                raise KeyboardInterrupt
             if proc.poll() is not None and run.died is None:
                 run.died = proc.returncode
             return run.died is None
@@ -177,6 +179,8 @@ def soak(frames: list[bytes], compressed: bool, topic: str, rate_hz: float, seco
                     progress(now - t0)
                 if not alive():
                     break
+            if i % 32 == 0 and not alive():
+                break
             stamp = start_stamp + i * period_ns
             raw = with_cdr_stamp(frames[i % len(frames)], stamp)
             with rx.lock:
@@ -216,7 +220,8 @@ def soak(frames: list[bytes], compressed: bool, topic: str, rate_hz: float, seco
         run.node_output = out or ""
         executor.shutdown()
         node.destroy_node()
-        rclpy.shutdown(context=context)
+        if context.ok():
+            rclpy.shutdown(context=context)
     return run
 
 
