@@ -4,22 +4,24 @@
   callback receives is counted exactly once, as ok or dropped (``exception_<Type>`` for an
   unexpected exception).
 * :class:`StampGaps`: what the header stamps of one stream tell: frames **missing** from it (a gap of
-  k periods counts k-1; the period is the camera's nominal one or the median of the stamp steps),
-  stamps going **backwards** or **repeated**, and a gap longer than the silence threshold, which is a
-  **silence** (the publisher stopped), not missing frames.
-* :class:`FrameLedger`: which frames that reached the node were never processed. The image inputs
-  have a cheap *counting path* (a second subscription on the topic that takes every message as bytes
-  and reads only the stamp, :func:`cdr_stamp_ns`) beside the processing path (best effort, depth 1:
-  newest frame only); a frame the counting path saw that the processing path never took was
-  **replaced** in the depth-1 queue.
-* :class:`StreamMonitor`: both, per input topic, plus **stale** frames (stamp older than
-  ``max_age_s`` on arrival), **silence** (no message for ``timeout_s``) and frames the middleware
-  reports **lost** (DDS sample lost, where supported; also in the stamp gaps, so not added again).
-  With a counting path, every frame sent is accounted for::
+  k periods counts k-1; the period is the camera's nominal one or learnt from the stamp steps, per
+  frame sent where the sequence numbers say how many were), stamps going **backwards** or
+  **repeated**, and a gap longer than the silence threshold, which is a **silence** (the publisher
+  stopped), not missing frames.
+* :class:`StreamMonitor`: per input topic, what reached the processing callback and what did not.
+  An image input is best effort with a queue of one (newest frame only): the frames replaced in the
+  queue never reach the callback. Where the middleware gives the publisher's **sequence number** of
+  each message (rclpy >= Iron, Fast DDS), a step of k between two frames taken means k-1 were sent in
+  between: **replaced** in the queue, or lost in transport (the middleware's **lost** event, then
+  counted **missing**). Where it does not (Humble), a *counting path* (a second subscription that
+  takes every frame as bytes and reads only its stamp, :func:`cdr_stamp_ns`) sees every frame that
+  reaches the node, and a :class:`FrameLedger` matches them with those taken. Also **stale** frames
+  (stamp older than ``max_age_s`` on arrival) and **silence** (no message for ``timeout_s``). With
+  either, every frame sent since the first one taken is accounted for::
 
       sent = ok + dropped (by cause) + replaced + missing (lost upstream) + queued (0 or 1, in flight)
 
-  Without one (a stream only the processing path sees), ``missing`` also holds the replaced frames.
+  With neither, ``missing`` holds the replaced frames too (stamp gaps of the frames taken).
 * :class:`NodeHealth`: all of a node's, and :meth:`NodeHealth.assess`: OK / WARN / ERROR with the
   cause, as the nodes publish it on ``/diagnostics`` once a second: ERROR for silence or a topic
   without a publisher (a missing or dead upstream node); WARN for drops, replaced or missing
