@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from .errors import ConfigError
+
 BLUE, YELLOW, ORANGE, LARGE_ORANGE, UNKNOWN = range(5)
 
 #: Class names by project class id.
@@ -69,3 +71,14 @@ def class_id_from_name(name: str) -> int:
         f"class name {name!r} does not map to a project class; known: "
         + ", ".join(sorted(_ALIASES))
     )
+
+
+def class_map_from_names(names: list[str], source: str) -> list[int]:
+    """Project class id per model class; :class:`ConfigError` names a name that does not map."""
+    out = []
+    for i, n in enumerate(names):
+        try:
+            out.append(class_id_from_name(n))
+        except KeyError as e:
+            raise ConfigError(source, f"class_names[{i}]", str(e.args[0])) from e
+    return out

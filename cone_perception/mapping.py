@@ -24,11 +24,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from .attitude import Attitude, AttitudeModel
-from .calib import Calibration
+from .attitude import Attitude, AttitudeModel, ImageAttitude
 from .classes import CONE_SIZE_M, NUM_CLASSES
 from .errors import FrameError
 from .geometry import GroundMapper, apply_homography, foot_point_weights, foot_points
+from .geometry.calib import Calibration
 from .records import BOX_DTYPE, CONE_DTYPE, boxes_to_arrays
 
 
@@ -75,8 +75,6 @@ class ConeMapper:
 
     def image_attitude(self, config=None):
         """A new :class:`~cone_perception.attitude.ImageAttitude` for this calibration (needs a mount pose)."""
-        from .attitude import ImageAttitude
-
         c = self.calib
         if self.attitude_model is None:
             raise ValueError(f"{c.source}: attitude from the image needs mount_pose and camera_matrix in the calibration")

@@ -13,7 +13,7 @@ import math
 from dataclasses import dataclass
 from typing import Union
 
-from .calib import DEFAULT_CAMERA
+from .geometry.calib import DEFAULT_CAMERA
 
 # -- the detector's defaults: one home. The nodes' parameters below, the API (``detector.Detector``,
 # which imports them from here: this module loads no torch, the mapping node imports it) and the CLI

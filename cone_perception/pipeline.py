@@ -13,8 +13,8 @@ import numpy as np
 
 from .adapter import DriverAdapter
 from .attitude import FIXED, Attitude, attitude_estimator, attitude_for_boxes
-from .calib import Calibration
 from .detector.farband import FarBand
+from .geometry.calib import Calibration
 from .mapping import ConeMapper
 
 STAGES = ("adapter", "preprocess", "forward", "postprocess", "far_band", "attitude", "mapping")

@@ -14,7 +14,7 @@ after ``respawn_delay`` seconds (default 1.0); its start removes the shared-memo
 predecessor left (``cone_perception.shm``), so it gets frames again at once (docs/robustness.md).
 ``tf:=true`` starts tf2_ros ``static_transform_publisher`` for ``rear_axle`` ->
 ``<calibration camera>_optical_frame`` (or ``camera_frame:=...``) from the calibration's mount pose
-(``cone_perception.transforms``). ``rviz:=true`` starts rviz2 with ``launch_configs/cone_perception.rviz``.
+(``cone_perception.geometry.transforms``). ``rviz:=true`` starts rviz2 with ``launch_configs/cone_perception.rviz``.
 """
 
 import os
@@ -48,8 +48,8 @@ def _nodes(context):
     again = {"respawn": _true(context, "respawn"), "respawn_delay": max(0.0, delay)}
     extra = []
     if _true(context, "tf"):
-        from cone_perception.calib import DEFAULT_CAMERA, load_calibration
-        from cone_perception.transforms import calibration_in_params_file, optical_frame_transform
+        from cone_perception.geometry.calib import DEFAULT_CAMERA, load_calibration
+        from cone_perception.geometry.transforms import calibration_in_params_file, optical_frame_transform
 
         calib = load_calibration(calibration_in_params_file(params) or DEFAULT_CAMERA)
         tf = optical_frame_transform(calib, LaunchConfiguration("camera_frame").perform(context) or None)

@@ -13,8 +13,8 @@ import cv2
 import numpy as np
 
 from cone_perception.calibrate import planar_transform
-from cone_perception.camera import PinholeCamera
 from cone_perception.geometry import undistort_pixels
+from cone_perception.geometry.camera import PinholeCamera
 
 
 def board_texture(cols: int, rows: int, px_per_square: int, margin_squares: int = 1) -> np.ndarray:
@@ -106,7 +106,7 @@ def write_example(out_dir: str) -> None:
 
     import yaml
 
-    from cone_perception.camera import MountPose, default_intrinsics
+    from cone_perception.geometry.camera import MountPose, default_intrinsics
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

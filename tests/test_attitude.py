@@ -10,20 +10,14 @@ import numpy as np
 import pytest
 
 from cone_perception.attitude import (
-    attitude_estimator,
-    Attitude,
-    ImageAttitude,
-    attitude_rotation,
-    attitude_vector,
-    box_top_extra_px,
-    ImageAttitudeConfig,
+    Attitude, ImageAttitude, ImageAttitudeConfig, attitude_estimator, attitude_vector, box_top_extra_px,
     default_attitude_mode,
-    pose_H_B_F,
 )
-from cone_perception.calib import calibration_from_dict, load_calibration, save_calibration
-from cone_perception.camera import MountPose, PinholeCamera, default_intrinsics
 from cone_perception.classes import BLUE, CONE_SIZE_M, LARGE_ORANGE, YELLOW
 from cone_perception.errors import ConfigError
+from cone_perception.geometry.calib import calibration_from_dict, load_calibration, save_calibration
+from cone_perception.geometry.camera import MountPose, PinholeCamera, default_intrinsics
+from cone_perception.geometry.pose import attitude_rotation, pose_H_B_F
 from cone_perception.mapping import ConeMapper
 from cone_perception.records import boxes_from_arrays
 from cone_perception.synth.config import SynthConfig

@@ -10,13 +10,13 @@ from geometry_msgs.msg import Vector3Stamped
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import Image, Imu, PointCloud2
 
-from cone_perception.calib import save_calibration
 from cone_perception.classes import BLUE, YELLOW
+from cone_perception.geometry.calib import save_calibration
 from cone_perception.nodes import _msgs
 from cone_perception.nodes.mapping import MappingNode
 from cone_perception.records import boxes_from_arrays
-from cone_perception.synth.motion import quat_from_rpy
 from cone_perception.synth.config import SynthConfig
+from cone_perception.synth.motion import quat_from_rpy
 from cone_perception.synth.scene import CarPose, SceneCamera
 
 from rosutil import Inbox, RosFixture, ros  # noqa: F401 (ros is a fixture)

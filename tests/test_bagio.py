@@ -1,12 +1,12 @@
-"""rosbag2 (MCAP) writing and reading through cone_perception.bagio."""
+"""rosbag2 (MCAP) writing and reading through cone_perception.data.bagio."""
 
 import cv2
 import numpy as np
 import pytest
 
-from cone_perception import bagio
 from cone_perception.adapter import crop_raw_to_bgr, decode_compressed, raw_frame_view
 from cone_perception.crop import CropSpec
+from cone_perception.data import bagio
 from cone_perception.errors import ConfigError
 from cone_perception.records import CONE_DTYPE, from_pointcloud2, to_pointcloud2
 

@@ -14,10 +14,10 @@ import pytest
 
 from cone_perception.adapter import bgr_to_yuyv
 from cone_perception.bench.table import INPUT_SETTINGS, crop_for_setting
-from cone_perception.calib import load_calibration
 from cone_perception.crop import CropSpec
 from cone_perception.detector import Detector
 from cone_perception.errors import ConfigError
+from cone_perception.geometry.calib import load_calibration
 from cone_perception.pipeline import Pipeline
 
 # the stub network's one box, in NETWORK-INPUT px: x1 100, y1 100, x2 140, y2 160

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import yaml
 
-from cone_perception.calib import calibration_from_dict, load_calibration, save_calibration
 from cone_perception.errors import ConfigError
+from cone_perception.geometry.calib import calibration_from_dict, load_calibration, save_calibration
 from cone_perception.resources import calib_dir
 
 EXAMPLE = calib_dir() / "example_mainhoop.yaml"

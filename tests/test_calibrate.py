@@ -5,26 +5,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from _board_scene import board_texture, render_on_ground, render_views
 
 from cone_perception.calibrate import (
-    Board,
-    Intrinsics,
-    PointPairs,
-    board_pairs,
-    calibrate_intrinsics,
-    detect_board,
-    estimate_homography,
-    fit_calibration,
-    from_pose,
-    planar_transform,
-    pose_from_homography,
-    quality_report,
-    read_points_csv,
+    Board, Intrinsics, PointPairs, board_pairs, calibrate_intrinsics, detect_board, estimate_homography,
+    fit_calibration, from_pose, planar_transform, pose_from_homography, quality_report, read_points_csv,
 )
-from cone_perception.camera import MountPose, PinholeCamera, default_intrinsics
 from cone_perception.errors import ConfigError
 from cone_perception.geometry import apply_homography, undistort_pixels
+from cone_perception.geometry.camera import MountPose, PinholeCamera, default_intrinsics
+
+from _board_scene import board_texture, render_on_ground, render_views
 
 W, H = 1920, 1080
 BOARD = (9, 6)

@@ -10,14 +10,15 @@ import cv2
 import numpy as np
 import pytest
 import yaml
-from _board_scene import board_texture, render_on_ground, render_views
 
-from cone_perception.calib import load_calibration
-from cone_perception.camera import MountPose, PinholeCamera, default_intrinsics
 from cone_perception.classes import CLASS_NAMES
 from cone_perception.cli import main
+from cone_perception.geometry.calib import load_calibration
+from cone_perception.geometry.camera import MountPose, PinholeCamera, default_intrinsics
 from cone_perception.mapping import ConeMapper
 from cone_perception.records import boxes_from_arrays
+
+from _board_scene import board_texture, render_on_ground, render_views
 
 W, H = 1920, 1080
 BOARD_X_M = 4.0

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 import torch
 
-from cone_perception.checkpoint import FORMAT, VERSION, load_checkpoint, save_checkpoint
 from cone_perception.detector import Detector, default_model_path
 from cone_perception.errors import ConfigError
 from cone_perception.model import ConeYOLO
+from cone_perception.model.checkpoint import FORMAT, VERSION, load_checkpoint, save_checkpoint
 from cone_perception.model.config import model_config
 
 

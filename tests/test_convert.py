@@ -10,7 +10,7 @@ import pytest
 import yaml
 
 from cone_perception.cli import main as cli_main
-from cone_perception.convert import content_rect, fsoco_to_yolo, restore_aspect
+from cone_perception.data.convert import content_rect, fsoco_to_yolo, restore_aspect
 from cone_perception.errors import ConfigError
 
 BORDER = 20

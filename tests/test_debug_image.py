@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cone_perception.calib import load_calibration
 from cone_perception.classes import BLUE, CLASS_BGR, YELLOW
-from cone_perception.debug_image import DebugImage, RateLimit, box_ranges_m, draw_debug_band
+from cone_perception.geometry.calib import load_calibration
 from cone_perception.mapping import ConeMapper
 from cone_perception.records import boxes_from_arrays
+from cone_perception.vis.debug_image import DebugImage, RateLimit, box_ranges_m, draw_debug_band
 
 CALIB = load_calibration("example_mainhoop")  # band rows 384-960, downscale 2 -> 960x288
 

@@ -11,9 +11,9 @@ import pytest
 from cone_perception import adapter
 from cone_perception.adapter import DriverAdapter, decode_compressed
 from cone_perception.crop import CropSpec
+from cone_perception.data.hostile import BOMBS, bmp_bomb, jpeg_bomb, jpeg_with_size, png_bomb, pnm_bomb
 from cone_perception.errors import FrameError
 from cone_perception.imageheader import HeaderError, declared_size
-from cone_perception.hostile import BOMBS, bmp_bomb, jpeg_bomb, jpeg_with_size, png_bomb, pnm_bomb
 
 W, H = 640, 480
 
@@ -141,7 +141,7 @@ def test_valid_images_still_decode_exactly() -> None:
 
 
 def test_detect_on_a_folder_with_a_bomb_processes_the_good_images(tmp_path: Path, capsys) -> None:
-    from cone_perception.sources import iter_source
+    from cone_perception.data.sources import iter_source
 
     (tmp_path / "a_bomb.png").write_bytes(png_bomb())
     (tmp_path / "b_bomb.jpg").write_bytes(jpeg_bomb())

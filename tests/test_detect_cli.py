@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from cone_perception.cli import main as cli_main
-from cone_perception.predictions import read_predictions
+from cone_perception.data.predictions import read_predictions
+
 from synthetic_cones import trained_smoke_model
 
 

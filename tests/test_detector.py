@@ -11,14 +11,15 @@ import torch
 import yaml
 
 from cone_perception import records
-from cone_perception.checkpoint import load_checkpoint, save_checkpoint
 from cone_perception.classes import CLASS_NAMES
 from cone_perception.cli import main as cli_main
 from cone_perception.crop import CropSpec
 from cone_perception.detector import Detector, default_model_path, resolve_backend, write_sidecar
-from cone_perception.errors import ConfigError
 from cone_perception.detector.export import export_model, onnx_bytes
+from cone_perception.errors import ConfigError
 from cone_perception.model import ConeYOLO, model_config
+from cone_perception.model.checkpoint import load_checkpoint, save_checkpoint
+
 from synthetic_cones import SMOKE_SIZE, trained_smoke_model
 
 
@@ -317,7 +318,7 @@ def test_detect_command_writes_boxes_and_the_model_input_scale(trained, tmp_path
     out = tmp_path / "p.jsonl"
     assert cli_main(["detect", str(folder), "--model", str(ckpt), "--crop", f"0,{2 * h}", "--downscale", "2",
                      "--out", str(out), "--no-progress"]) == 0
-    from cone_perception.predictions import read_predictions
+    from cone_perception.data.predictions import read_predictions
 
     preds = list(read_predictions(out))
     det = Detector.load(ckpt)
@@ -342,7 +343,7 @@ def test_detect_command_onnx_band_runs_at_its_own_size(trained, tmp_path):
     h, w = images[0].shape[:2]
     big = cv2.resize(images[0], (2 * w, 2 * h), interpolation=cv2.INTER_NEAREST)
     cv2.imwrite(str(folder / "f0.png"), big)
-    from cone_perception.predictions import read_predictions
+    from cone_perception.data.predictions import read_predictions
 
     got = {}
     for backend in ("torch", "onnx"):

@@ -8,14 +8,17 @@ import onnx
 import pytest
 import yaml
 
-from cone_perception.detector import quantize
 from cone_perception.adapter import crop_bgr
 from cone_perception.classes import CLASS_NAMES
 from cone_perception.cli import main as cli_main
 from cone_perception.crop import CropSpec
 from cone_perception.detector import Detector
 from cone_perception.errors import ConfigError
-from cone_perception.detector.quantize import calibration_blobs, int8_frame_pool, compare_detections, head_output_convs, qdq_summary, spread
+from cone_perception.train import quantize
+from cone_perception.train.quantize import (
+    calibration_blobs, compare_detections, head_output_convs, int8_frame_pool, qdq_summary, spread,
+)
+
 from synthetic_cones import SMOKE_SIZE, make_image, trained_smoke_model
 
 

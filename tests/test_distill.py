@@ -9,13 +9,14 @@ import numpy as np
 import pytest
 import torch
 
-from cone_perception.checkpoint import load_checkpoint, save_checkpoint
 from cone_perception.classes import CLASS_NAMES
 from cone_perception.errors import ConfigError
 from cone_perception.model import ConeYOLO, model_config
+from cone_perception.model.checkpoint import load_checkpoint, save_checkpoint
 from cone_perception.train.augment import AugmentConfig
 from cone_perception.train.distill import DistillLoss
 from cone_perception.train.trainer import TrainConfig, train
+
 from synthetic_cones import SMOKE_SIZE, trained_smoke_model
 
 

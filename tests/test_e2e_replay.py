@@ -12,18 +12,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cone_perception.calib import load_calibration
 from cone_perception.classes import NUM_CLASSES
-from cone_perception.mapping import expected_truth
+from cone_perception.data import bagio
+from cone_perception.data.bags import read_ground_truth
 from cone_perception.detector import RUNTIME_THREADS, Detector, default_model_path
 from cone_perception.evaluation import LocalisationReport
+from cone_perception.geometry.calib import load_calibration
+from cone_perception.mapping import expected_truth
 from cone_perception.nodes.live_replay import live_replay, write_result_bag
 from cone_perception.pipeline import Pipeline
-from cone_perception.replay import offline_replay, read_ground_truth
+from cone_perception.replay import offline_replay
 from cone_perception.resources import calib_dir
 from cone_perception.synth.config import SynthConfig
 from cone_perception.synth.writers import write_scene_bag
-from cone_perception import bagio
 
 SEED = 90210  # not a training seed (training data: seed 1)
 

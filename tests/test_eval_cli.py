@@ -8,10 +8,10 @@ import json
 import cv2
 import numpy as np
 import pytest
+from test_evaluation_report import CONES, box_rows, scene_boxes, write_gt_jsonl, write_pred
 
-from cone_perception.calib import load_calibration
 from cone_perception.cli import main
-from test_evaluation_report import box_rows, scene_boxes, write_gt_jsonl, write_pred, CONES
+from cone_perception.geometry.calib import load_calibration
 
 
 @pytest.fixture(scope="module")

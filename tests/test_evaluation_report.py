@@ -9,15 +9,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cone_perception.calib import load_calibration
 from cone_perception.classes import BLUE, LARGE_ORANGE, ORANGE, YELLOW
 from cone_perception.cli import main
+from cone_perception.data.predictions import read_predictions
 from cone_perception.errors import ConfigError
 from cone_perception.evaluation import PairDistanceReport, blue_yellow_pairs
-from cone_perception.geometry import apply_homography
 from cone_perception.evaluation.groundtruth import load_ground_truth, pair_with_predictions
 from cone_perception.evaluation.metrics import ImageDetections, coco_map, operating_point
-from cone_perception.predictions import read_predictions
+from cone_perception.geometry import apply_homography
+from cone_perception.geometry.calib import load_calibration
 from cone_perception.mapping import ConeMapper
 from cone_perception.records import CONE_DTYPE, boxes_from_arrays
 
@@ -381,8 +381,8 @@ def test_yolo_folder_with_split_subfolders(tmp_path, scene, capsys):
 
 
 def test_recall_by_box_height_at_the_model_input():
-    from cone_perception.evaluation.report import recall_by_box_height
     from cone_perception.evaluation.groundtruth import EvalImage
+    from cone_perception.evaluation.report import recall_by_box_height
 
     hs = np.array([12.0, 20.0, 40.0, 60.0, 120.0])  # image px; at input_scale 0.5: 6, 10, 20, 30, 60 px
     gt = np.column_stack([np.arange(5) * 200.0, np.full(5, 100.0), np.arange(5) * 200.0 + 40, 100.0 + hs])
@@ -402,7 +402,7 @@ def test_recall_by_box_height_at_the_model_input():
 
 
 def test_prediction_input_scale_round_trip_and_bad_value(tmp_path):
-    from cone_perception.predictions import prediction_line
+    from cone_perception.data.predictions import prediction_line
 
     boxes = boxes_from_arrays(np.array([[1.0, 2.0, 3.0, 4.0]]), np.array([0.9]), np.array([BLUE]))
     p = tmp_path / "p.jsonl"

@@ -60,8 +60,8 @@ def test_far_band_finds_far_cones_the_halved_band_misses():
     model: with the far band (rows 384-576 at full resolution) more of the cones beyond 15 m are found,
     and the nearer ones are found as before (box IoU >= 0.5, same class, cones at least half visible)."""
     from cone_perception.adapter import bgr_to_yuyv
-    from cone_perception.calib import load_calibration
     from cone_perception.detector import Detector, default_model_path
+    from cone_perception.geometry.calib import load_calibration
     from cone_perception.pipeline import Pipeline
     from cone_perception.synth.config import SynthConfig
     from cone_perception.synth.scene import random_pose
@@ -108,11 +108,12 @@ def test_pipeline_node_with_far_rows_publishes_the_merged_boxes(ros):  # noqa: F
     from sensor_msgs.msg import Image, PointCloud2
 
     from cone_perception.bench.frames import rendered_frames
-    from cone_perception.calib import load_calibration
     from cone_perception.detector import Detector, default_model_path
+    from cone_perception.geometry.calib import load_calibration
     from cone_perception.nodes import _msgs
     from cone_perception.nodes.pipeline import PipelineNode
     from cone_perception.pipeline import Pipeline
+
     from rosutil import Inbox
 
     calib = load_calibration("example_mainhoop")

@@ -5,9 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cone_perception.calib import DEFAULT_FOOT_POINTS, RECOMMENDED_FOOT_OFFSET_M, calibration_from_dict, load_calibration
 from cone_perception.classes import CLASS_NAMES, LARGE_ORANGE, ORANGE
 from cone_perception.errors import ConfigError
+from cone_perception.geometry.calib import (
+    DEFAULT_FOOT_POINTS, RECOMMENDED_FOOT_OFFSET_M, calibration_from_dict, load_calibration,
+)
 from cone_perception.mapping import ConeMapper
 from cone_perception.records import boxes_from_arrays
 from cone_perception.synth.config import SynthConfig

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 import yaml
 
-from cone_perception import bagio
 from cone_perception.attitude import imu_rest
 from cone_perception.cli import main
+from cone_perception.data import bagio
 from cone_perception.errors import ConfigError
 from cone_perception.synth.motion import Drive, imu_samples
 from cone_perception.synth.writers import _imu_msg

@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cone_perception.calib import DEFAULT_FOOT_POINTS, Calibration, load_calibration
-from cone_perception.camera import MountPose, PinholeCamera, default_intrinsics
 from cone_perception.classes import BLUE, CLASS_NAMES, LARGE_ORANGE, ORANGE, UNKNOWN, YELLOW
 from cone_perception.crop import CropSpec
 from cone_perception.errors import FrameError
 from cone_perception.geometry import GroundMapper, apply_homography, fix_homography_sign
+from cone_perception.geometry.calib import DEFAULT_FOOT_POINTS, Calibration, load_calibration
+from cone_perception.geometry.camera import MountPose, PinholeCamera, default_intrinsics
 from cone_perception.mapping import ConeMapper
 from cone_perception.records import CONE_DTYPE, boxes_from_arrays
 

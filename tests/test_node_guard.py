@@ -9,12 +9,12 @@ import pytest
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 
-from cone_perception.calib import load_calibration
 from cone_perception.crop import MAX_IMAGE_SIDE_PX, camera_info_crop
+from cone_perception.data.hostile import jpeg_bomb, png_bomb
 from cone_perception.errors import FrameError
+from cone_perception.geometry.calib import load_calibration
 from cone_perception.nodes import _msgs
 from cone_perception.nodes.driver_adapter import DriverAdapterNode
-from cone_perception.hostile import jpeg_bomb, png_bomb
 
 from rosutil import RosFixture, ros  # noqa: F401 (ros is a fixture)
 

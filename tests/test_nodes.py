@@ -18,15 +18,15 @@ from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from visualization_msgs.msg import Marker, MarkerArray
 
 from cone_perception.adapter import DriverAdapter, bgr_to_yuyv
-from cone_perception.calib import load_calibration, save_calibration
-from cone_perception.camera import MountPose, PinholeCamera, default_intrinsics
 from cone_perception.classes import BLUE, YELLOW
 from cone_perception.crop import CropSpec
+from cone_perception.geometry.calib import load_calibration, save_calibration
+from cone_perception.geometry.camera import MountPose, PinholeCamera, default_intrinsics
 from cone_perception.mapping import ConeMapper
-from cone_perception.params import PARAMS
 from cone_perception.nodes import _msgs
 from cone_perception.nodes.driver_adapter import DriverAdapterNode
 from cone_perception.nodes.mapping import MappingNode
+from cone_perception.params import PARAMS
 from cone_perception.records import boxes_from_arrays
 
 from rosutil import Inbox, RosFixture, ros, start_node_process, stop_process  # noqa: F401 (ros is a fixture)

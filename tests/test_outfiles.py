@@ -8,9 +8,9 @@ from pathlib import Path
 import pytest
 
 from cone_perception.cli import main
+from cone_perception.data.outfiles import refuse_existing
 from cone_perception.detector import default_model_path
 from cone_perception.errors import ConfigError
-from cone_perception.outfiles import refuse_existing
 
 
 def test_refuse_existing_names_the_file(tmp_path: Path) -> None:
@@ -41,7 +41,7 @@ def test_synth_preview_refuses_then_overwrites_with_force(tmp_path: Path, capsys
 
 
 def test_replay_refuses_existing_outputs_and_force_replaces_only_a_bag(tmp_path: Path, capsys) -> None:
-    from cone_perception.outfiles import remove_bag
+    from cone_perception.data.outfiles import remove_bag
 
     js = tmp_path / "s.json"
     js.write_text("keep me")

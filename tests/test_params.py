@@ -14,7 +14,7 @@ from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
 
 from cone_perception import detector
-from cone_perception.calib import load_calibration
+from cone_perception.geometry.calib import load_calibration
 from cone_perception.nodes import _msgs
 from cone_perception.params import PARAMS, ParamSpec
 from cone_perception.records import boxes_from_arrays
@@ -152,8 +152,8 @@ def test_detection_node_thresholds_and_descriptors(ros: RosFixture) -> None:
 def test_detection_node_debug_image_only_when_on_and_subscribed(ros: RosFixture) -> None:
     """Switched on at run time; no drawing while nobody subscribes; a frame without boxes still gives
     an image (the band, "0 boxes"); a frame with cones gives their boxes drawn."""
-    from cone_perception.bench.frames import rendered_frames
     from cone_perception.adapter import DriverAdapter
+    from cone_perception.bench.frames import rendered_frames
     from cone_perception.nodes.detection import DetectionNode
 
     node = ros.add(DetectionNode(context=ros.context))

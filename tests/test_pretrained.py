@@ -11,11 +11,7 @@ import torch
 from cone_perception.errors import ConfigError
 from cone_perception.model import ConeYOLO, model_config, model_names
 from cone_perception.model.pretrained import (
-    BACKBONES,
-    PretrainedBackbone,
-    load_imagenet,
-    read_imagenet_weights,
-    weights_path,
+    BACKBONES, PretrainedBackbone, load_imagenet, read_imagenet_weights, weights_path,
 )
 
 FAMILIES = sorted(BACKBONES)
@@ -141,8 +137,8 @@ def test_checkpoint_of_a_pretrained_model_runs_in_every_backend(tmp_path, name):
     (the default backend) and TorchScript: the same outputs as the eager model."""
     import numpy as np
 
-    from cone_perception.checkpoint import load_checkpoint, save_checkpoint
     from cone_perception.detector import Detector
+    from cone_perception.model.checkpoint import load_checkpoint, save_checkpoint
 
     model = ConeYOLO(model_config(f"{name}-p"))
     load_imagenet(model.backbone)
@@ -161,6 +157,7 @@ def test_checkpoint_of_a_pretrained_model_runs_in_every_backend(tmp_path, name):
 def _cone_batch(seed: int, n: int, w: int = 256, h: int = 96) -> tuple[torch.Tensor, torch.Tensor]:
     """n synthetic cone images (B, 3, h, w) RGB 0..1 and their (M, 6) targets (image, class, x1 y1 x2 y2 px)."""
     import numpy as np
+
     from synthetic_cones import make_image
 
     rng = np.random.default_rng(seed)

@@ -7,13 +7,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cone_perception import bagio
-from cone_perception.calib import load_calibration
 from cone_perception.cli import main
+from cone_perception.data import bagio
+from cone_perception.data.bags import find_image_topic
 from cone_perception.detector import Detector, default_model_path
 from cone_perception.errors import ConfigError
+from cone_perception.geometry.calib import load_calibration
 from cone_perception.pipeline import Pipeline
-from cone_perception.replay import find_image_topic, offline_replay
+from cone_perception.replay import offline_replay
 
 
 def _frame(i: int) -> np.ndarray:
@@ -81,7 +82,7 @@ def test_corrupt_and_missing_bags(bad_bag: Path, tmp_path: Path, capsys) -> None
 
 def test_header_bombs_in_a_bag_are_dropped_and_the_rest_processed(tmp_path: Path, capsys) -> None:
     """Issue 20: one 69-byte PNG declaring 100000x100000 px killed replay and detect."""
-    from cone_perception.hostile import jpeg_bomb, png_bomb
+    from cone_perception.data.hostile import jpeg_bomb, png_bomb
 
     path = tmp_path / "bombs"
     with bagio.BagWriter(path, {"/camera/image_raw/compressed": bagio.COMPRESSED_IMAGE}) as w:

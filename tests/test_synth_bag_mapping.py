@@ -4,9 +4,9 @@ import json
 
 import numpy as np
 
-from cone_perception import bagio
 from cone_perception.adapter import DriverAdapter
-from cone_perception.calib import load_calibration
+from cone_perception.data import bagio
+from cone_perception.geometry.calib import load_calibration
 from cone_perception.mapping import ConeMapper
 from cone_perception.records import CONE_DTYPE, boxes_from_arrays, from_pointcloud2
 from cone_perception.synth.config import SynthConfig

@@ -13,8 +13,8 @@ import numpy as np
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import Image, PointCloud2
 
-from cone_perception import bagio
-from cone_perception.calib import load_calibration
+from cone_perception.data import bagio
+from cone_perception.geometry.calib import load_calibration
 from cone_perception.nodes import _msgs
 from cone_perception.nodes.driver_adapter import DriverAdapterNode
 from cone_perception.nodes.mapping import MappingNode

@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 import yaml
 
-from cone_perception import bagio
 from cone_perception.adapter import crop_raw_to_bgr, decode_compressed, raw_frame_view
-from cone_perception.calib import load_calibration
 from cone_perception.classes import CLASS_NAMES
 from cone_perception.cli import main
 from cone_perception.crop import CropSpec
+from cone_perception.data import bagio
+from cone_perception.geometry.calib import load_calibration
 from cone_perception.records import CONE_DTYPE, from_pointcloud2
 from cone_perception.synth.config import SynthConfig
 from cone_perception.synth.writers import MIN_LABEL_BOX_PX, MIN_LABEL_VISIBLE
@@ -142,8 +142,8 @@ def test_unwritable_output_is_refused(tmp_path, capsys):
 
 
 def test_vary_mount_records_each_frames_camera(tmp_path):
-    from cone_perception.camera import MountPose, PinholeCamera
     from cone_perception.geometry import GroundMapper
+    from cone_perception.geometry.camera import MountPose, PinholeCamera
 
     out = tmp_path / "vm"
     args = ["synth", "dataset", "--n", "3", "--frames-per-track", "1", "--vary-mount", "--no-jitter", "--out", str(out), *SMALL]

@@ -9,16 +9,17 @@ import json
 import numpy as np
 import pytest
 
-from cone_perception import bagio
 from cone_perception.attitude import ImuAttitude
-from cone_perception.calib import load_calibration
+from cone_perception.data import bagio
+from cone_perception.data.bags import read_attitude_truth
+from cone_perception.geometry.calib import load_calibration
 from cone_perception.pipeline import Pipeline
 from cone_perception.records import boxes_from_arrays
-from cone_perception.replay import offline_replay, read_attitude_truth
-from cone_perception.synth.motion import drive_motion, quat_from_rpy, rpy_matrix
+from cone_perception.replay import offline_replay
 from cone_perception.synth.config import SynthConfig
-from cone_perception.synth.writers import bag_side_paths, write_scene_bag
+from cone_perception.synth.motion import drive_motion, quat_from_rpy, rpy_matrix
 from cone_perception.synth.track import make_track
+from cone_perception.synth.writers import bag_side_paths, write_scene_bag
 
 
 def test_drive_motion_follows_the_speed_profile():
@@ -114,7 +115,7 @@ def test_replay_with_the_image_attitude(bags, tmp_path):
     # the picture of it
     import cv2
 
-    from cone_perception.attitude import attitude_plot
+    from cone_perception.evaluation.attitude import attitude_plot
 
     stamps = sorted(res["image"].attitude)
     png = attitude_plot(tmp_path / "att.png", stamps, [res["image"].attitude[s] for s in stamps],

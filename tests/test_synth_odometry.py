@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from cone_perception.egomotion import Motion2D, TwistBuffer
 from cone_perception.synth.odometry import ODOM_RATE_HZ, frame_twists, odometry_samples
+from cone_perception.tracking import Motion2D, TwistBuffer
 
 
 def _arc(n: int, fps: float, v: float, w: float) -> np.ndarray:
@@ -61,10 +61,10 @@ def test_the_noise_comes_from_its_own_generator() -> None:
 
 
 def test_synth_bag_writes_odom_that_replay_reads(tmp_path) -> None:
-    from cone_perception import bagio
+    from cone_perception.data import bagio
+    from cone_perception.data.bags import read_twists
     from cone_perception.synth.config import SynthConfig
     from cone_perception.synth.writers import ODOM_TOPIC, write_scene_bag
-    from cone_perception.track_replay import read_twists
 
     bag = tmp_path / "drive"
     counts = write_scene_bag(SynthConfig(seed=7, jitter=False), 0.5, 10.0, bag, progress=False)

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from cone_perception.calib import load_calibration
 from cone_perception.classes import BLUE, YELLOW
 from cone_perception.geometry import GroundMapper
+from cone_perception.geometry.calib import load_calibration
 from cone_perception.synth.config import SynthConfig
 from cone_perception.synth.render import cone_vertices_W
 from cone_perception.synth.scene import CarPose, SceneCamera, random_pose

@@ -9,19 +9,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cone_perception import bagio
-from cone_perception.calib import load_calibration
 from cone_perception.classes import BLUE, YELLOW
+from cone_perception.data import bagio
+from cone_perception.data.bags import TRACKED_TOPIC, read_twists
 from cone_perception.detector import Detector, default_model_path
-from cone_perception.egomotion import Motion2D
 from cone_perception.errors import ConfigError
+from cone_perception.evaluation.tracking import TrackingReport, idf1, load_drive_truth
+from cone_perception.geometry.calib import load_calibration
 from cone_perception.pipeline import Pipeline
 from cone_perception.records import CONE_DTYPE, TRACKED_CONE_DTYPE, from_pointcloud2
-from cone_perception.replay import TRACKED_TOPIC, offline_replay
+from cone_perception.replay import ReplayTracking, drive_truth_beside, offline_replay
 from cone_perception.synth.config import SynthConfig
 from cone_perception.synth.writers import bag_side_paths, write_scene_bag
-from cone_perception.track_eval import TrackingReport, idf1, load_drive_truth
-from cone_perception.track_replay import ReplayTracking, drive_truth_beside, read_twists
+from cone_perception.tracking import Motion2D
 
 SEED = 31337  # not a training seed
 

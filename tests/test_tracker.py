@@ -6,10 +6,12 @@ import numpy as np
 import pytest
 
 from cone_perception.classes import BLUE, LARGE_ORANGE, UNKNOWN, YELLOW
-from cone_perception.egomotion import Motion2D, TwistBuffer, from_twist, register_cones
 from cone_perception.errors import FrameError
 from cone_perception.records import CONE_DTYPE, TRACKED_CONE_DTYPE
-from cone_perception.tracker import ConeTracker, FieldOfView, TrackerConfig, _mahalanobis2
+from cone_perception.tracking import (
+    ConeTracker, FieldOfView, Motion2D, TrackerConfig, TwistBuffer, from_twist, register_cones,
+)
+from cone_perception.tracking.tracker import _mahalanobis2
 
 DT_NS = 50_000_000  # 20 Hz
 
@@ -256,7 +258,7 @@ def test_mahalanobis_matches_direct_formula():
 
 
 def test_field_of_view_from_calibration():
-    from cone_perception.calib import load_calibration
+    from cone_perception.geometry.calib import load_calibration
 
     fov = FieldOfView.from_calibration(load_calibration())
     pts = np.array([[8.0, 0.0], [0.5, 0.0], [-5.0, 0.0], [8.0, 40.0], [500.0, 0.0]])
@@ -389,11 +391,11 @@ def test_stage_hands_the_frame_attitude_to_the_tracker_and_the_jacobian_matches_
     part the mapping added to each cone's covariance; tracks then carry their error's cross-covariance
     with the attitude (none with ``attitude_common`` off, none for the fixed attitude)."""
     from cone_perception.attitude import Attitude
-    from cone_perception.calib import calibration_from_dict
+    from cone_perception.geometry.calib import calibration_from_dict
     from cone_perception.mapping import ConeMapper
     from cone_perception.records import boxes_from_arrays
     from cone_perception.synth.config import SynthConfig
-    from cone_perception.tracker import TrackingStage
+    from cone_perception.tracking import TrackingStage
 
     calib = calibration_from_dict(SynthConfig(seed=0).calibration().to_dict(), "synth.yaml")
     mapper = ConeMapper(calib)

@@ -106,7 +106,7 @@ def _diagnostics(node):
 def test_pipeline_node_with_track_publishes_tracked_cones(ros: RosFixture, tmp_path) -> None:
     from sensor_msgs.msg import Image
 
-    from cone_perception import bagio
+    from cone_perception.data import bagio
     from cone_perception.nodes.pipeline import PipelineNode
     from cone_perception.synth.config import SynthConfig
     from cone_perception.synth.writers import bag_side_paths, write_scene_bag

@@ -9,11 +9,12 @@ import numpy as np
 import pytest
 import yaml
 
+from cone_perception.data.datasets import load_data_yaml
 from cone_perception.errors import ConfigError
 from cone_perception.train.augment import AugmentConfig, hflip, hsv_jitter, random_window
-from cone_perception.train.datasets import load_data_yaml
 from cone_perception.train.loader import EpochSampler, TrainSet, collate, epoch_order
 from cone_perception.train.trainer import TrainConfig, round_imgsz, train
+
 from synthetic_cones import trained_smoke_model, write_dataset
 
 
@@ -57,8 +58,9 @@ def test_bf16_training_learns_and_keeps_fp32_weights(tmp_path):
     holds fp32 weights that load into a plain model, and a pre-precision run resumes as fp32."""
     import torch
 
-    from cone_perception.checkpoint import load_checkpoint
+    from cone_perception.model.checkpoint import load_checkpoint
     from cone_perception.train.trainer import resolve_precision
+
     from synthetic_cones import SMOKE_SIZE
 
     root = write_dataset(tmp_path / "d", n_images=8, size=SMOKE_SIZE, seed=0)
@@ -183,8 +185,8 @@ def test_epoch_samples_are_reproducible_and_worker_independent(tmp_path):
 def test_train_command_writes_checkpoints_and_resumes(tmp_path, capsys):
     import json
 
-    from cone_perception.checkpoint import load_checkpoint
     from cone_perception.cli import main as cli_main
+    from cone_perception.model.checkpoint import load_checkpoint
 
     root = write_dataset(tmp_path / "d", n_images=4, size=(128, 64), seed=6)
     (root / "d.yaml").write_text(yaml.safe_dump({"train": [{"path": "."}], "val": [{"path": "."}]}))

@@ -6,18 +6,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import yaml
-from synthetic_cones import NAMES, draw_cone
 
 from cone_perception.classes import BLUE, LARGE_ORANGE, ORANGE, YELLOW
 from cone_perception.train.copy_paste import (
-    LARGE_H,
-    SMALL_H,
-    ConeBank,
-    CopyPasteConfig,
-    RowLaw,
-    cone_matte,
-    fit_row_law,
+    LARGE_H, SMALL_H, ConeBank, CopyPasteConfig, RowLaw, cone_matte, fit_row_law,
 )
+
+from synthetic_cones import NAMES, draw_cone
 
 W, H = 480, 270
 LAW = RowLaw(a=0.5, b=-0.2)  # cones from 8 px tall at row 0.46 H to 81 px at the bottom
@@ -145,8 +140,8 @@ def test_a_nearer_labelled_cone_stays_in_front_of_a_pasted_one():
 def test_training_set_pastes_only_when_asked(tmp_path):
     import cv2
 
+    from cone_perception.data.datasets import load_data_yaml
     from cone_perception.train.augment import AugmentConfig
-    from cone_perception.train.datasets import load_data_yaml
     from cone_perception.train.loader import TrainSet
 
     root = tmp_path / "d"

@@ -13,9 +13,10 @@ import yaml
 
 from cone_perception.classes import BLUE, LARGE_ORANGE, YELLOW
 from cone_perception.cli import main as cli_main
+from cone_perception.data.datasets import load_data_yaml, split_counts, summary_table
 from cone_perception.errors import ConfigError
-from cone_perception.train.datasets import load_data_yaml, split_counts, summary_table
 from cone_perception.train.report import next_run_dir
+
 from synthetic_cones import write_dataset
 
 

@@ -13,6 +13,7 @@ import yaml
 
 from cone_perception.train.distributed import ShardedSampler
 from cone_perception.train.loader import EpochSampler
+
 from synthetic_cones import write_dataset
 
 ARGS = ["train", "--data", "d/d.yaml", "--model", "p", "--imgsz", "128x64", "--batch", "4", "--epochs", "3",
@@ -38,8 +39,8 @@ def data(tmp_path_factory):
 
 
 def test_two_cpu_processes_match_one_with_the_same_global_batch(data):
-    from cone_perception.checkpoint import load_checkpoint
     from cone_perception.detector import Detector
+    from cone_perception.model.checkpoint import load_checkpoint
 
     one = _run([sys.executable, "-m", "cone_perception.cli", *ARGS, "--out", "one"], data)
     assert one.returncode == 0, one.stderr[-2000:]
@@ -73,7 +74,7 @@ def test_world_size_not_dividing_the_batch_stops_before_training(data):
 def test_sharded_sampler_splits_each_global_batch(tmp_path):
     root = write_dataset(tmp_path / "d", n_images=10, size=(64, 64), seed=1)
     (root / "d.yaml").write_text(yaml.safe_dump({"train": [{"path": "."}]}))
-    from cone_perception.train.datasets import load_data_yaml
+    from cone_perception.data.datasets import load_data_yaml
 
     entries = load_data_yaml(root / "d.yaml")[0]
     base = EpochSampler(entries, seed=0)

@@ -8,15 +8,12 @@ import numpy as np
 import pytest
 import yaml
 
-from cone_perception.calib import calibration_from_dict, load_calibration, resolve_calibration_path
 from cone_perception.calibrate import from_pose
-from cone_perception.camera import MountPose, PinholeCamera, default_intrinsics
 from cone_perception.errors import ConfigError
-from cone_perception.transforms import (
-    calibration_in_params_file,
-    mount_pose_of,
-    optical_frame_transform,
-    quaternion_xyzw,
+from cone_perception.geometry.calib import calibration_from_dict, load_calibration, resolve_calibration_path
+from cone_perception.geometry.camera import MountPose, PinholeCamera, default_intrinsics
+from cone_perception.geometry.transforms import (
+    calibration_in_params_file, mount_pose_of, optical_frame_transform, quaternion_xyzw,
 )
 
 ROOT = Path(__file__).resolve().parents[1]

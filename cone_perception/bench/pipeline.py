@@ -10,8 +10,8 @@ import time
 import numpy as np
 
 from ..adapter import DriverAdapter
-from ..timing import StageTimer, peak_rss_mb
 from ..crop import CropSpec
+from ..timing import StageTimer, peak_rss_mb
 from .frames import synthetic_frames
 
 #: Bytes per pixel of the raw encodings ``bench adapter`` times.
@@ -22,10 +22,10 @@ def bench_pipeline(calib, det, frames: list[bytes], n_frames: int, warmup: int =
     """Time ``det`` in the fused pipeline of ``calib`` (its crop and downscale) on raw YUYV ``frames``
     (cycled): per stage, end to end with the packing of ``cone_boxes`` and ``/cones``. The result
     of ``bench pipeline`` (and one row of ``bench table``). ``far``: a far band (``detector/farband.py``) or None."""
-    from .. import bagio
-    from ..debug_image import DebugImage
+    from ..data import bagio
     from ..pipeline import Pipeline
     from ..records import to_pointcloud2
+    from ..vis.debug_image import DebugImage
 
     pipe = Pipeline(calib, det, far=far)
     debug = DebugImage(pipe.mapper)
@@ -107,8 +107,8 @@ def bench_tracker(calib, rows: int, n_frames: int, warmup: int) -> dict:
     """Time :meth:`ConeTracker.update` (motion from the cones: registration, association, Kalman update)
     per frame of a simulated drive through ``rows`` rows of cones, seen through the calibration's band:
     the result of ``bench tracker``."""
-    from ..track_eval import simulated_drive
-    from ..tracker import ConeTracker, FieldOfView, TrackerConfig
+    from ..evaluation.tracking import simulated_drive
+    from ..tracking import ConeTracker, FieldOfView, TrackerConfig
 
     fov = FieldOfView.from_calibration(calib)
     rows_m = tuple(float(s * (1.75 + 3.5 * (k // 2))) for k, s in zip(range(rows), [1, -1] * rows))

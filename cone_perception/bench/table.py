@@ -27,9 +27,9 @@ from pathlib import Path
 import numpy as np
 
 from ..crop import CropSpec
-from ..errors import ConfigError
+from ..data.sources import iter_source
 from ..detector import detect_one
-from ..sources import iter_source
+from ..errors import ConfigError
 from ..words import plural
 from .frames import rendered_frames
 from .pipeline import bench_pipeline, load_for_crop
@@ -137,9 +137,9 @@ def format_markdown(doc: dict) -> str:
 def run_table(args: argparse.Namespace, calib) -> int:
     from tqdm import tqdm
 
-    from ..evaluation.report import _json_safe, evaluate_predictions
+    from ..data.predictions import write_prediction
     from ..evaluation.groundtruth import load_ground_truth
-    from ..predictions import write_prediction
+    from ..evaluation.report import _json_safe, evaluate_predictions
 
     _need(args)
     settings = parse_settings(args.settings)

@@ -8,21 +8,14 @@
 The names below are this package's face (``from cone_perception.calibrate import fit_calibration``).
 """
 
+from ..geometry.pose import PoseEstimate, from_pose, pose_from_homography
 from .fit import (
-    DEFAULT_RANSAC_PX,
-    CalibrationResult,
-    Intrinsics,
-    PoseEstimate,
-    calibrate_intrinsics,
-    default_crop,
-    estimate_homography,
-    fit_calibration,
-    from_pose,
-    pose_from_homography,
-    read_intrinsics_file,
-    result_from_pose,
+    DEFAULT_RANSAC_PX, CalibrationResult, Intrinsics, calibrate_intrinsics, default_crop, estimate_homography,
+    fit_calibration, read_intrinsics_file, result_from_pose,
 )
-from .points import Board, PointPairs, board_not_found_hint, board_pairs, detect_board, planar_transform, read_points_csv
+from .points import (
+    Board, PointPairs, board_not_found_hint, board_pairs, detect_board, planar_transform, read_points_csv,
+)
 from .report import REPORT_DISTANCES_M, format_report, quality_report
 
 __all__ = [

@@ -23,7 +23,6 @@ source (image, point file) and what is wrong. ROS-free.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
@@ -32,11 +31,11 @@ import cv2
 import numpy as np
 import yaml
 
-from ..camera import MountPose, PinholeCamera
 from ..crop import CropSpec
 from ..errors import ConfigError
 from ..geometry import apply_homography, distort_pixels, fix_homography_sign, undistort_pixels
-
+from ..geometry.camera import MountPose
+from ..geometry.pose import from_pose
 from .points import PointPairs, detect_board
 
 DEFAULT_RANSAC_PX = 3.0
@@ -217,54 +216,6 @@ def fit_calibration(
         )
     res.H_S_B, res.H_F_B, res.inliers, res.uv_und_px = H_S_B, H_F_B, inl, uv_und
     return res
-
-
-def from_pose(K: np.ndarray, width: int, height: int, pose: MountPose) -> np.ndarray:
-    """``H_F_B`` (undistorted px -> rear_axle m) of a camera with known K and mount pose."""
-    return PinholeCamera(np.asarray(K, dtype=np.float64), int(width), int(height), pose).H_F_B()
-
-
-@dataclass(frozen=True)
-class PoseEstimate:
-    """Mount pose recovered from ``H_F_B`` and K, with how well K fits H.
-
-    ``column_ratio`` = |r1| / |r2| of ``K^-1 H_B_F`` (1 for a consistent K),
-    ``column_angle_deg`` their angle (90 for a consistent K).
-    """
-
-    pose: MountPose
-    column_ratio: float
-    column_angle_deg: float
-
-
-def pose_from_homography(H_F_B: np.ndarray, K: np.ndarray) -> PoseEstimate:
-    """Inverse of :func:`from_pose`: decompose ``K^-1 H_B_F = s [r1 r2 t]`` into the mount pose.
-
-    r1, r2 are the first two columns of ``R_C_F`` (scale from their mean
-    length, sign so the ground lies in front of the camera), r3 = r1 x r2, the
-    rotation re-orthonormalised by SVD; camera position ``-R^T t``; yaw, pitch,
-    roll in the convention of :class:`~cone_perception.camera.MountPose`.
-    """
-    M = np.linalg.inv(np.asarray(K, dtype=np.float64)) @ np.linalg.inv(np.asarray(H_F_B, dtype=np.float64))
-    m1, m2, m3 = M[:, 0], M[:, 1], M[:, 2]
-    n1, n2 = np.linalg.norm(m1), np.linalg.norm(m2)
-    angle = math.degrees(math.acos(np.clip(m1 @ m2 / (n1 * n2), -1.0, 1.0)))
-    s = 2.0 / (n1 + n2)  # the sign is fixed below: the camera must be above the ground
-    r1, r2, t = s * m1, s * m2, s * m3
-    R = np.column_stack([r1, r2, np.cross(r1, r2)])
-    U, _, Vt = np.linalg.svd(R)
-    R = U @ Vt
-    if np.linalg.det(R) < 0:
-        R = U @ np.diag([1, 1, -1]) @ Vt
-    C = -R.T @ t
-    if C[2] < 0:  # wrong overall sign: camera below the ground
-        r1, r2, t = -r1, -r2, -t
-        R = np.column_stack([r1, r2, np.cross(r1, r2)])
-        U, _, Vt = np.linalg.svd(R)
-        R = U @ Vt
-        C = -R.T @ t
-    pose = MountPose.from_R_F_C(R.T, C)
-    return PoseEstimate(pose, float(n1 / n2), angle)
 
 
 # -- intrinsics ----------------------------------------------------------------------------------

@@ -6,8 +6,8 @@ import cv2
 import numpy as np
 
 from ..geometry import GroundMapper, apply_homography
-
-from .fit import CalibrationResult, pose_from_homography
+from ..geometry.pose import pose_from_homography
+from .fit import CalibrationResult
 
 REPORT_DISTANCES_M = (5.0, 10.0, 15.0, 20.0)
 

@@ -33,14 +33,13 @@ from pathlib import Path
 from ..bench.frames import rendered_frames
 from ..bench.pipeline import BYTES_PER_PX, bench_adapter, bench_pipeline, bench_tracker, load_for_crop
 from ..bench.table import INPUT_SETTINGS, crop_for_setting
-from ..timing import format_table
-from ..calib import DEFAULT_CAMERA, load_calibration
 from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, RUNTIME_THREADS
 from ..errors import ConfigError
+from ..geometry.calib import DEFAULT_CAMERA, load_calibration
 from ..params import DEFAULT_CONF
+from ..timing import format_table
 from ..words import plural
 from ._args import parse_crop
-
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -19,32 +19,22 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ..calib import RECOMMENDED_FOOT_OFFSET_M, RECOMMENDED_FOOT_POINTS, Calibration, calibration_from_dict, load_calibration, save_calibration
 from ..calibrate import (
-    Board,
-    CalibrationResult,
-    Intrinsics,
-    PointPairs,
-    board_not_found_hint,
-    board_pairs,
-    calibrate_intrinsics,
-    default_crop,
-    detect_board,
-    fit_calibration,
-    format_report,
-    planar_transform,
-    quality_report,
-    read_intrinsics_file,
-    read_points_csv,
-    result_from_pose,
+    Board, CalibrationResult, Intrinsics, PointPairs, board_not_found_hint, board_pairs, calibrate_intrinsics,
+    default_crop, detect_board, fit_calibration, format_report, planar_transform, quality_report, read_intrinsics_file,
+    read_points_csv, result_from_pose,
 )
 from ..calibrate.pictures import birdseye_picture, not_found_picture, points_picture
-from ..attitude import MOUNT_POSE_CHECK_RANGE_M, MOUNT_POSE_TOLERANCE, mount_pose_disagreement
-from ..camera import MountPose, default_intrinsics
 from ..classes import CLASS_NAMES
+from ..data.outfiles import print_written, refuse_existing
+from ..data.sources import read_bag_image, read_image
 from ..errors import ConfigError
-from ..outfiles import print_written, refuse_existing
-from ..sources import read_bag_image, read_image
+from ..geometry.calib import (
+    RECOMMENDED_FOOT_OFFSET_M, RECOMMENDED_FOOT_POINTS, Calibration, calibration_from_dict, load_calibration,
+    save_calibration,
+)
+from ..geometry.camera import MountPose, default_intrinsics
+from ..geometry.pose import MOUNT_POSE_CHECK_RANGE_M, MOUNT_POSE_TOLERANCE, mount_pose_disagreement
 from ._args import parse_size
 
 BOARD_SIZE = "COLSxROWS (e.g. 9x6)"

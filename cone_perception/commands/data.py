@@ -39,7 +39,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from .. import convert
+    from ..data import convert
 
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(message)s")
     if args.action == "fsoco-to-yolo":

@@ -19,10 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..timing import format_table, summarize
-from ..calib import DEFAULT_CAMERA, load_calibration, resolve_calibration_path
 from ..evaluation import LocalisationReport, format_localisation
+from ..geometry.calib import DEFAULT_CAMERA, load_calibration, resolve_calibration_path
 from ..mapping import expected_truth
+from ..timing import format_table, summarize
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -65,14 +65,14 @@ def _bag(args) -> tuple[Path, Path]:
 def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
+    from ..data.bags import read_ground_truth
     from ..detector import default_model_path
-    from ..replay import read_ground_truth
 
     calib = load_calibration(args.calib)
     model = Path(args.model) if args.model else default_model_path()
     if not model.is_file():
-        from ..checkpoint import RESTORE_HINT
         from ..errors import ConfigError
+        from ..model.checkpoint import RESTORE_HINT
 
         raise ConfigError(str(model), None, f"model file not found; {RESTORE_HINT}")
     args.out.mkdir(parents=True, exist_ok=True)
@@ -121,7 +121,8 @@ def run(args: argparse.Namespace) -> int:
     print(format_table({"latency": latency}))
     print(format_localisation(loc))
 
-    from ..vis import bag_frames_picture, birdseye_plot
+    from ..evaluation.plots import bag_frames_picture
+    from ..vis import birdseye_plot
 
     stamps = sorted(cones)
     picks = [stamps[int(i)] for i in np.linspace(0, len(stamps) - 1, 4)] if stamps else []

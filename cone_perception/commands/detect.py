@@ -3,7 +3,7 @@
   cone-perception detect SOURCE --out FILE.jsonl [--model M] [--imgsz WxH] [--crop V0,V1[,U0,U1]]
                                  [--downscale N] [--backend B] [--save-vis DIR] [--every N]
 
-One line per image (see ``cone_perception/predictions.py``), boxes in the image's own pixels.
+One line per image (see ``cone_perception/data/predictions.py``), boxes in the image's own pixels.
 A video's frames are named ``<video stem>_<frame index, 6 digits>`` (index from 0 in the file);
 a bag's by their stamp in ns. No image read at all is an error (exit 2).
 Without ``--crop`` each image is letterboxed to the model input (``--imgsz``, default the
@@ -19,12 +19,12 @@ from pathlib import Path
 import cv2
 from tqdm import tqdm
 
+from ..crop import CropSpec
+from ..data.sources import iter_source
 from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, Detector, default_model_path, detect_one, resolve_backend
+from ..detector.farband import FarBand
 from ..errors import ConfigError
 from ..params import DEFAULT_CONF, DEFAULT_IOU
-from ..sources import iter_source
-from ..crop import CropSpec
-from ..detector.farband import FarBand
 from ._args import parse_crop, size_arg
 
 
@@ -55,7 +55,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..predictions import write_prediction
+    from ..data.predictions import write_prediction
     from ..vis import draw_band, draw_boxes
 
     if args.far_rows and not args.crop:

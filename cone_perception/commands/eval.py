@@ -8,7 +8,7 @@ Ground truth: a YOLO label folder (images/, labels/, data.yaml) or a synthetic g
 positions: localisation and the thesis's pair metric too). See ``cone_perception/evaluation/report.py``.
 ``--tracked``: the tracking table of ``replay --track --gt-topic`` from a replay's output bag
 (``/cones`` and ``/cones/tracked``) against the synthetic drive's gt.jsonl
-(``cone_perception/track_eval.py``).
+(``cone_perception/evaluation/tracking.py``).
 """
 
 from __future__ import annotations
@@ -116,7 +116,9 @@ def run(args: argparse.Namespace) -> int:
 
 def _run_tracked(args: argparse.Namespace) -> int:
     from ..errors import ConfigError
-    from ..track_eval import evaluate_tracking_bag, format_drive_evaluation, load_drive_truth, write_tracking_report
+    from ..evaluation.tracking import (
+        evaluate_tracking_bag, format_drive_evaluation, load_drive_truth, write_tracking_report,
+    )
 
     if not args.tracked.is_dir() and not args.tracked.is_file():
         raise ConfigError(str(args.tracked), None, "bag not found")

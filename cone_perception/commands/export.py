@@ -13,7 +13,7 @@ VERIFY_FRAMES = 8
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from ..detector.quantize import ACTIVATION_TYPES, CALIB_METHODS, DEFAULT_CALIB_FRAMES, MIN_MATCHED, MIN_MEAN_IOU
+    from ..train.quantize import ACTIVATION_TYPES, CALIB_METHODS, DEFAULT_CALIB_FRAMES, MIN_MATCHED, MIN_MEAN_IOU
 
     p.description = (
         "Export a detector checkpoint to TorchScript or ONNX, verified against eager (max |diff| <= "
@@ -55,11 +55,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..checkpoint import load_checkpoint
+    from ..data.outfiles import refuse_existing
     from ..detector import Detector, sidecar_path, write_sidecar
-    from ..errors import ConfigError
-    from ..outfiles import refuse_existing
     from ..detector.export import export_metadata, export_model, worst_diff_to_eager
+    from ..errors import ConfigError
+    from ..model.checkpoint import load_checkpoint
     from ..train.trainer import round_imgsz
 
     int8_flags = [f"--{k.replace('_', '-')}" for k in ("calib_images", "calib_clips", "calib_crop") if getattr(args, k) is not None]
@@ -72,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError("--int8", "calib-images", "give a folder of real frames to calibrate on (--calib-images DIR)")
         if args.calib_frames < 1:
             raise ConfigError("--calib-frames", None, f"must be >= 1, got {args.calib_frames}")
-        from ..detector.quantize import int8_frame_pool
+        from ..train.quantize import int8_frame_pool
 
         # the calibration frames are checked before anything is exported
         pool, dropped = int8_frame_pool(args.calib_images, args.calib_clips.split(",") if args.calib_clips else None)
@@ -111,7 +111,9 @@ def _int8(args, ck, fp32_path: Path, imgsz: tuple[int, int], eager, pool: list[P
     from ..detector import Detector, write_sidecar
     from ..errors import ConfigError
     from ..model.decode import postprocess
-    from ..detector.quantize import MIN_MATCHED, MIN_MEAN_IOU, QuantOptions, calibration_blobs, compare_detections, quantize_onnx, spread
+    from ..train.quantize import (
+        MIN_MATCHED, MIN_MEAN_IOU, QuantOptions, calibration_blobs, compare_detections, quantize_onnx, spread,
+    )
 
     files = spread(pool, args.calib_frames)
     opts = QuantOptions(activation=args.int8_activations, per_channel=not args.per_tensor,

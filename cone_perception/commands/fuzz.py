@@ -37,9 +37,9 @@ def run(args: argparse.Namespace) -> int:
 
     from tqdm import tqdm
 
+    from ..data.outfiles import print_written, refuse_existing
     from ..errors import ConfigError
     from ..nodes.fuzz import TARGETS, bomb_timings, fuzz_target
-    from ..outfiles import print_written, refuse_existing
 
     targets = list(TARGETS) if args.targets == "all" else [t.strip() for t in args.targets.split(",") if t.strip()]
     unknown = [t for t in targets if t not in TARGETS]
@@ -51,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
         refuse_existing([args.json], args.force, "fuzz")
     params = {}
     if args.calib:
-        from ..calib import resolve_calibration_path
+        from ..geometry.calib import resolve_calibration_path
 
         params["calibration"] = str(resolve_calibration_path(args.calib))
     if args.model:

@@ -20,8 +20,9 @@ import sys
 import textwrap
 from pathlib import Path
 
-from ..attitude import (IMU_REST_MAX_ACCEL_SD, IMU_REST_MAX_ANGLE_SD_DEG, IMU_REST_MAX_RATE_SD_DPS,
-                        IMU_REST_MIN_SAMPLES, imu_rest)
+from ..attitude import (
+    IMU_REST_MAX_ACCEL_SD, IMU_REST_MAX_ANGLE_SD_DEG, IMU_REST_MAX_RATE_SD_DPS, IMU_REST_MIN_SAMPLES, imu_rest,
+)
 from ..errors import ConfigError
 
 
@@ -43,7 +44,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..replay import read_imu_motion
+    from ..data.bags import read_imu_motion
 
     if args.seconds <= 0 or args.start < 0:
         raise ConfigError("--seconds/--start", None, f"need --seconds > 0 and --start >= 0, got {args.seconds}, {args.start}")

@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from ..attitude import attitude_estimator
-from ..calib import DEFAULT_CAMERA, load_calibration
 from ..errors import ConfigError, FrameError
+from ..geometry.calib import DEFAULT_CAMERA, load_calibration
 from ..mapping import ConeMapper, validate_boxes
 from ..records import read_boxes_csv
 

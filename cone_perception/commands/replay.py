@@ -23,16 +23,16 @@ import sys
 from pathlib import Path
 
 import numpy as np
-
 from tqdm import tqdm
 
-from ..attitude import ATTITUDE_MODES, format_attitude_report
-from ..timing import format_table, summarize
-from ..calib import DEFAULT_CAMERA, load_calibration, resolve_calibration_path
+from ..attitude import ATTITUDE_MODES
+from ..data.outfiles import print_written, refuse_existing, remove_bag
 from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, RUNTIME_THREADS, Detector, default_model_path
 from ..evaluation import LocalisationReport, format_localisation
-from ..outfiles import print_written, refuse_existing, remove_bag
+from ..evaluation.attitude import format_attitude_report
+from ..geometry.calib import DEFAULT_CAMERA, load_calibration, resolve_calibration_path
 from ..params import DEFAULT_CONF
+from ..timing import format_table, summarize
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -102,7 +102,7 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError("--far-rows", None, "needs the fused pipeline node (--live fused or offline)")
     refuse_existing([p for p in (args.out, args.json) if p is not None], args.force, "replay")
     if args.out is not None:
-        from ..bagio import check_new_output
+        from ..data.bagio import check_new_output
 
         if args.force and args.out.exists():
             remove_bag(args.out)
@@ -120,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
 def _imu_source(args, calib):
     """An ImuAttitude when the bag has the IMU topic and the mode may use it, else None."""
     from ..attitude import ImuAttitude
-    from ..bagio import bag_topics
+    from ..data.bagio import bag_topics
     from ..errors import ConfigError
 
     if args.attitude in ("fixed", "image") or not calib.has_attitude_model and args.attitude is None:
@@ -168,14 +168,14 @@ def _run_offline(args, calib) -> dict:
     if res.pipeline_attitude is not None:
         print(f"attitude ({res.attitude_mode}): " + ", ".join(f"{k} {v}" for k, v in res.pipeline_attitude.items()))
     if res.tracking:
-        from ..track_replay import format_replay_tracking
+        from ..replay import format_replay_tracking
 
         print(format_replay_tracking(res.tracking))
     if args.out:
         print_written([args.out], "replay")
     if args.attitude_png:
-        from ..attitude import attitude_plot
-        from ..replay import read_attitude_truth
+        from ..data.bags import read_attitude_truth
+        from ..evaluation.attitude import attitude_plot
 
         stamps = sorted(res.attitude)
         attitude_plot(args.attitude_png, stamps, [res.attitude[s] for s in stamps], read_attitude_truth(args.bag),
@@ -189,7 +189,8 @@ def _tracking(args, calib):
     """The replay's tracking (``--track``, ``--drop-detections``), or None."""
     if not args.track and args.drop_detections == 0:
         return None
-    from ..track_replay import ReplayTracking, drive_truth_beside, read_twists
+    from ..data.bags import read_twists
+    from ..replay import ReplayTracking, drive_truth_beside
 
     truth = drive_truth_beside(args.bag) if args.gt_topic else None
     twists = read_twists(args.bag, args.odom_topic) if (args.odom_topic and args.track) else None
@@ -197,8 +198,8 @@ def _tracking(args, calib):
 
 
 def _run_live(args, calib) -> dict:
+    from ..data.bags import read_ground_truth
     from ..nodes.live_replay import live_replay, write_result_bag
-    from ..replay import read_ground_truth
 
     params = {"calibration": str(resolve_calibration_path(args.calib)), "backend": args.backend, "conf": args.conf}
     if args.model:
@@ -239,8 +240,8 @@ def _run_live(args, calib) -> dict:
 
 def _live_tracking(args, res) -> dict | None:
     """The tracking table of a live replay (``--track --gt-topic`` on a synthetic bag); no ego-motion figures."""
-    from ..track_eval import DriveEvaluation, format_drive_evaluation
-    from ..track_replay import drive_truth_beside
+    from ..evaluation.tracking import DriveEvaluation, format_drive_evaluation
+    from ..replay import drive_truth_beside
 
     truth = drive_truth_beside(args.bag)
     if truth is None:

@@ -83,7 +83,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def config_from_args(args: argparse.Namespace):
-    from ..camera import MountPose
+    from ..geometry.camera import MountPose
     from ..synth.config import SynthConfig
     from ._args import parse_size
 
@@ -121,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
         calib, gt = writers.bag_side_paths(Path(args.out))
         print(f"wrote {args.out}: " + ", ".join(f"{t} {k}" for t, k in c.items()) + f"; calibration {calib}; ground truth {gt}")
     elif args.action == "preview":
-        from ..outfiles import print_written, refuse_existing
+        from ..data.outfiles import print_written, refuse_existing
 
         refuse_existing([args.out], args.force, "synth preview")
         print_written([writers.write_preview(cfg, args.out, args.n)], "synth preview")

@@ -2,7 +2,7 @@
 
 ``--data`` takes an Ultralytics data.yaml (``path``, ``train``, ``val``, ``test``, ``names``),
 the one ``synth dataset`` / ``data fsoco-to-yolo`` / ``data restore-aspect`` write, or this
-package's own mixing form (see :mod:`cone_perception.train.datasets`). Without ``--out`` a run goes
+package's own mixing form (see :mod:`cone_perception.data.datasets`). Without ``--out`` a run goes
 to ``runs/train/<name>`` numbered (``exp``, ``exp2``, ...), never into an existing run.
 """
 

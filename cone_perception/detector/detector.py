@@ -34,10 +34,10 @@ import torch
 
 from .. import records
 from ..adapter import pin_opencv_threads
-from ..classes import CLASS_NAMES
-from ..checkpoint import RESTORE_HINT, Checkpoint, class_map_from_names, load_checkpoint
+from ..classes import CLASS_NAMES, class_map_from_names
 from ..crop import CropSpec
 from ..errors import ConfigError
+from ..model.checkpoint import RESTORE_HINT, Checkpoint, load_checkpoint
 from ..model.decode import postprocess
 from ..params import DEFAULT_BACKEND, DEFAULT_CONF, DEFAULT_IOU, DEFAULT_MAX_DET
 from .backends import BACKEND_CHOICES, OrtRunner, TorchRunner, onnx_input_size, ort_session, resolve_backend

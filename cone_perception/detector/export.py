@@ -63,7 +63,7 @@ def export_metadata(class_names: list[str], imgsz: tuple[int, int], stride: int,
     ("[H, W]", Ultralytics' order), ``stride``, ``model_version`` (checkpoint format and version),
     ``exporter`` (this package's version), ``source`` (the checkpoint), ``layout``, ``task``."""
     from .. import __version__
-    from ..checkpoint import FORMAT, VERSION
+    from ..model.checkpoint import FORMAT, VERSION
 
     meta = {
         "names": repr({i: str(n) for i, n in enumerate(class_names)}),

@@ -26,8 +26,8 @@ import numpy as np
 
 from ..classes import NUM_CLASSES
 from ..crop import MIN_VISIBLE
+from ..data.predictions import ImagePrediction, iter_json_lines
 from ..errors import ConfigError
-from ..predictions import ImagePrediction, iter_json_lines
 from ..records import boxes_to_arrays
 
 #: The synthetic labelling rule (``synth`` writes YOLO labels only for cones passing it).
@@ -157,7 +157,7 @@ def _beside(path: Path, *candidates: str) -> Path | None:
 
 
 def _load_yolo(root: Path, names: list[str] | None) -> GroundTruth:
-    from ..train.datasets import load_entry
+    from ..data.datasets import load_entry
 
     images_dir = root / "images"
     if not images_dir.is_dir() or not (root / "labels").is_dir():
@@ -165,7 +165,7 @@ def _load_yolo(root: Path, names: list[str] | None) -> GroundTruth:
     has_names = names or any((root / f).is_file() for f in ("data.yaml", "dataset.yaml", "classes.txt"))
     if not has_names:
         raise ConfigError(str(root), "names", "no data.yaml / classes.txt with class names: add one or pass --gt-names")
-    from ..train.datasets import IMAGE_SUFFIXES
+    from ..data.datasets import IMAGE_SUFFIXES
 
     direct = any(p.suffix.lower() in IMAGE_SUFFIXES for p in images_dir.iterdir())
     subdirs = [""] if direct else sorted(p.name for p in images_dir.iterdir() if p.is_dir())

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..classes import CLASS_NAMES, CLASS_RGBA
+from ..classes import CLASS_BGR, CLASS_NAMES, CLASS_RGBA
 from .groundtruth import EvalImage
 from .localisation import DISTANCE_GROUPS, LocalisationReport, PairDistanceReport, distance_group
 from .metrics import RECALL_POINTS, at_conf, match_by_class
@@ -161,8 +161,8 @@ def _frame_images(images: list[EvalImage], ks: list[int]) -> dict[int, np.ndarra
             if img is not None:
                 out[k] = img
     if by_bag:
+        from ..data.bags import read_bag_images
         from ..errors import ConePerceptionError
-        from ..replay import read_bag_images
 
         for bag, stamp_to_k in by_bag.items():
             try:
@@ -243,3 +243,51 @@ def plot_worst_frames(images: list[EvalImage], conf: float, iou: float, path: Pa
     path.parent.mkdir(parents=True, exist_ok=True)
     cv2.imwrite(str(path), frame_strip(tiles, width=TILE_WIDTH, cols=2), [cv2.IMWRITE_JPEG_QUALITY, 88])
     return path, listed
+
+
+def bag_frames_picture(bag: Path, boxes: dict, stamps: list[int], calib, path: Path, truth: dict | None = None,
+                t0_ns: int | None = None) -> Path:
+    """The picked frames in a 2-column grid: detections (class colour, score), the true cones' foot points
+    (class-coloured rings, from ``/cones_gt`` through the calibration), the band, a time stamp per tile and
+    a legend strip below."""
+    import cv2
+
+    from ..data.bags import read_bag_images
+    from ..mapping import ConeMapper
+    from ..vis import draw_boxes, frame_strip, legend_strip, outlined_text
+
+    mapper = ConeMapper(calib)
+    imgs = []
+    t0 = stamps[0] if t0_ns is None and stamps else t0_ns
+    frames = read_bag_images(bag, set(stamps))  # frames that do not decode are left out
+    for stamp in sorted(frames):
+        bgr = frames[stamp]
+        k = max(1, bgr.shape[1] // 960)  # line and font size for a tile shown at 960 px
+        img = draw_boxes(bgr, boxes.get(stamp, np.zeros(0)), thickness=k + 1, font_scale=0.45 * k,
+                         min_label_height=14 * k)
+        t = (truth or {}).get(stamp)
+        if t is not None and len(t):
+            t = t[t["score"] >= 0.5]  # at least half visible (score of /cones_gt: the visible fraction)
+            uv = mapper.ground_to_pixels(np.c_[t["x"], t["y"]])
+            for (u, v), c in zip(uv, t["class_id"]):
+                if np.isfinite(u) and np.isfinite(v) and 0 <= u < img.shape[1] and 0 <= v < img.shape[0]:
+                    cv2.circle(img, (int(round(u)), int(round(v))), 5 * k, (0, 0, 0), 3 * k, cv2.LINE_AA)
+                    cv2.circle(img, (int(round(u)), int(round(v))), 5 * k, CLASS_BGR[int(c)], k, cv2.LINE_AA)
+        c = calib.crop
+        cv2.rectangle(img, (c.u0, c.v0), (c.u1 - 1, c.v1 - 1), (255, 255, 255), k)
+        n = len(boxes.get(stamp, ()))
+        outlined_text(img, f"t = {(stamp - t0) / 1e9:.2f} s   {n} detection{'s' if n != 1 else ''}",
+                      (12 * k, 34 * k), (255, 255, 255), 0.9 * k, 2 * k)
+        imgs.append(img)
+    if not imgs:
+        cv2.imwrite(str(path), np.zeros((8, 8, 3), np.uint8))
+        return path
+    grid = frame_strip(imgs, width=960, cols=2)
+    legend = legend_strip(grid.shape[1], [
+        ("box + class score: detection (score shown on boxes >= 14 px tall at 960 px)", (230, 230, 230)),
+        ("ring: foot point of a true cone at least half visible (/cones_gt)", (230, 230, 230)),
+        ("white frame: the band fed to the detector", (255, 255, 255)),
+        *[(name.replace("_", " "), CLASS_BGR[i]) for i, name in enumerate(("blue", "yellow", "orange", "large_orange"))],
+    ])
+    cv2.imwrite(str(path), np.vstack([grid, legend]))
+    return path

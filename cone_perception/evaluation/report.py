@@ -23,13 +23,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..calib import Calibration
 from ..classes import CLASS_NAMES
-from .localisation import DISTANCE_GROUPS, LocalisationReport, PairDistanceReport, distance_group
-from .groundtruth import EvalImage
-from .metrics import ImageDetections, coco_map, greedy_match, operating_point
+from ..geometry.calib import Calibration
 from ..params import DEFAULT_CONF
 from ..records import CONE_DTYPE, boxes_from_arrays
+from .groundtruth import EvalImage
+from .localisation import DISTANCE_GROUPS, LocalisationReport, PairDistanceReport, distance_group
+from .metrics import ImageDetections, coco_map, greedy_match, operating_point
 from .plots import plot_by_distance, plot_confusion, plot_localisation, plot_pairs, plot_pr, plot_worst_frames
 
 FILES = {
@@ -146,8 +146,9 @@ def evaluate(images: list[EvalImage], calib: Calibration | None, conf: float = D
     own detections first, as ``map --boxes --attitude image``; needs a mount pose in the calibration)."""
     from tqdm import tqdm
 
-    from ..attitude import FIXED, AttitudeReport, attitude_estimator
+    from ..attitude import FIXED, attitude_estimator
     from ..mapping import ConeMapper
+    from .attitude import AttitudeReport
 
     notes: list[str] = []
     range_mapper = ConeMapper(replace(calib, max_range_m=math.inf)) if calib is not None else None
@@ -440,10 +441,10 @@ def evaluate_predictions(pred: Path, gt_path: Path, gt_names: str | None = None,
     """A prediction file against ground truth -> :class:`~cone_perception.evaluation.report.EvalResult`, as ``eval``
     computes it (``gt_names`` comma-separated; ``band``, ``min_height``, ``attitude``: as ``eval --band``, ``--min-height``,
     ``--attitude``). Used by ``eval`` and ``bench table``."""
-    from ..calib import load_calibration
+    from ..data.predictions import read_predictions
     from ..errors import ConfigError
+    from ..geometry.calib import load_calibration
     from .groundtruth import load_ground_truth, pair_with_predictions, restrict_to_band, restrict_to_min_height
-    from ..predictions import read_predictions
 
     names = [n.strip() for n in gt_names.split(",") if n.strip()] if gt_names else None
     gt = load_ground_truth(gt_path, names)

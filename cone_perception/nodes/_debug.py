@@ -1,5 +1,5 @@
 """``image_cropped/debug`` of a node (``debug_image: true``): drawn by the core
-(:mod:`cone_perception.debug_image`) at most ``debug_image_hz`` times a second, and only while
+(:mod:`cone_perception.vis.debug_image`) at most ``debug_image_hz`` times a second, and only while
 someone subscribes."""
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ from rclpy.node import Node
 from sensor_msgs.msg import Image
 
 from ..crop import CropSpec
-from ..debug_image import DebugImage
 from ..mapping import ConeMapper
+from ..vis.debug_image import DebugImage
 from . import _msgs
 from ._common import QOS_IMAGE_OUT
 from ._params import RuntimeParameters, declare

@@ -1,6 +1,6 @@
 """The tracker in a node (``cone_tracker``, and ``pipeline`` with ``track: true``): parameters,
 odometry in, ``/cones/tracked`` and ``/cones/tracked/markers`` out. The logic is
-:class:`cone_perception.tracker.TrackingStage`.
+:class:`cone_perception.tracking.TrackingStage`.
 
 Parameters
   odom_topic (str, "odom"): the car's motion; "" = none (motion estimated from the cones).
@@ -8,7 +8,7 @@ Parameters
   odom_max_age_s (float, 0.1): odometry older than this at a frame is not used for it (counted).
   publish_tracked_markers (bool, true): cylinders with the track ids as text, for rviz2.
 
-Health: the tracker's event counts (:attr:`cone_perception.tracker.ConeTracker.events`) are values
+Health: the tracker's event counts (:attr:`cone_perception.tracking.ConeTracker.events`) are values
 ``tracker:<event>`` of the node's ``/diagnostics`` status; a gap, stale odometry, a refused twist, a
 failed registration or a bad cone in the period makes it WARN.
 """
@@ -21,7 +21,7 @@ from sensor_msgs.msg import PointCloud2
 from visualization_msgs.msg import MarkerArray
 
 from ..errors import ConfigError
-from ..tracker import INPUT_EVENTS, TrackingStage
+from ..tracking import INPUT_EVENTS, TrackingStage
 from . import _msgs
 from ._common import QOS_DATA, WARN_THROTTLE_S
 

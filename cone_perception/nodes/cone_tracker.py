@@ -1,6 +1,6 @@
 """cone_tracker node: ``/cones`` (+ ``odom``) -> ``/cones/tracked`` + ``/cones/tracked/markers``.
 
-A local map of the cones around the car with ids (:mod:`cone_perception.tracker`): tracks survive
+A local map of the cones around the car with ids (:mod:`cone_perception.tracking`): tracks survive
 missed frames, positions are fused over frames, each output keeps the capture stamp of its frame.
 
 Parameters
@@ -16,7 +16,7 @@ from ._common import QOS_DATA, PerceptionNode, run_node  # noqa: I001 (sets DDS 
 
 from sensor_msgs.msg import PointCloud2
 
-from ..calib import DEFAULT_CAMERA, load_calibration
+from ..geometry.calib import DEFAULT_CAMERA, load_calibration
 from . import _msgs
 from ._tracking import NodeTracking
 

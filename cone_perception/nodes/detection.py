@@ -25,7 +25,7 @@ import time
 
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
-from ..calib import load_calibration
+from ..geometry.calib import load_calibration
 from ..errors import FrameError
 from ..mapping import ConeMapper
 from . import _msgs

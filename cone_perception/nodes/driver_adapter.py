@@ -14,7 +14,7 @@ from ._common import QOS_IMAGE_OUT, PerceptionNode, run_node  # noqa: I001 (sets
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 
 from ..adapter import DriverAdapter
-from ..calib import load_calibration
+from ..geometry.calib import load_calibration
 from . import _msgs
 from ._params import declare
 

@@ -2,7 +2,7 @@
 
 Each target is a node built in-process (as ``ros2 run`` builds it, with the shipped calibration and
 model) whose guarded subscription callbacks are called directly with messages from a seeded
-generator: random fields, lying sizes, short data, header bombs (:mod:`cone_perception.hostile`),
+generator: random fields, lying sizes, short data, header bombs (:mod:`cone_perception.data.hostile`),
 bit-flipped and truncated JPEGs, bad ``camera_info`` (zero sizes, roi outside, huge binning),
 PointCloud2 with wrong fields, steps and lengths, stamps jumping back and forth, and a few valid
 messages among them. A message that raises out of the callback is a crash; every message must be
@@ -23,8 +23,8 @@ import rclpy
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2, PointField
 
-from .. import hostile
-from ..calib import DEFAULT_CAMERA, load_calibration
+from ..data import hostile
+from ..geometry.calib import DEFAULT_CAMERA, load_calibration
 from ..records import BOX_DTYPE, boxes_from_arrays
 from ..timing import rss_mb
 from . import _msgs

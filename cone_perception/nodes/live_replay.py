@@ -35,9 +35,9 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import CompressedImage, Image, PointCloud2
 
-from .. import bagio
+from ..data import bagio
 from ..errors import ConfigError
-from ..replay import BOXES_TOPIC, CONES_TOPIC, find_image_topic
+from ..data.bags import BOXES_TOPIC, CONES_TOPIC, find_image_topic
 from . import _msgs
 
 MODES = {"separate": ("driver_adapter", "detection", "mapping"), "fused": ("pipeline",)}

@@ -15,7 +15,7 @@ from ._common import QOS_DATA, PerceptionNode, run_node  # noqa: I001 (sets DDS 
 from sensor_msgs.msg import PointCloud2
 
 from ..attitude import attitude_estimator, attitude_for_boxes
-from ..calib import load_calibration
+from ..geometry.calib import load_calibration
 from ..mapping import ConeMapper, validate_boxes
 from . import _msgs
 from ._attitude import declare_attitude, publish_attitude

@@ -18,7 +18,7 @@ import time
 
 from sensor_msgs.msg import CompressedImage, Image, PointCloud2
 
-from ..calib import load_calibration
+from ..geometry.calib import load_calibration
 from ..errors import FrameError
 from ..pipeline import FrameResult, Pipeline
 from . import _msgs

@@ -8,11 +8,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..calib import RECOMMENDED_FOOT_OFFSET_M, RECOMMENDED_FOOT_POINTS, Calibration, save_calibration
-from ..camera import MountPose, PinholeCamera, default_intrinsics
 from ..classes import CLASS_NAMES
 from ..crop import CropSpec
 from ..errors import ConfigError
+from ..geometry.calib import RECOMMENDED_FOOT_OFFSET_M, RECOMMENDED_FOOT_POINTS, Calibration, save_calibration
+from ..geometry.camera import MountPose, PinholeCamera, default_intrinsics
 from .render import Renderer, RenderOptions
 from .scene import ground_visible
 from .track import TRACK_KINDS, Track, make_track

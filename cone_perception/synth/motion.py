@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..camera import _rot_x, _rot_y, _rot_z
+from ..geometry.camera import _rot_x, _rot_y, _rot_z
 from .track import Track
 
 PITCH_PER_MPS2 = 0.2  # degrees per m/s^2 of longitudinal acceleration (1 g braking: ~2 degrees)

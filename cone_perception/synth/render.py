@@ -23,8 +23,8 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
-from ..camera import PinholeCamera
 from ..classes import BLUE, CLASS_NAMES, LARGE_ORANGE, ORANGE, UNKNOWN, YELLOW
+from ..geometry.camera import PinholeCamera
 from .scene import CarPose, SceneCamera
 from .track import Track
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..camera import PinholeCamera, _rot_x, _rot_y
+from ..geometry.camera import PinholeCamera, _rot_x, _rot_y
 from .track import Track
 
 

@@ -29,39 +29,20 @@ import cv2
 import numpy as np
 import yaml
 
-from ..bagio import (
-    COMPRESSED_IMAGE,
-    IMAGE,
-    IMU,
-    ODOMETRY,
-    POINTCLOUD2,
-    VECTOR3_STAMPED,
-    Imu,
-    Odometry,
-    Point,
-    Pose,
-    PoseWithCovariance,
-    Quaternion,
-    Twist,
-    TwistWithCovariance,
-    Vector3,
-    Vector3Stamped,
-    BagWriter,
-    PointCloud2,
-    PointField,
-    check_new_output,
-    ensure_writable_dir,
-    compressed_msg_from_bgr,
-    header,
-    image_msg_from_bgr,
-)
 from ..classes import CLASS_BGR, CLASS_NAMES
+from ..data.bagio import (
+    COMPRESSED_IMAGE, IMAGE, IMU, ODOMETRY, POINTCLOUD2, VECTOR3_STAMPED, BagWriter, Imu, Odometry, Point, PointCloud2,
+    PointField, Pose, PoseWithCovariance, Quaternion, Twist, TwistWithCovariance, Vector3, Vector3Stamped,
+    check_new_output, compressed_msg_from_bgr, ensure_writable_dir, header, image_msg_from_bgr,
+)
 from ..errors import ConfigError
 from ..records import CONE_DTYPE, to_pointcloud2
 from .config import SynthConfig
-from .render import ConeTruth
+from .motion import (
+    IMU_ACCEL_NOISE, IMU_ANGLE_NOISE_DEG, IMU_RATE_NOISE_DPS, constant_speed_drive, drive_motion, imu_samples,
+)
 from .odometry import ODOM_V_NOISE, ODOM_VY_NOISE, ODOM_W_NOISE, OdomSample, odometry_samples
-from .motion import IMU_ANGLE_NOISE_DEG, IMU_ACCEL_NOISE, IMU_RATE_NOISE_DPS, constant_speed_drive, drive_motion, imu_samples
+from .render import ConeTruth
 from .scene import CarPose, drive_poses, jitter_series, random_pose
 from .track import TRACK_KINDS, Track, make_track
 

@@ -11,10 +11,10 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset, Sampler
 
+from ..data.datasets import DatasetEntry, labels_to_xyxy, read_image
 from ..detector import letterbox
 from .augment import AugmentConfig, cutout, fit_width, hflip, mosaic4, photometric, random_window
 from .copy_paste import CopyPasteConfig, RowLaw, build_bank, fit_row_law
-from .datasets import DatasetEntry, labels_to_xyxy, read_image
 
 
 class _Items:

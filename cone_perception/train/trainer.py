@@ -23,17 +23,17 @@ import torch
 from torch.utils.data import DataLoader
 from tqdm import tqdm
 
-from ..checkpoint import load_checkpoint, save_checkpoint
 from ..classes import CLASS_NAMES
+from ..data.datasets import load_data_yaml, summary_table
 from ..errors import ConfigError
 from ..evaluation.metrics import ImageDetections, coco_map
 from ..model import PRETRAINED_BACKBONES, ConeYOLO, is_model_name, model_config, model_names
-from ..model.pretrained import PretrainedBackbone, load_imagenet
+from ..model.checkpoint import load_checkpoint, save_checkpoint
 from ..model.decode import postprocess
 from ..model.loss import DetectionLoss
-from .augment import AugmentConfig
+from ..model.pretrained import PretrainedBackbone, load_imagenet
 from . import distributed
-from .datasets import load_data_yaml, summary_table
+from .augment import AugmentConfig
 from .distill import DistillLoss, check_teacher
 from .loader import EpochSampler, TrainSet, ValSet, collate
 from .report import plot_results

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from cone_perception.attitude import FusedAttitude, ImageAttitudeConfig, ImuAttitude, attitude_for_boxes
-from cone_perception.calib import load_calibration
+from cone_perception.geometry.calib import load_calibration
 from cone_perception.evaluation import LocalisationReport
 from cone_perception.mapping import ConeMapper
 
@@ -32,8 +32,10 @@ def cached(bag: str) -> dict:
     if not path.is_file():
         from cone_perception.detector import Detector, default_model_path
         from cone_perception.pipeline import Pipeline
-        from cone_perception.replay import (find_image_topic, iter_frames, process_frame, read_attitude_truth, read_ground_truth,
-                                            read_imu)
+        from cone_perception.data.bags import (
+            find_image_topic, iter_frames, read_attitude_truth, read_ground_truth, read_imu
+        )
+        from cone_perception.replay import process_frame
 
         cal = load_calibration(bag + "_calib.yaml")
         pipe = Pipeline(cal, Detector.load_for_band(default_model_path(), (cal.crop.out_width, cal.crop.out_height)), "fixed")

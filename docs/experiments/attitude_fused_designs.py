@@ -23,7 +23,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from attitude_designs import cached, print_design_table, run_drive  # noqa: E402
 
 from cone_perception.attitude import Attitude, FusedAttitude, ImageAttitudeConfig, rpy_from_quaternion  # noqa: E402
-from cone_perception.calib import load_calibration  # noqa: E402
+from cone_perception.geometry.calib import load_calibration  # noqa: E402
 from cone_perception.mapping import ConeMapper  # noqa: E402
 
 
@@ -214,7 +214,7 @@ SERIES = [
 def rate_smoothed(bag: str, a: np.ndarray, qn: float) -> np.ndarray:
     """``a`` of :func:`series` with the IMU columns replaced by the IMU smoothed with its angular rate
     (random walk ``qn`` deg a sample around the rate-integrated prediction)."""
-    from cone_perception.replay import read_imu_motion
+    from cone_perception.data.bags import read_imu_motion
 
     st, q, w, _ = read_imu_motion(bag)
     y = np.array([np.degrees(rpy_from_quaternion(*qq))[[1, 0]] for qq in q])

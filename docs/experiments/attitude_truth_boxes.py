@@ -15,11 +15,12 @@ from pathlib import Path
 import numpy as np
 
 from cone_perception.attitude import Attitude
-from cone_perception.calib import load_calibration
+from cone_perception.geometry.calib import load_calibration
 from cone_perception.detector import Detector, default_model_path
 from cone_perception.pipeline import Pipeline
 from cone_perception.records import boxes_from_arrays
-from cone_perception.replay import offline_replay, read_attitude_truth
+from cone_perception.replay import offline_replay
+from cone_perception.data.bags import read_attitude_truth
 
 
 class TruthDetector:

@@ -16,9 +16,9 @@ import sys
 
 import numpy as np
 
-from cone_perception import bagio
+from cone_perception.data import bagio
 from cone_perception.attitude import rpy_from_quaternion
-from cone_perception.replay import read_imu
+from cone_perception.data.bags import read_imu
 
 
 def rest_from_truth(bag: str) -> tuple[float, float, float, float]:

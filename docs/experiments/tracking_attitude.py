@@ -17,15 +17,16 @@ One markdown row per drive, mode and drop share: median error 0-7 m and 7-15 m o
 """
 import argparse
 import numpy as np
-from cone_perception import bagio
+from cone_perception.data import bagio
 from cone_perception.attitude import ImuAttitude, attitude_estimator, attitude_for_boxes
-from cone_perception.calib import load_calibration
+from cone_perception.geometry.calib import load_calibration
 from cone_perception.mapping import ConeMapper
 from cone_perception.records import BOX_DTYPE, from_pointcloud2
-from cone_perception.replay import read_imu
-from cone_perception.track_eval import DriveEvaluation, load_drive_truth
-from cone_perception.track_replay import drop_detections, read_twists
-from cone_perception.tracker import TrackerConfig, TrackingStage
+from cone_perception.data.bags import read_imu
+from cone_perception.evaluation.tracking import DriveEvaluation, load_drive_truth
+from cone_perception.replay import drop_detections
+from cone_perception.data.bags import read_twists
+from cone_perception.tracking import TrackerConfig, TrackingStage
 
 
 def mapped(name: str, mode: str):

@@ -12,13 +12,13 @@ and the mean of the tracked / raw ratio, id switches per 100 frames (mean).
 """
 import sys
 import numpy as np
-from cone_perception import bagio
-from cone_perception.calib import load_calibration
+from cone_perception.data import bagio
+from cone_perception.geometry.calib import load_calibration
 from cone_perception.mapping import ConeMapper
 from cone_perception.records import BOX_DTYPE, from_pointcloud2
-from cone_perception.track_eval import DriveEvaluation, load_drive_truth
-from cone_perception.track_replay import drop_detections
-from cone_perception.tracker import TrackerConfig, TrackingStage
+from cone_perception.evaluation.tracking import DriveEvaluation, load_drive_truth
+from cone_perception.replay import drop_detections
+from cone_perception.tracking import TrackerConfig, TrackingStage
 
 DESIGNS = {"as shipped": ({}, False, False), "true motion (exact twists as odometry)": ({}, False, True),
            "(a) more fading memory, process_std_m 0.08": ({"process_std_m": 0.08}, False, False),

@@ -16,8 +16,8 @@ raw detections: the mean of a cone's last K detections (true motion, true associ
 """
 import json, sys
 import numpy as np
-from cone_perception import bagio
-from cone_perception.calib import load_calibration
+from cone_perception.data import bagio
+from cone_perception.geometry.calib import load_calibration
 from cone_perception.evaluation import match_cones
 from cone_perception.mapping import ConeMapper
 from cone_perception.records import BOX_DTYPE, CONE_DTYPE, from_pointcloud2

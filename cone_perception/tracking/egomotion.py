@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .classes import UNKNOWN
+from ..classes import UNKNOWN
 
 
 @dataclass(frozen=True)

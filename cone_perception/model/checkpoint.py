@@ -25,9 +25,9 @@ from typing import Any
 
 import torch
 
-from .classes import CLASS_NAMES, class_id_from_name
-from .errors import ConfigError
-from .model import ConeYOLO, ModelConfig
+from ..classes import CLASS_NAMES, class_map_from_names
+from ..errors import ConfigError
+from . import ConeYOLO, ModelConfig
 
 FORMAT = "cone_perception.detector"
 VERSION = 1
@@ -59,17 +59,6 @@ class Checkpoint:
             first = str(e).splitlines()[0:3]
             raise ConfigError(self.path, "state_dict", f"weights do not fit architecture {self.cfg.name!r}: {' '.join(first)}") from e
         return model.eval()
-
-
-def class_map_from_names(names: list[str], source: str) -> list[int]:
-    """Project class id per model class; :class:`ConfigError` names a name that does not map."""
-    out = []
-    for i, n in enumerate(names):
-        try:
-            out.append(class_id_from_name(n))
-        except KeyError as e:
-            raise ConfigError(source, f"class_names[{i}]", str(e.args[0])) from e
-    return out
 
 
 def save_checkpoint(

@@ -2,7 +2,7 @@
 
 Per frame (:meth:`ConeTracker.update`): the tracks are moved by the car's motion since the last
 frame (odometry when given, else a registration of the frame's cones against the tracks with a
-constant-velocity prior, see :mod:`cone_perception.egomotion`), associated with the frame's cones
+constant-velocity prior, see :mod:`cone_perception.tracking.egomotion`), associated with the frame's cones
 by gated Mahalanobis distance and one-to-one assignment (``scipy.optimize.linear_sum_assignment``),
 and updated by a Kalman filter with each cone's own covariance (its attitude part, when the frame's
 attitude is given, as one error common to the frame: :meth:`ConeTracker.update`). Per track: id (uint32, never
@@ -28,10 +28,12 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from .classes import NUM_CLASSES, UNKNOWN
+from ..classes import NUM_CLASSES, UNKNOWN
+from ..errors import FrameError
+from ..geometry.linalg import inv2
+from ..mapping import ConeMapper
+from ..records import CONE_DTYPE, TRACKED_CONE_DTYPE
 from .egomotion import Motion2D, from_twist, register_cones
-from .errors import FrameError
-from .records import CONE_DTYPE, TRACKED_CONE_DTYPE
 
 _BIG = 1e9
 #: :attr:`ConeTracker.events` that mean bad or missing input (a node's health WARNs when one grows);
@@ -99,8 +101,6 @@ class FieldOfView:
 
     @classmethod
     def from_calibration(cls, calib, margin_frac: float = 0.03) -> "FieldOfView":
-        from .mapping import ConeMapper
-
         c = calib.crop
         return cls(ConeMapper(calib).ground.ground_to_pixels, (c.u0, c.v0, c.u1, c.v1), calib.max_range_m, margin_frac)
 
@@ -286,7 +286,7 @@ class ConeTracker:
             CJt = C @ Jt
             Rind = Rm - Ra[rows]  # (robust scaling included)
             S = _symmetrise(P + Ra[rows] - CJt - np.transpose(CJt, (0, 2, 1)) + Rind)
-            K = (P - CJt) @ _inv2(S)
+            K = (P - CJt) @ inv2(S)
             innov = z[rows] - self.xy[cols]
             self.xy[cols] += np.einsum("nij,nj->ni", K, innov)
             IK = np.eye(2)[None] - K
@@ -392,14 +392,6 @@ def _bayes(p: np.ndarray, likelihood_ratio) -> np.ndarray:
 
 
 # ---- small vectorised 2x2 helpers ------------------------------------------------------------
-def _inv2(S: np.ndarray) -> np.ndarray:
-    a, b, c, d = S[:, 0, 0], S[:, 0, 1], S[:, 1, 0], S[:, 1, 1]
-    det = a * d - b * c
-    out = np.empty_like(S)
-    out[:, 0, 0], out[:, 0, 1], out[:, 1, 0], out[:, 1, 1] = d / det, -b / det, -c / det, a / det
-    return out
-
-
 def _symmetrise(P: np.ndarray) -> np.ndarray:
     return 0.5 * (P + np.transpose(P, (0, 2, 1)))
 
@@ -452,54 +444,3 @@ def _valid_cones(cones: np.ndarray, events: Counter) -> np.ndarray:
         events["bad_cone"] += int((~ok).sum())
         cones = cones[ok]
     return cones
-
-
-class TrackingStage:
-    """The tracker as a pipeline stage: ``/cones`` of a frame (+ odometry twists when the car has them)
-    -> ``/cones/tracked`` records. Used by the ``pipeline`` and ``cone_tracker`` nodes and ``replay``.
-
-    Twists (:meth:`add_twist`) are used for a frame when fresh (:attr:`TwistBuffer.max_age_s`); once
-    any twist has come, a frame without a fresh one is counted as ``odom_stale`` and its motion is
-    estimated from the cones. Refused twists are counted (``twist_nan``, ``twist_stamp``).
-    """
-
-    def __init__(self, calib=None, config: TrackerConfig | None = None, odom_max_age_s: float = 0.1):
-        from .egomotion import TwistBuffer
-
-        self.tracker = ConeTracker(config or TrackerConfig(), FieldOfView.from_calibration(calib) if calib is not None else None)
-        self.attitude_jacobian = None  # d(x, y)/d(pitch, roll) of a mapped cone, with a mount pose
-        if calib is not None and calib.has_attitude_model:
-            from .mapping import ConeMapper
-
-            self.attitude_jacobian = ConeMapper(calib).attitude_jacobian
-        self.twists = TwistBuffer(max_age_s=odom_max_age_s)
-        self.last_info: FrameInfo | None = None
-
-    @property
-    def events(self) -> Counter:
-        return self.tracker.events
-
-    def add_twist(self, stamp_ns: int, vx: float, vy: float, wz: float) -> bool:
-        """One body twist (m/s, m/s, rad/s); False (and counted) when refused."""
-        why = self.twists.add(stamp_ns, vx, vy, wz)
-        if why is not None:
-            self.tracker.events[why] += 1
-        return why is None
-
-    def process(self, stamp_ns: int, cones: np.ndarray, attitude=None) -> tuple[np.ndarray, FrameInfo]:
-        """Fuse one frame; returns (:data:`TRACKED_CONE_DTYPE` records, :class:`FrameInfo`).
-        ``attitude``: the :class:`~cone_perception.attitude.Attitude` the cones were mapped with (its
-        1-sigma is the frame-common part of their covariance, see :meth:`ConeTracker.update`); None: all
-        of each cone's covariance is taken as independent.
-        Raises ``FrameError`` for a stamp not after the last fused frame."""
-        motion = None
-        last = self.tracker.last_stamp_ns
-        if self.twists.stamps and last is not None and stamp_ns > last:
-            motion = self.twists.motion(last, stamp_ns)
-            if motion is None:
-                self.tracker.events["odom_stale"] += 1
-        cov = None
-        if attitude is not None and self.attitude_jacobian is not None and self.tracker.config.attitude_common:
-            cov = attitude.covariance_deg2()
-        self.last_info = self.tracker.update(stamp_ns, cones, motion, self.attitude_jacobian, cov)
-        return self.tracker.output(), self.last_info

@@ -7,11 +7,11 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .classes import CLASS_NAMES
-from .crop import CropSpec
-from .errors import FrameError
-from .mapping import ConeMapper
-from .vis import draw_boxes
+from ..classes import CLASS_NAMES
+from ..crop import CropSpec
+from ..errors import FrameError
+from ..mapping import ConeMapper
+from .draw import draw_boxes
 
 
 def box_ranges_m(mapper: ConeMapper, boxes: np.ndarray) -> np.ndarray:

@@ -12,15 +12,16 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from ..errors import ConfigError
 from .calib import Calibration
 from .camera import MountPose
-from .errors import ConfigError
+from .pose import pose_from_homography
 
 
 def mount_pose_of(calib: Calibration) -> tuple[MountPose, str]:
     """The camera's mount pose in ``calib.frame_id`` and where it came from, in this order:
     ``mount_pose`` (measured), ``mount`` (written by ``calibrate --from-pose``), or decomposed from
-    ``H_F_B`` and ``camera_matrix`` (:func:`~cone_perception.calibrate.fit.pose_from_homography`).
+    ``H_F_B`` and ``camera_matrix`` (:func:`~cone_perception.geometry.pose.pose_from_homography`).
     Without any of them: a :class:`ConfigError` naming the fields to add."""
     if calib.mount_pose is not None:
         return calib.mount_pose, "mount_pose"
@@ -32,8 +33,6 @@ def mount_pose_of(calib: Calibration) -> tuple[MountPose, str]:
         except (TypeError, ValueError):
             raise ConfigError(calib.source, "mount", "must hold numbers") from None
     if calib.camera_matrix is not None:
-        from .calibrate.fit import pose_from_homography
-
         return pose_from_homography(calib.H_F_B, calib.camera_matrix).pose, "H_F_B + camera_matrix"
     raise ConfigError(calib.source, "mount_pose",
                       "missing: the camera's transform needs mount_pose {x_m, y_m, z_m, yaw_deg, pitch_deg, roll_deg} "

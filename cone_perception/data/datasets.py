@@ -34,7 +34,7 @@ import cv2
 import numpy as np
 import yaml
 
-from ..checkpoint import class_map_from_names
+from ..classes import CLASS_NAMES, class_map_from_names
 from ..errors import ConfigError
 from .yolo_yaml import is_yolo_style, yolo_entries
 
@@ -244,8 +244,6 @@ def labels_to_xyxy(labels: np.ndarray, w: int, h: int) -> tuple[np.ndarray, np.n
 
 def split_counts(entries: list[DatasetEntry]) -> dict:
     """Images, background images (no box) and boxes per project class of a split's entries."""
-    from ..classes import CLASS_NAMES
-
     per_class = np.zeros(len(CLASS_NAMES), np.int64)
     background = 0
     for e in entries:
@@ -259,8 +257,6 @@ def split_counts(entries: list[DatasetEntry]) -> dict:
 
 def summary_table(splits: dict[str, list[DatasetEntry]]) -> str:
     """A plain-text table: per split, images, background images, boxes, and boxes per project class."""
-    from ..classes import CLASS_NAMES
-
     head = ["split", "images", "no box", "boxes", *CLASS_NAMES]
     rows = []
     for split, entries in splits.items():

@@ -2,8 +2,8 @@
 
 :class:`ReplayTracking` takes each replayed frame's ``/cones``, drops a random share of them when
 asked (``replay --drop-detections P``, to measure gap filling), feeds the bag's odometry twists
-when there are any, runs the :class:`~cone_perception.tracker.TrackingStage` and scores both the
-raw (after the drop) and the tracked cones within :data:`~cone_perception.track_eval.EVAL_RANGE_M`
+when there are any, runs the :class:`~cone_perception.tracking.TrackingStage` and scores both the
+raw (after the drop) and the tracked cones within :data:`~cone_perception.evaluation.tracking.EVAL_RANGE_M`
 against the drive's truth (``<bag>_gt.jsonl``) when it is given.
 """
 
@@ -15,14 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from . import bagio
-from .bagio import ODOMETRY
-from .errors import ConfigError, FrameError
-from .track_eval import EVAL_RANGE_M, DriveEvaluation, DriveTruth, load_drive_truth
-from .tracker import TrackerConfig, TrackingStage
-
-TWIST_STAMPED = "geometry_msgs/msg/TwistStamped"
-TRACKED_TOPIC = "/cones/tracked"
+from ..errors import ConfigError, FrameError
+from ..evaluation.tracking import EVAL_RANGE_M, DriveEvaluation, DriveTruth, format_drive_evaluation, load_drive_truth
+from ..tracking import TrackerConfig, TrackingStage
 
 
 def drive_truth_beside(bag: str | os.PathLike) -> DriveTruth | None:
@@ -30,20 +25,6 @@ def drive_truth_beside(bag: str | os.PathLike) -> DriveTruth | None:
     p = Path(bag)
     gt = p.parent / f"{p.name}_gt.jsonl"
     return load_drive_truth(gt) if gt.is_file() else None
-
-
-def read_twists(bag: str | os.PathLike, topic: str) -> list[tuple[int, float, float, float]]:
-    """``(header stamp ns, vx, vy, wz)`` of a ``nav_msgs/Odometry`` or ``geometry_msgs/TwistStamped`` topic, by stamp."""
-    out = []
-    for m in bagio.read_messages(bag, topic):
-        if m.msgtype == ODOMETRY:
-            tw = m.msg.twist.twist
-        elif m.msgtype == TWIST_STAMPED:
-            tw = m.msg.twist
-        else:
-            raise ConfigError(str(bag), topic, f"is {m.msgtype}, expected {ODOMETRY} or {TWIST_STAMPED}")
-        out.append((bagio.stamp_ns(m.msg.header), float(tw.linear.x), float(tw.linear.y), float(tw.angular.z)))
-    return sorted(out, key=lambda t: t[0])
 
 
 def drop_detections(cones: np.ndarray, share: float, rng: np.random.Generator) -> np.ndarray:
@@ -104,8 +85,6 @@ class ReplayTracking:
 
 def format_replay_tracking(s: dict) -> str:
     """Plain-text lines of :meth:`ReplayTracking.summary`."""
-    from .track_eval import format_drive_evaluation
-
     rows = []
     if s["drop_share"] > 0:
         rows.append(f"dropped detections: {s['dropped_detections']} ({s['drop_share']:.0%} share, seeded)")

@@ -27,8 +27,8 @@ import numpy as np
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
-from .adapter import bgr_to_yuyv
-from .errors import ConfigError
+from ..adapter import bgr_to_yuyv
+from ..errors import ConfigError
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 

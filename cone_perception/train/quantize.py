@@ -57,9 +57,9 @@ class QuantOptions:
 def int8_frame_pool(folder: str | Path, clips: Iterable[str] | None = None) -> tuple[list[Path], int]:
     """The images of ``folder`` (searched recursively, sorted) that int8 calibration may use, and how
     many were dropped because they belong to the validation clips
-    (:data:`~cone_perception.train.datasets.VALIDATION_CLIPS`, never used; naming one in ``clips`` is an error).
+    (:data:`~cone_perception.data.datasets.VALIDATION_CLIPS`, never used; naming one in ``clips`` is an error).
     ``clips`` keeps only frames of these clips (file name before the first '-')."""
-    from ..train.datasets import IMAGE_SUFFIXES, VALIDATION_CLIPS, in_clips
+    from ..data.datasets import IMAGE_SUFFIXES, VALIDATION_CLIPS, in_clips
 
     folder = Path(folder)
     src = str(folder)
@@ -103,7 +103,7 @@ def calibration_blobs(files: list[Path], imgsz: tuple[int, int], crop: tuple[int
     cut and downscaled like the car's adapter does (:func:`~.adapter.crop_bgr`); then
     :func:`~.detector.preprocess` fits it to the model input ``imgsz`` (W, H)."""
     from ..adapter import crop_bgr
-    from .preprocess import preprocess
+    from ..detector.preprocess import preprocess
 
     for f in files:
         img = cv2.imread(str(f), cv2.IMREAD_COLOR)

@@ -35,9 +35,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .egomotion import Motion2D
-from .errors import ConfigError
-from .evaluation import DISTANCE_GROUPS, LocalisationReport, distance_group, match_cones
+from ..errors import ConfigError
+from ..tracking import Motion2D
+from . import DISTANCE_GROUPS, LocalisationReport, distance_group, match_cones
 
 EVAL_RANGE_M = 15.0
 
@@ -317,8 +317,8 @@ def evaluate_tracking_bag(bag: str | os.PathLike, truth: DriveTruth, cones_topic
                           tracked_topic: str = "/cones/tracked", range_m: float = EVAL_RANGE_M) -> dict:
     """:meth:`DriveEvaluation.summary` of a bag with ``/cones`` and ``/cones/tracked`` (e.g. the ``--out`` of
     ``replay --track``), messages taken by header stamp. No ego-motion figures (the bag has no estimate)."""
-    from . import bagio
-    from .records import CONE_DTYPE, TRACKED_CONE_DTYPE, from_pointcloud2
+    from ..data import bagio
+    from ..records import CONE_DTYPE, TRACKED_CONE_DTYPE, from_pointcloud2
 
     topics = bagio.bag_topics(bag)
     ev = DriveEvaluation(truth, range_m)
@@ -344,7 +344,7 @@ def write_tracking_report(summary: dict, out_dir: str | os.PathLike, bag: str, g
     out.mkdir(parents=True, exist_ok=True)
     files = {"metrics": out / "metrics.json", "report": out / "report.md"}
     files["metrics"].write_text(json.dumps({"bag": bag, "gt": gt, **summary}, indent=1), encoding="utf-8")
-    files["report"].write_text(f"# Tracking: {bag}\n\nGround truth: `{gt}`. Definitions: `cone_perception/track_eval.py`.\n\n"
+    files["report"].write_text(f"# Tracking: {bag}\n\nGround truth: `{gt}`. Definitions: `cone_perception/evaluation/tracking.py`.\n\n"
                                f"```\n{format_drive_evaluation(summary)}\n```\n", encoding="utf-8")
     return files
 
@@ -355,10 +355,10 @@ def simulated_drive(n_frames: int, fov, rows_m: tuple[float, ...] = (1.75, -1.75
     """Frames of cones seen from a car driving straight through rows of cones (benchmarks, tests).
 
     Yields ``(true Motion2D from the last frame, CONE_DTYPE records of the cones inside ``fov``
-    (a :class:`~cone_perception.tracker.FieldOfView`), each kept with probability 1 - ``drop`` and
+    (a :class:`~cone_perception.tracking.FieldOfView`), each kept with probability 1 - ``drop`` and
     moved by ``sigma_m`` noise)``. Classes alternate blue / yellow by row.
     """
-    from .records import CONE_DTYPE
+    from ..records import CONE_DTYPE
 
     rng = np.random.default_rng(seed)
     length = n_frames * step_m + 60.0

@@ -1,7 +1,7 @@
 """Image sources -> full BGR frames: an image file, a folder of images, a video file, a rosbag2 camera topic.
 
 One reader for every command that reads frames (``detect``, ``bench table``, ``calibrate --image/--bag``,
-``demo``'s pictures); a bag message becomes a frame through :func:`cone_perception.replay.frame_bgr`.
+``demo``'s pictures); a bag message becomes a frame through :func:`cone_perception.data.bags.frame_bgr`.
 """
 
 from __future__ import annotations
@@ -12,8 +12,9 @@ from typing import Iterator
 import cv2
 import numpy as np
 
-from .errors import ConfigError, FrameError
-from .replay import find_image_topic, frame_bgr, iter_frames
+from ..adapter import decode_compressed
+from ..errors import ConfigError, FrameError
+from .bags import find_image_topic, frame_bgr, iter_frames
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp")
 #: Files read with OpenCV's VideoCapture.
@@ -40,7 +41,6 @@ def iter_source(source: Path, topic: str | None = None, every: int = 1
     files = [source] if source.is_file() else sorted(p for p in source.rglob("*") if p.suffix.lower() in IMAGE_SUFFIXES)
     if not files:
         raise ConfigError(str(source), None, f"no images ({', '.join(IMAGE_SUFFIXES)}) found")
-    from .adapter import decode_compressed
 
     for f in files:
         name = str(f.relative_to(source)) if source.is_dir() else f.name
@@ -91,8 +91,6 @@ def iter_bag(bag: Path, topic: str | None = None) -> Iterator[tuple[str, np.ndar
 def read_image(path: Path) -> np.ndarray:
     """One image file -> full BGR image, decoded as the nodes decode (the header's size checked first);
     :class:`ConfigError` naming the file otherwise."""
-    from .adapter import decode_compressed
-
     if not path.is_file():
         raise ConfigError(str(path), None, "image file not found")
     try:

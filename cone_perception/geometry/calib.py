@@ -23,12 +23,13 @@ from typing import Any
 import numpy as np
 import yaml
 
+from ..classes import CLASS_NAMES
+from ..crop import MAX_IMAGE_SIDE_PX, CropSpec
+from ..errors import ConfigError
+from ..resources import calib_dir, resolve_in
 from .camera import MountPose
-from .classes import CLASS_NAMES
-from .crop import MAX_IMAGE_SIDE_PX, CropSpec
-from .errors import ConfigError
-from .geometry import FOOT_RULES, fix_homography_sign
-from .resources import calib_dir, resolve_in
+from .homography import FOOT_RULES, fix_homography_sign
+from .pose import MOUNT_POSE_CHECK_RANGE_M, MOUNT_POSE_TOLERANCE, mount_pose_disagreement, pose_from_homography
 
 DEFAULT_FOOT_POINTS = {
     "blue": "bottom_right",
@@ -117,8 +118,6 @@ class Calibration:
         if self.mount_pose is not None:
             return np.array([self.mount_pose.x_m, self.mount_pose.y_m])
         if self.camera_matrix is not None:
-            from .calibrate.fit import pose_from_homography
-
             pose = pose_from_homography(self.H_F_B, self.camera_matrix).pose
             return np.array([pose.x_m, pose.y_m])
         return np.zeros(2)
@@ -366,8 +365,6 @@ def calibration_from_dict(data: dict, source: str = "<memory>") -> Calibration:
     except ValueError as e:
         raise f.err("H_S_B", str(e)) from None
     if calib.has_attitude_model:
-        from .attitude import MOUNT_POSE_CHECK_RANGE_M, MOUNT_POSE_TOLERANCE, mount_pose_disagreement
-
         bad = mount_pose_disagreement(calib.H_F_B, K, mount_pose, width, height)
         if not bad <= MOUNT_POSE_TOLERANCE:
             raise f.err("mount_pose", f"disagrees with the file's own H_F_B (H_S_B, T_F_S, camera_matrix) by "

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from .geometry import fix_homography_sign
+from .homography import fix_homography_sign
 
 # Optical axes expressed in a vehicle-aligned frame: z_opt = x_veh, x_opt = -y_veh, y_opt = -z_veh.
 _R_OPT_FROM_BODY = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])

@@ -18,8 +18,10 @@ import numpy as np
 import yaml
 from tqdm import tqdm
 
-from .classes import CLASS_NAMES, class_id_from_name
-from .errors import ConfigError
+from ..classes import CLASS_NAMES, class_id_from_name
+from ..errors import ConfigError
+from .datasets import in_clips
+from .yolo_yaml import yolo_names
 
 log = logging.getLogger(__name__)
 
@@ -174,9 +176,6 @@ def restore_aspect(src: str | Path, out: str | Path, aspect: tuple[float, float]
     are copied too; then ``out/data.yaml`` is written (Ultralytics form, ``train: images``, the dataset's class
     names: ``names``, else those of ``src/data.yaml`` or ``src/classes.txt``; none found is an error before
     any image is written), so ``cone-perception train --data out/data.yaml`` reads it."""
-    from .train.datasets import in_clips
-    from .train.yolo_yaml import yolo_names
-
     if width is not None and width < 16:
         raise ConfigError("restore-aspect", "width", f"must be at least 16 px, got {width}")
     src, out = Path(src), Path(out)

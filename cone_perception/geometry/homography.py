@@ -14,7 +14,7 @@ from typing import Sequence
 import cv2
 import numpy as np
 
-from .classes import NUM_CLASSES
+from ..classes import NUM_CLASSES
 
 FOOT_RULES = ("bottom_left", "bottom_right", "bottom_center")
 _UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-10)

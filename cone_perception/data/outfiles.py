@@ -6,10 +6,11 @@ existing one is an error naming it, unless ``--force``) and prints each file it 
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 from typing import Iterable
 
-from .errors import ConfigError
+from ..errors import ConfigError
 
 
 def refuse_existing(paths: Iterable[str | Path], force: bool, command: str) -> None:
@@ -30,8 +31,6 @@ def print_written(paths: Iterable[str | Path], command: str) -> None:
 
 def remove_bag(path: Path) -> None:
     """Remove a rosbag2 directory for ``--force``; anything else is left alone and refused."""
-    import shutil
-
     if not (path.is_dir() and (path / "metadata.yaml").is_file()):
         raise ConfigError(str(path), None, "--force replaces only a rosbag2 directory (with metadata.yaml); "
                                            "this is something else: remove it yourself")

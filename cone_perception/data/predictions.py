@@ -20,9 +20,9 @@ from typing import IO, Iterator
 
 import numpy as np
 
-from .classes import NUM_CLASSES
-from .errors import ConfigError
-from .records import BOX_DTYPE, boxes_from_arrays
+from ..classes import NUM_CLASSES
+from ..errors import ConfigError
+from ..records import BOX_DTYPE, boxes_from_arrays
 
 
 @dataclass

@@ -1,0 +1,336 @@
+"""The attitude offset fitted per frame from the cone boxes (:class:`ImageAttitude`).
+
+Cones are objects of known size standing on the ground: the foot point of a box gives its range
+through the ground plane (which depends on the attitude), its height gives the range independently
+of the ground. For an attitude hypothesis the foot point is mapped to the ground, the cone's tip is
+placed above it and projected; the residual is predicted minus observed top row of the box (px). A
+robust (Cauchy) weighted least-squares fit of (pitch, roll) with a weak prior around zero, started
+from the weighted median of single-cone pitch estimates, then a Kalman filter across frames (random
+walk decaying to zero): frames with too few usable cones hold the last estimate, decaying to zero; a
+fit beyond :data:`~cone_perception.attitude.model.MAX_ABS_DEG` is rejected and counted. ROS-free.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..classes import CONE_SIZE_M, NUM_CLASSES
+from ..geometry.camera import MountPose
+from ..geometry.homography import undistort_pixels
+from ..geometry.linalg import inv2
+from .model import MAX_ABS_DEG, Attitude, attitude_rotation
+
+
+def box_top_extra_px(height_px: np.ndarray, table) -> np.ndarray:
+    """(N,) px the detector's box tops stand above the cones' (``table``: (box height px, px) pairs,
+    interpolated, ends held; empty = zero) for boxes (N,) px high."""
+    h = np.asarray(height_px, dtype=np.float64)
+    if not table:
+        return np.zeros(h.shape)
+    return np.interp(h, [a for a, _ in table], [b for _, b in table])
+
+
+@dataclass
+class ImageAttitudeConfig:
+    """Tuning of :class:`ImageAttitude` (degrees, px, frames)."""
+
+    min_cones: int = 3  # usable cones for a fit
+    min_height_px: float = 8.0  # boxes shorter than this tell little and are often wrong
+    max_range_m: float = 20.0  # cones farther (by their size) are left out
+    edge_margin_px: float = 2.0  # boxes this close to the image / band edge are cut: left out
+    aspect_tol: float = 0.45  # |log(w/h / expected)| above this: knocked over, merged or wrong
+    sigma_px: float = 1.5  # box edge 1-sigma (foot and top)
+    #: a box's top edge lies this far above the cone's projected tip (a box covers every pixel the cone
+    #: touches); tests/test_attitude.py::test_box_top_bias_on_rendered_cones checks it
+    top_bias_px: float = 1.0
+    #: plus this much by box height (px -> px, interpolated): the shipped detector's boxes, half the median
+    #: top-row residual at the true attitude on tuning drives (docs/benchmarks.md, "Bias of the image fit")
+    top_bias_extra_px: tuple = ((15.0, 0.29), (22.0, 0.20), (33.0, 0.06), (50.0, 0.10), (75.0, 0.05), (120.0, 0.05))
+    sigma_rel: float = 0.03  # plus this fraction of the box height (cone build, orientation)
+    cauchy_c: float = 1.5  # robust scale in sigmas
+    outer_iterations: int = 1  # linearisations per fit (the second only after a step of more than 0.3 degree)
+    prior_sigma_deg: float = 2.0  # per-frame prior around zero
+    process_sigma_deg: float = 0.6  # random walk per frame (body motion at 20 fps)
+    decay: float = 0.95  # per frame, towards zero
+    max_abs_deg: float = MAX_ABS_DEG
+    #: the fit's own slowly varying bias (box edges of this detector on this drive's cones): the long-run
+    #: mean of the fits, since the car's mean attitude over a lap is the calibration's (zero). A running
+    #: mean shrunk towards zero by ``bias_prior_frames`` pseudo-frames, an exponential mean of
+    #: ``bias_tau_frames`` (about a lap at 20 fps) once that many fits are in; 0 = off. Roll only
+    #: (``bias_pitch`` False): a grade or a braking phase longer than the bag moves the mean pitch.
+    bias_tau_frames: float = 1200.0
+    bias_prior_frames: float = 100.0
+    bias_pitch: bool = False
+    #: still body: the spread of the fits over ``still_frames`` frames against their own sigma; below
+    #: ``still_ratio`` (pitch and roll) the body is taken as still and the estimate returns to zero,
+    #: fully at ``still_ratio - still_ramp``; 0 frames = off
+    still_frames: float = 40.0
+    still_min_frames: float = 10.0  # fits before the test judges (until then: moving)
+    still_ratio: float = 1.3
+    still_ramp: float = 0.4
+    #: ... and only while the fits' mean stays within this (degrees, pitch and roll; ramp of half of it):
+    #: a body standing still on a slope keeps its estimate
+    still_max_mean_deg: float = 0.5
+
+
+@dataclass
+class AttitudeCounts:
+    """Frames by outcome of the image fit."""
+
+    fitted: int = 0
+    too_few: int = 0
+    rejected: int = 0
+
+    def as_dict(self) -> dict[str, int]:
+        return {"fitted": self.fitted, "too_few_cones": self.too_few, "rejected_beyond_limit": self.rejected}
+
+
+class ImageAttitude:
+    """Per-frame attitude offset from the cone boxes, smoothed across frames.
+
+    ``K``/``dist``: lens model; ``pose``: the calibration's mount pose; ``foot_offset_m``: per class
+    (as the mapping uses); ``image_size``/``band_rows``: boxes touching these edges are cut.
+    """
+
+    def __init__(
+        self,
+        K: np.ndarray,
+        pose: MountPose,
+        foot_offset_m: np.ndarray,
+        image_size: tuple[int, int],
+        band_rows: tuple[float, float] | None = None,
+        dist: np.ndarray | None = None,
+        config: ImageAttitudeConfig | None = None,
+    ):
+        self.K = np.asarray(K, dtype=np.float64)
+        self.Kinv = np.linalg.inv(self.K)
+        self.dist = None if dist is None or not np.any(dist) else np.asarray(dist, dtype=np.float64)
+        self.pose = pose
+        self.R_F_C0 = pose.R_F_C()
+        self.p0 = pose.position_F()
+        self.off = np.asarray(foot_offset_m, dtype=np.float64)
+        self.W, self.H = image_size
+        self.band = band_rows if band_rows is not None else (0.0, float(self.H))
+        self.cfg = config or ImageAttitudeConfig()
+        size = np.array([CONE_SIZE_M.get(c, (np.nan, np.nan, np.nan)) for c in range(NUM_CLASSES)])
+        self._height_m, self._base_m, self._tip_r_m = size[:, 0], size[:, 1], size[:, 2]
+        self.counts = AttitudeCounts()
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the filter state (a new drive)."""
+        self.x = np.zeros(2)
+        self.P = np.eye(2) * self.cfg.prior_sigma_deg**2
+        self.bias = np.zeros(2)  # the fit's slowly varying bias (degrees), see ImageAttitudeConfig.bias_tau_frames
+        self.n_bias = 0
+        self._m1 = np.zeros(2)  # exponential means of the fits, their squares and their variances (still test)
+        self._m2 = np.zeros(2)
+        self._mv = np.zeros(2)
+        self._n_still = 0
+
+    def motion_weight(self, z: np.ndarray | None, Rz: np.ndarray | None) -> float:
+        """Fold one fit into the still test; 1 = the body moves (use the estimate), 0 = still (use zero)."""
+        c = self.cfg
+        if c.still_frames <= 0:
+            return 1.0
+        if z is not None:
+            self._n_still += 1
+            a = 1.0 / min(self._n_still, c.still_frames)
+            self._m1 += a * (z - self._m1)
+            self._m2 += a * (z * z - self._m2)
+            self._mv += a * (np.diag(Rz) - self._mv)
+        if self._n_still < c.still_min_frames:
+            return 1.0
+        spread = np.sqrt(np.maximum(self._m2 - self._m1**2, 0.0) / np.maximum(self._mv, 1e-12))
+        moving = (np.max(spread) - (c.still_ratio - c.still_ramp)) / c.still_ramp
+        sloped = (np.max(np.abs(self._m1)) - c.still_max_mean_deg) / (0.5 * c.still_max_mean_deg)
+        return float(np.clip(max(moving, sloped), 0.0, 1.0))
+
+    def still_sigma(self, sd: np.ndarray, wm: float) -> np.ndarray:
+        """(2,) 1-sigma (degrees) of the attitude used: the estimate's ``sd`` while the body moves; while it is
+        still (``wm`` 0) how far from zero the recent fits say it may be (their mean and spread)."""
+        if wm >= 1.0:
+            return sd
+        still = np.sqrt(self._m1**2 + np.maximum(self._m2 - self._m1**2, 0.0))
+        return wm * sd + (1.0 - wm) * np.minimum(still, sd)
+
+    def debias(self, z: np.ndarray) -> np.ndarray:
+        """Fold one accepted fit ``z`` (2,) degrees into the bias estimate; return the fit less the bias."""
+        c = self.cfg
+        if c.bias_tau_frames <= 0:
+            return z
+        self.n_bias += 1
+        self.bias = self.bias + (z - self.bias) / min(self.n_bias + c.bias_prior_frames, c.bias_tau_frames)
+        if not c.bias_pitch:
+            self.bias[0] = 0.0
+        return z - self.bias
+
+    # -- model ------------------------------------------------------------------------------------
+    def _select(self, boxes: np.ndarray, class_ids: np.ndarray) -> np.ndarray:
+        """(N,) bool: boxes that may be standing, whole cones of a known size."""
+        c = self.cfg
+        b = boxes
+        known = (class_ids >= 0) & (class_ids < NUM_CLASSES)
+        cls = np.where(known, class_ids, 0)
+        hm = self._height_m[cls]
+        w = np.maximum(b[:, 2] - b[:, 0], 1e-6)
+        h = np.maximum(b[:, 3] - b[:, 1], 1e-6)
+        aspect_ok = np.abs(np.log(w / h * (hm / self._base_m[cls]))) <= c.aspect_tol  # NaN (unknown size): False
+        near = self.K[1, 1] * hm <= c.max_range_m * h
+        m = c.edge_margin_px
+        inside = (b[:, 0] > m) & (b[:, 2] < self.W - m) & (b[:, 1] > self.band[0] + m) & (b[:, 3] < self.band[1] - m)
+        return known & aspect_ok & (h >= c.min_height_px) & inside & near
+
+    def _prepare(self, boxes: np.ndarray, class_ids: np.ndarray):
+        u = 0.5 * (boxes[:, 0] + boxes[:, 2]) - 0.5  # pixel-edge -> pixel-centre coordinates
+        foot = np.column_stack([u, boxes[:, 3] - 0.5])
+        top = np.column_stack([u, boxes[:, 1] - 0.5 + self.cfg.top_bias_px
+                               + box_top_extra_px(boxes[:, 3] - boxes[:, 1], self.cfg.top_bias_extra_px)])
+        if self.dist is not None:
+            foot = undistort_pixels(foot, self.K, self.dist)
+            top = undistort_pixels(top, self.K, self.dist)
+        rays = np.column_stack([foot, np.ones(len(foot))]) @ self.Kinv.T  # (N, 3) optical frame
+        return rays, top[:, 1], class_ids
+
+    def residuals(self, theta_deg: np.ndarray, rays: np.ndarray, v_top: np.ndarray, cls: np.ndarray) -> np.ndarray:
+        """(N,) predicted minus observed top row (px) of each cone for attitude (pitch, roll) in degrees.
+
+        NaN where the foot ray misses the ground under that attitude.
+        """
+        return self._residuals_batch(np.asarray(theta_deg, dtype=np.float64).reshape(1, 2), rays, v_top, cls)[0]
+
+    def _residuals_batch(self, thetas_deg: np.ndarray, rays: np.ndarray, v_top: np.ndarray, cls: np.ndarray) -> np.ndarray:
+        """(k, 2) attitudes -> (k, N) residuals, all in one vectorised pass."""
+        R_att = np.stack([attitude_rotation(t[0], t[1]) for t in thetas_deg])  # (k, 3, 3)
+        R_F_C = R_att @ self.R_F_C0
+        p = R_att @ self.p0  # (k, 3)
+        d = rays @ R_F_C.transpose(0, 2, 1)  # (k, N, 3) in rear_axle
+        dz = d[:, :, 2]
+        hits = dz < -1e-9
+        t = -p[:, 2:3] / np.where(hits, dz, -1.0)
+        away = t[:, :, None] * d[:, :, :2]  # ground point minus camera, (k, N, 2)
+        dist = np.sqrt(np.sum(away * away, axis=2, keepdims=True))
+        reach = dist + (self.off[cls] + self._tip_r_m[cls])[None, :, None]
+        top = away * (reach / dist)  # tip (xy) minus camera
+        P = np.concatenate([top, (self._height_m[cls][None, :] - p[:, 2:3])[:, :, None]], axis=2)
+        Pc = P @ R_F_C  # (k, N, 3) optical frame
+        v = self.K[1, 1] * Pc[:, :, 1] / Pc[:, :, 2] + self.K[1, 2]
+        return np.where(hits, v - v_top, np.nan)
+
+    # -- fit --------------------------------------------------------------------------------------
+    def fit(self, boxes: np.ndarray, class_ids: np.ndarray, start_deg: np.ndarray | None = None
+            ) -> tuple[np.ndarray, np.ndarray, int] | None:
+        """One frame's robust fit: ``(theta (2,) deg, covariance (2, 2) deg^2, cones used)``, or None
+        with fewer than ``min_cones`` usable cones. ``boxes`` (N, 4) full-image px (pixel edges);
+        ``start_deg``: where to linearise first (the filter's prediction; default zero)."""
+        c = self.cfg
+        boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
+        class_ids = np.asarray(class_ids, dtype=np.intp).ravel()
+        sel = self._select(boxes, class_ids)
+        if int(sel.sum()) < c.min_cones:
+            return None
+        rays, v_top, cls = self._prepare(boxes[sel], class_ids[sel])
+        h = boxes[sel, 3] - boxes[sel, 1]
+        sigma = np.sqrt(2.0 * c.sigma_px**2 + (c.sigma_rel * h) ** 2)
+        theta = np.zeros(2) if start_deg is None else np.clip(np.asarray(start_deg, dtype=np.float64), -2.0, 2.0)
+        eps = 0.05
+        lam = np.eye(2) / c.prior_sigma_deg**2
+        for outer in range(self.cfg.outer_iterations):
+            rr = self._residuals_batch(theta + np.array([[0.0, 0.0], [eps, 0.0], [0.0, eps]]), rays, v_top, cls)
+            r0 = rr[0]
+            J = ((rr[1:] - r0) / eps).T
+            ok = np.isfinite(r0) & np.all(np.isfinite(J), axis=1)
+            if int(ok.sum()) < c.min_cones:
+                return None
+            r0o, Jo, so = r0[ok], J[ok], sigma[ok]
+            if outer == 0:  # robust start: weighted median of single-cone pitch estimates
+                jp = Jo[:, 0]
+                fin = np.abs(jp) > 1e-9
+                single = -r0o[fin] / jp[fin]
+                wts = (jp[fin] / so[fin]) ** 2
+                if not np.any(fin):
+                    return None
+                delta = np.array([_weighted_median(single, wts), 0.0])
+            else:
+                delta = np.zeros(2)
+            delta = _irls(r0o, Jo[:, 0].copy(), Jo[:, 1].copy(), 1.0 / so, delta, theta, 1.0 / c.prior_sigma_deg**2,
+                          1.0 / c.cauchy_c)
+            theta = theta + delta
+            if np.max(np.abs(delta)) < 0.3:  # small step: the linearisation holds (error ~1e-3 deg)
+                break
+        e = (r0o + Jo @ delta) / so
+        w = 1.0 / (1.0 + (e / c.cauchy_c) ** 2)
+        inl = np.abs(e) <= 3.0 * c.cauchy_c
+        n_used = int(inl.sum())
+        if n_used < c.min_cones:
+            return None
+        A = Jo.T @ ((w / so**2)[:, None] * Jo) + lam
+        scale = max(1.0, float(np.sum(w[inl] * e[inl] ** 2) / max(n_used - 2, 1)))
+        return theta, inv2(A) * scale, n_used
+
+    def single_frame(self, boxes: np.ndarray, class_ids: np.ndarray) -> Attitude:
+        """The attitude of one frame on its own (no history): the fit with its covariance, or zero with
+        the prior's uncertainty when the fit has too few cones or is rejected (both counted)."""
+        res = self.fit(boxes, class_ids)
+        s0 = self.cfg.prior_sigma_deg
+        if res is None:
+            self.counts.too_few += 1
+            return Attitude(0.0, 0.0, s0, s0, "hold", 0)
+        if np.any(np.abs(res[0]) > self.cfg.max_abs_deg):
+            self.counts.rejected += 1
+            return Attitude(0.0, 0.0, s0, s0, "hold", 0)
+        self.counts.fitted += 1
+        sd = np.sqrt(np.diag(res[1]))
+        return Attitude(float(res[0][0]), float(res[0][1]), float(sd[0]), float(sd[1]), "image", res[2])
+
+    def update(self, boxes: np.ndarray, class_ids: np.ndarray) -> Attitude:
+        """Fit this frame, fold it into the filter, return the attitude to map this frame with."""
+        c = self.cfg
+        self.x = self.x * c.decay  # predict: random walk decaying to zero
+        self.P = self.P * c.decay**2 + np.eye(2) * c.process_sigma_deg**2
+        res = self.fit(boxes, class_ids, self.x + self.bias)
+        source, n = "hold", 0
+        if res is None:
+            self.counts.too_few += 1
+            wm = self.motion_weight(None, None)
+        elif np.any(np.abs(res[0]) > c.max_abs_deg):
+            self.counts.rejected += 1
+            wm = self.motion_weight(None, None)
+        else:
+            z, Rz, n = res
+            wm = self.motion_weight(z, Rz)
+            z = self.debias(z)
+            G = self.P @ inv2(self.P + Rz)
+            self.x = self.x + G @ (z - self.x)
+            self.P = (np.eye(2) - G) @ self.P
+            self.counts.fitted += 1
+            source = "image"
+        sd = self.still_sigma(np.sqrt(np.diag(self.P)), wm)
+        x = self.x * wm
+        return Attitude(float(x[0]), float(x[1]), float(sd[0]), float(sd[1]), source, n)
+
+
+def _irls(r0: np.ndarray, j0: np.ndarray, j1: np.ndarray, inv_s: np.ndarray, delta: np.ndarray, theta: np.ndarray,
+          lam: float, inv_c: float, iterations: int = 4) -> np.ndarray:
+    """Cauchy-weighted least squares of the linearised residuals ``r0 + j0 d0 + j1 d1`` (px, 1/sigma
+    ``inv_s``) with the prior ``lam (theta + d)^2`` around zero; returns the step ``d`` (2,) degrees."""
+    d0, d1 = float(delta[0]), float(delta[1])
+    t0, t1 = float(theta[0]), float(theta[1])
+    inv_s2 = inv_s * inv_s
+    for _ in range(iterations):
+        e = (r0 + j0 * d0 + j1 * d1) * inv_s * inv_c
+        w = inv_s2 / (1.0 + e * e)
+        wj0, wj1 = w * j0, w * j1
+        a00, a01, a11 = float(wj0 @ j0) + lam, float(wj0 @ j1), float(wj1 @ j1) + lam
+        b0, b1 = -float(wj0 @ r0) - lam * t0, -float(wj1 @ r0) - lam * t1
+        det = a00 * a11 - a01 * a01
+        d0, d1 = (a11 * b0 - a01 * b1) / det, (a00 * b1 - a01 * b0) / det
+    return np.array([d0, d1])
+
+
+def _weighted_median(x: np.ndarray, w: np.ndarray) -> float:
+    order = np.argsort(x)
+    cw = np.cumsum(w[order])
+    return float(x[order][np.searchsorted(cw, 0.5 * cw[-1])])

@@ -1,0 +1,13 @@
+"""Tracking: a local map of static cones with ids (:mod:`.tracker`), the tracker as a pipeline stage
+(:mod:`.stage`) and the car's motion between frames (:mod:`.egomotion`). Its figures against a synthetic
+drive are :mod:`cone_perception.evaluation.tracking`. ROS-free.
+"""
+
+from __future__ import annotations
+
+from .egomotion import Motion2D, Registration, TwistBuffer, from_twist, register_cones
+from .stage import TrackingStage
+from .tracker import INPUT_EVENTS, ConeTracker, FieldOfView, FrameInfo, TrackerConfig
+
+__all__ = ["ConeTracker", "FieldOfView", "FrameInfo", "INPUT_EVENTS", "Motion2D", "Registration", "TrackerConfig",
+    "TrackingStage", "TwistBuffer", "from_twist", "register_cones"]
