@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
+from matplotlib.figure import Figure
 
 #: RSS may grow by at most this share from the first window to the last.
 RSS_GROWTH_LIMIT = 0.05
@@ -137,14 +138,10 @@ def _ok(b: bool) -> str:
 
 def plot(r: dict, path) -> None:
     """RSS, rates and latency over time (one PNG)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     w = r["windows"]
     t = [x["t_s"] for x in w]
-    fig, ax = plt.subplots(3, 1, figsize=(8, 7), sharex=True)
+    fig = Figure(figsize=(8, 7))
+    ax = fig.subplots(3, 1, sharex=True)
     ax[0].plot(t, [x["sent_per_s"] for x in w], label="sent/s")
     ax[0].plot(t, [x["cones_per_s"] for x in w], label="/cones/s")
     ax[0].set_ylabel("frames/s")
@@ -159,7 +156,6 @@ def plot(r: dict, path) -> None:
     fig.suptitle(f"soak: {r['rate_hz']:g} Hz for {r['seconds']:g} s, {r['sent']} sent, {r['uncounted']} uncounted")
     fig.tight_layout()
     fig.savefig(path, dpi=90)
-    plt.close(fig)
 
 
 def to_json(r: dict) -> dict:

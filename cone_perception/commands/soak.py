@@ -23,6 +23,12 @@ import sys
 import tempfile
 from pathlib import Path
 
+from tqdm import tqdm
+
+from .. import soak as core
+from ..data.outfiles import print_written, refuse_existing
+from ..errors import ConfigError
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rate", type=float, default=30.0, help="frames per second published (default %(default)s)")
@@ -48,29 +54,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
-def _frames(args, tmp: Path) -> tuple[list[bytes], bool, str, str | None]:
-    """(serialized frames, compressed, topic, calibration) of --bag or a synthetic drive rendered into ``tmp``."""
-    from .. import bagio
-    from ..replay import find_image_topic
-
-    bag, calib = args.bag, args.calib
-    if bag is None:
-        from ..synth.config import SynthConfig
-        from ..synth.writers import bag_side_paths, write_scene_bag
-
-        bag = tmp / "drive"
-        print(f"soak: rendering a {args.drive_seconds:g} s synthetic drive (seed {args.seed})", file=sys.stderr)
-        write_scene_bag(SynthConfig(seed=args.seed), args.drive_seconds, 20.0, bag, progress=not args.no_progress)
-        calib = calib or str(bag_side_paths(bag)[0])
-    topic, msgtype = find_image_topic(bag, args.topic)
-    frames = [m.raw for m in bagio.read_messages(bag, topic)]
-    return frames, msgtype == bagio.COMPRESSED_IMAGE, topic, calib
-
-
 def run(args: argparse.Namespace) -> int:
-    from ..errors import ConfigError
-    from ..outfiles import print_written, refuse_existing
-
     if not args.rate > 0 or not args.seconds > 0 or not args.window > 0:
         raise ConfigError("soak", None, "--rate, --seconds and --window must be > 0")
     if args.domain_id is not None and not 0 <= args.domain_id <= 232:
@@ -82,14 +66,12 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError("--param", None, f"expected NAME:=VALUE, got {p!r}")
     os.environ["ROS_DOMAIN_ID"] = str(args.domain_id if args.domain_id is not None else 150 + os.getpid() % 80)
 
-    from tqdm import tqdm
-
-    from .. import soak as core
-    from ..nodes.soak import soak
+    from ..nodes import soak as player  # rclpy and the localhost DDS environment: on use only
 
     tmp = Path(tempfile.mkdtemp(prefix="cone_perception_soak_"))
     try:
-        frames, compressed, topic, calib = _frames(args, tmp)
+        frames, compressed, topic, calib = player.drive_frames(args.bag, args.topic, tmp, args.drive_seconds, args.seed,
+                                                               args.calib, not args.no_progress)
         node_args = []
         for k, v in (("calibration", calib), ("model", args.model)):
             if v:
@@ -107,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
         def progress(t: float) -> None:
             bar.update(max(0, round(t) - bar.n))
 
-        res = soak(frames, compressed, topic, args.rate, args.seconds, node_args, window_s=args.window,
+        res = player.soak(frames, compressed, topic, args.rate, args.seconds, node_args, window_s=args.window,
                    progress=progress)
         bar.close()
     finally:

@@ -17,9 +17,11 @@ from ._common import QOS_DATA  # noqa: E402,I001 (sets DDS env first)
 
 import os  # noqa: E402
 import subprocess  # noqa: E402
+import sys  # noqa: E402
 import threading  # noqa: E402
 import time  # noqa: E402
 from dataclasses import dataclass, field  # noqa: E402
+from pathlib import Path  # noqa: E402
 from typing import Callable  # noqa: E402
 
 import rclpy  # noqa: E402
@@ -28,9 +30,13 @@ from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.qos import QoSProfile  # noqa: E402
 from sensor_msgs.msg import CompressedImage, Image, PointCloud2  # noqa: E402
 
+from ..data import bagio  # noqa: E402
+from ..data.bags import find_image_topic  # noqa: E402
 from ..errors import ConfigError  # noqa: E402
 from ..soak import SoakWindow  # noqa: E402
 from ..stats import cdr_stamp_ns, with_cdr_stamp  # noqa: E402
+from ..synth.config import SynthConfig  # noqa: E402
+from ..synth.writers import bag_side_paths, write_scene_bag  # noqa: E402
 from ..timing import rss_mb  # noqa: E402
 from .live_replay import _QOS_PLAY, node_command  # noqa: E402
 
@@ -49,6 +55,20 @@ class SoakRun:
     topic: str = ""
     node_output: str = ""
     died: int | None = None
+
+
+def drive_frames(bag: Path | None, topic: str | None, tmp: Path, drive_seconds: float = 3.0, seed: int = 2026,
+                 calib: str | None = None, progress: bool = True) -> tuple[list[bytes], bool, str, str | None]:
+    """(serialized frames, compressed, topic, calibration) of ``bag``'s camera topic, or of a synthetic
+    drive of ``drive_seconds`` at 20 Hz rendered into ``tmp`` (its calibration unless ``calib``)."""
+    if bag is None:
+        bag = tmp / "drive"
+        print(f"soak: rendering a {drive_seconds:g} s synthetic drive (seed {seed})", file=sys.stderr)
+        write_scene_bag(SynthConfig(seed=seed), drive_seconds, 20.0, bag, progress=progress)
+        calib = calib or str(bag_side_paths(bag)[0])
+    topic, msgtype = find_image_topic(bag, topic)
+    frames = [m.raw for m in bagio.read_messages(bag, topic)]
+    return frames, msgtype == bagio.COMPRESSED_IMAGE, topic, calib
 
 
 class _Receiver:
