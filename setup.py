@@ -39,11 +39,11 @@ setup(
     entry_points={
         "console_scripts": [
             "cone-perception = cone_perception.cli:main",
-            "driver_adapter = cone_perception.nodes.driver_adapter:main",
-            "mapping = cone_perception.nodes.mapping:main",
-            "detection = cone_perception.nodes.detection:main",
-            "pipeline = cone_perception.nodes.pipeline:main",
-            "cone_tracker = cone_perception.nodes.cone_tracker:main",
+            "driver_adapter = cone_perception.nodes.executables:driver_adapter",
+            "mapping = cone_perception.nodes.executables:mapping",
+            "detection = cone_perception.nodes.executables:detection",
+            "pipeline = cone_perception.nodes.executables:pipeline",
+            "cone_tracker = cone_perception.nodes.executables:cone_tracker",
         ],
     },
 )

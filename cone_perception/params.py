@@ -1,15 +1,20 @@
-"""The nodes' parameters: one table of name, default, type, range and description. ROS-free.
+"""Every node parameter in one place: name, type, default, range, description, and whether it can be
+changed at run time; which node declares which, and each node's topics. ROS-free.
 
-The nodes declare their parameters from :data:`PARAMS` (``nodes/_params.py`` turns a
-:class:`ParamSpec` into an rclpy ``ParameterDescriptor``), so ``ros2 param describe`` shows the
-same text and range as the README's parameter table. Parameters marked ``dynamic`` can be changed
-at run time (``ros2 param set``): :meth:`ParamSpec.check` says why a value is refused, and the
-node keeps its old value then.
+The nodes declare their parameters from here (``nodes/_params.py`` turns a :class:`ParamSpec` into an
+rclpy ``ParameterDescriptor``: description, range, ``read_only`` unless ``dynamic``), so ``ros2 param
+describe`` shows the same text and range as the README's tables, the node modules' docstrings and each
+node executable's ``--help``, which are all generated from :data:`NODES` (``cone-perception params
+--write`` rewrites the README's tables and the docstrings; a test fails when they drift). Parameters
+marked ``dynamic`` can be changed at run time (``ros2 param set``): :meth:`ParamSpec.check` says why a
+value is refused, and the node keeps its old value then.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import textwrap
 from dataclasses import dataclass
 from typing import Union
 
@@ -34,27 +39,46 @@ DEFAULT_IOU = 0.45
 #: lower cap (the nodes' 100 before) would drop cones silently in a crowded frame (a start area, skidpad).
 DEFAULT_MAX_DET = 300
 
-Value = Union[bool, int, float, str]
+Value = Union[bool, int, float, str, "tuple[float, ...]"]
+
+_ROS_TYPE_NAMES = {bool: "bool", int: "int", float: "double", str: "string"}
 
 
 @dataclass(frozen=True)
 class ParamSpec:
-    """One parameter. Its type is the type of ``default`` (bool, int, float or str)."""
+    """One parameter. Its type is the type of ``default`` (bool, int, float or str; a tuple of floats is a
+    ROS double array of ``len(default)`` elements)."""
 
     name: str
     default: Value
-    description: str
+    description: str  # plain text: ros2 param describe, --help, docstrings and the README
     min: float | None = None
     max: float | None = None
     choices: tuple[str, ...] | None = None
     dynamic: bool = False  # changeable at run time; otherwise read-only once the node runs
+    min_exclusive: bool = False  # the value must be above ``min``, not equal to it
+    values: str = ""  # the accepted values in words where no range is checked ("cpu, cuda, cuda:N")
 
     @property
     def type(self) -> type:
         return type(self.default)
 
+    @property
+    def ros_type(self) -> str:
+        """The type as ROS names it: bool, int, double, string, double[N]."""
+        if isinstance(self.default, tuple):
+            return f"double[{len(self.default)}]"
+        return _ROS_TYPE_NAMES[self.type]
+
+    @property
+    def ros_default(self):
+        """The default as rclpy declares it (a list for an array)."""
+        return list(self.default) if isinstance(self.default, tuple) else self.default
+
     def check(self, value: object) -> str | None:
         """Why ``value`` is not acceptable (one line), or ``None`` when it is."""
+        if isinstance(self.default, tuple):
+            return self._check_array(value)
         want = self.type
         if want is bool:
             ok = isinstance(value, bool)
@@ -67,51 +91,310 @@ class ParamSpec:
         if not ok:
             return f"{self.name} must be a {want.__name__}, got {type(value).__name__} {value!r}"
         if want in (int, float):
-            if not math.isfinite(float(value)):  # type: ignore[arg-type]
-                return f"{self.name} must be finite, got {value!r}"
-            if self.min is not None and value < self.min:  # type: ignore[operator]
-                return f"{self.name} must be >= {self.min}, got {value!r}"
-            if self.max is not None and value > self.max:  # type: ignore[operator]
-                return f"{self.name} must be <= {self.max}, got {value!r}"
+            return self._check_number(value)
         if self.choices is not None and value not in self.choices:
-            return f"{self.name} must be one of {', '.join(self.choices)}, got {value!r}"
+            return f"{self.name} must be one of {', '.join(repr(c) if not c else c for c in self.choices)}, got {value!r}"
+        return None
+
+    def _check_number(self, value, what: str = "") -> str | None:
+        what = what or self.name
+        if not math.isfinite(float(value)):
+            return f"{what} must be finite, got {value!r}"
+        if self.min is not None and self.min_exclusive and not value > self.min:
+            return f"{what} must be > {self.min}, got {value!r}"
+        if self.min is not None and value < self.min:
+            return f"{what} must be >= {self.min}, got {value!r}"
+        if self.max is not None and value > self.max:
+            return f"{what} must be <= {self.max}, got {value!r}"
+        return None
+
+    def _check_array(self, value: object) -> str | None:
+        n = len(self.default)  # type: ignore[arg-type]
+        try:
+            items = list(value)  # type: ignore[call-overload]
+        except TypeError:
+            items = None
+        if items is None or isinstance(value, (str, bytes)) or len(items) != n or not all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) for v in items):
+            return f"{self.name} must be a list of {n} numbers, got {value!r}"
+        for i, v in enumerate(items):
+            why = self._check_number(v, f"{self.name}[{i}]")
+            if why:
+                return why
         return None
 
     def range_text(self) -> str:
-        """The constraint in words, for the descriptor and the README ("0.0 .. 1.0", "raw | compressed")."""
+        """The constraint in words, for the descriptor and the docs ("0.0 .. 1.0", ">= 0", "raw | compressed")."""
         if self.choices is not None:
-            return " | ".join(self.choices)
-        if self.min is not None or self.max is not None:
-            lo = "" if self.min is None else f"{self.min}"
-            hi = "" if self.max is None else f"{self.max}"
-            return f"{lo} .. {hi}".strip()
-        return ""
+            return " | ".join(c or '""' for c in self.choices)
+        if self.min is not None and self.max is not None:
+            return f"{self.min} .. {self.max}"
+        if self.min is not None:
+            return f"{'>' if self.min_exclusive else '>='} {self.min}"
+        if self.max is not None:
+            return f"<= {self.max}"
+        return self.values
+
+    def default_text(self) -> str:
+        """The default as written in a parameter file: ``true``, ``0.25``, ``""``, ``[0.0, 0.0]``."""
+        d = self.default
+        if isinstance(d, bool):
+            return "true" if d else "false"
+        if isinstance(d, str):
+            return d if d else '""'
+        if isinstance(d, tuple):
+            return "[" + ", ".join(str(float(v)) for v in d) + "]"
+        return str(d)
 
 
-_SPECS = (
-    ParamSpec("calibration", DEFAULT_CAMERA, "calibration YAML: a path, or a camera name in the package's calib/"),
-    ParamSpec("input_transport", "raw", "camera input: raw (sensor_msgs/Image on image_raw) or compressed "
-              "(sensor_msgs/CompressedImage on image_raw/compressed)", choices=("raw", "compressed")),
-    ParamSpec("publish_markers", True, "also publish /cones/markers (visualization_msgs/MarkerArray) for rviz2",
-              dynamic=True),
-    ParamSpec("model", "", "model file (.pt checkpoint, TorchScript or ONNX); empty = the shipped default model"),
-    ParamSpec("backend", DEFAULT_BACKEND, "inference backend; auto = ONNX Runtime on the CPU where installed, "
-              "else torch", choices=("auto", "torch", "torchscript", "onnx")),
-    ParamSpec("device", "cpu", "torch device: cpu, cuda or cuda:N"),
-    ParamSpec("fp16", False, "half precision (CUDA only)"),
-    ParamSpec("bf16", False, "bfloat16 autocast on the CPU (backend torch)"),
-    ParamSpec("threads", RUNTIME_THREADS, "CPU threads of the network; 0 = the library's default", min=0, max=256),
-    ParamSpec("conf", DEFAULT_CONF, "confidence threshold: boxes scoring at most this are dropped", min=0.0, max=1.0,
-              dynamic=True),
-    ParamSpec("iou", DEFAULT_IOU, "NMS IoU threshold: a box overlapping a better one of its class by more is dropped",
-              min=0.0, max=1.0, dynamic=True),
-    ParamSpec("max_det", DEFAULT_MAX_DET, "most boxes per frame (best first)", min=1, max=1000, dynamic=True),
-    ParamSpec("debug_image", False, "publish image_cropped/debug (bgr8): the band with boxes, classes, scores "
-              "and each cone's distance; drawn only while someone subscribes", dynamic=True),
-    ParamSpec("far_rows", "", "pipeline: image rows V0,V1 also run at full resolution, the whole width (the far band "
-              "for small, far cones; a second forward); empty = off"),
-    ParamSpec("debug_image_hz", 5.0, "most debug images per second", min=0.1, max=100.0, dynamic=True),
+def _p(*args, **kwargs) -> ParamSpec:
+    return ParamSpec(*args, **kwargs)
+
+
+# -- every parameter, by theme. Descriptions are plain text (ros2 param describe shows them as they are).
+_COMMON = (  # declared by every node (nodes/_common.py, PerceptionNode)
+    _p("input_timeout_s", 1.0, "silence on an input longer than this (s) is an ERROR on /diagnostics; 0 = never",
+       min=0.0),
+    _p("max_frame_age_s", 0.0, "a frame whose header stamp is older than this (s) on arrival is counted stale; "
+       "0 = off (bag replays carry old stamps; set it on the car, where the camera stamps with the node's clock)",
+       min=0.0),
+    _p("input_rate_hz", 0.0, "the camera's nominal rate (Hz), for counting the frames missing from its stamps; "
+       "0 = learnt from the stamps (per frame sent, from the publisher's sequence numbers: right at any load)",
+       min=0.0),
+)
+_CAMERA = (
+    _p("calibration", DEFAULT_CAMERA, "the camera's calibration YAML: a path, or a camera name in the package's "
+       "calib/ (its image size, crop and downscale define the band; its homography and mount pose map boxes to "
+       "metres)", values="a YAML path or a camera name in calib/"),
+    _p("input_transport", "raw", "camera input: raw subscribes image_raw (sensor_msgs/Image: yuv422_yuy2 / yuyv, "
+       "bgr8, rgb8), compressed subscribes image_raw/compressed (sensor_msgs/CompressedImage, JPEG/PNG)",
+       choices=("raw", "compressed")),
+)
+_DETECTOR = (
+    _p("model", "", "model file (.pt checkpoint, TorchScript or ONNX); empty = the shipped default model "
+       "(models/cone_detector.pt)", values="a .pt, .onnx or .torchscript path"),
+    _p("backend", DEFAULT_BACKEND, "inference backend; auto = ONNX Runtime for a checkpoint on the CPU where "
+       "installed, else eager torch; an exported file runs with its own", choices=("auto", "torch", "torchscript", "onnx")),
+    _p("device", "cpu", "where the network runs (torch device)", values="cpu, cuda, cuda:N"),
+    _p("fp16", False, "half precision on the GPU (CUDA only)"),
+    _p("bf16", False, "bfloat16 autocast on the CPU (backend torch); pays only on CPUs with native bf16"),
+    _p("threads", RUNTIME_THREADS, "the network's CPU threads; 0 = the library's default (all cores); 1 leaves the "
+       "other cores to the rest of the car (docs/benchmarks.md, Backend and threads)", min=0, max=256),
+    _p("conf", DEFAULT_CONF, "confidence threshold: boxes scoring at most this are dropped", min=0.0, max=1.0,
+       dynamic=True),
+    _p("iou", DEFAULT_IOU, "NMS IoU threshold (class-aware): a box overlapping a better one of its class by more is "
+       "dropped", min=0.0, max=1.0, dynamic=True),
+    _p("max_det", DEFAULT_MAX_DET, "most boxes per frame (best first)", min=1, max=1000, dynamic=True),
+)
+_DEBUG = (
+    _p("debug_image", False, "publish image_cropped/debug (bgr8): the band with boxes, classes, scores and each "
+       "cone's distance; drawn only while someone subscribes", dynamic=True),
+    _p("debug_image_hz", 5.0, "most debug images per second", min=0.1, max=100.0, dynamic=True),
+)
+_MAPPING = (
+    _p("publish_markers", True, "also publish /cones/markers (visualization_msgs/MarkerArray) for rviz2", dynamic=True),
+    _p("attitude", "", "the camera attitude per frame (docs/attitude.md): fixed, image (from the boxes), imu or fused; "
+       "empty = image when the calibration has a mount pose, else fixed (ask for imu / fused explicitly)",
+       choices=("", "fixed", "image", "imu", "fused")),
+    _p("imu_rest_deg", (0.0, 0.0), "the IMU's pitch and roll (degrees) with the car at rest on the level ground of "
+       "the calibration (cone-perception imu-rest measures it); for attitude imu / fused"),
+)
+_PIPELINE = (
+    _p("far_rows", "", "image rows V0,V1 also run at full resolution, the whole width (the far band for small, far "
+       "cones; a second forward, about a third of the frames/s; docs/detector.md, Far band); empty = off",
+       values="V0,V1 or empty"),
+    _p("track", False, "also the tracker stage: /cones/tracked out (the parameters of cone_tracker); it gets each "
+       "frame's attitude, which a separate cone_tracker does not"),
+)
+_TRACKING = (
+    _p("odom_topic", "odom", "the car's motion (odom_type); empty = none (motion estimated from the cones)"),
+    _p("odom_type", "odometry", "odom_topic's type: odometry = nav_msgs/Odometry (twist.twist), twist = "
+       "geometry_msgs/TwistStamped", choices=("odometry", "twist")),
+    _p("odom_max_age_s", 0.1, "odometry older than this (s) at a frame is not used for it (counted)", min=0.0,
+       min_exclusive=True),
+    _p("publish_tracked_markers", True, "also publish /cones/tracked/markers: cylinders with the track ids as text, "
+       "for rviz2"),
 )
 
-#: Every node parameter by name.
-PARAMS: dict[str, ParamSpec] = {s.name: s for s in _SPECS}
+#: Every node parameter by name (a node may declare one with its own default: :data:`NODES`).
+PARAMS: dict[str, ParamSpec] = {s.name: s for s in (*_COMMON, *_CAMERA, *_DETECTOR, *_DEBUG, *_MAPPING, *_PIPELINE,
+                                                    *_TRACKING)}
+#: The parameters every node declares (input health: nodes/_common.py).
+COMMON_PARAMS: tuple[ParamSpec, ...] = _COMMON
+
+
+@dataclass(frozen=True)
+class NodeSpec:
+    """One node executable: what it does, its topics (Markdown: backticks), its own parameters (in table
+    order) and the nodes whose parameters it declares too (``(node, when)``, ``when`` "" = always)."""
+
+    name: str
+    summary: str
+    subscribes: tuple[str, ...]
+    publishes: tuple[str, ...]
+    params: tuple[ParamSpec, ...]
+    also: tuple[tuple[str, str], ...] = ()
+
+
+def _by_name(*names: str) -> tuple[ParamSpec, ...]:
+    return tuple(PARAMS[n] for n in names)
+
+
+_DIAG = "`/diagnostics` (diagnostic_msgs/DiagnosticArray, once a second)"
+
+#: Every node executable (``ros2 run cone_perception <name>``), in the README's order.
+NODES: dict[str, NodeSpec] = {n.name: n for n in (
+    NodeSpec(
+        "driver_adapter", "camera frames -> the calibration's band (image_cropped, bgr8) + image_cropped/camera_info",
+        ("`image_raw` (sensor_msgs/Image) or `image_raw/compressed` (sensor_msgs/CompressedImage), by `input_transport`",),
+        ("`image_cropped` (sensor_msgs/Image, `bgr8`)",
+         "`image_cropped/camera_info` (sensor_msgs/CameraInfo, sent first: `roi` = the crop, `binning` = the downscale)",
+         _DIAG),
+        _CAMERA),
+    NodeSpec(
+        "detection", "image_cropped (bgr8) + its camera_info -> cone_boxes (full-image px)",
+        ("`image_cropped` (sensor_msgs/Image, `bgr8`)", "`image_cropped/camera_info` (sensor_msgs/CameraInfo)"),
+        ("`cone_boxes` (sensor_msgs/PointCloud2, the image's header)", "`image_cropped/debug` (sensor_msgs/Image, "
+         "opt-in: `debug_image`)", _DIAG),
+        (*_DETECTOR, *_DEBUG, dataclasses.replace(
+            PARAMS["calibration"], default="", values="empty, a YAML path or a camera name in calib/",
+            description="optional: a calibration (a path, or a camera name in calib/) for the cones' distances on "
+                        "the debug image; empty = none loaded, the debug image shows no distances (the node itself "
+                        "needs none: the crop comes with each camera_info)"))),
+    NodeSpec(
+        "mapping", "cone_boxes (full-image px) -> /cones (rear_axle metres) + /cones/markers",
+        ("`cone_boxes` (sensor_msgs/PointCloud2)", "`imu` (sensor_msgs/Imu, only with `attitude` `imu` or `fused`)"),
+        ("`/cones` (sensor_msgs/PointCloud2, frame = the calibration's `frame_id`, default `rear_axle`)",
+         "`/cones/markers` (visualization_msgs/MarkerArray)", "`cones/attitude` (geometry_msgs/Vector3Stamped: "
+         "the attitude each frame was mapped with, x = roll, y = pitch, rad)", _DIAG),
+        (PARAMS["calibration"], *_MAPPING)),
+    NodeSpec(
+        "pipeline", "the three stages fused in one process: image_raw -> cone_boxes, /cones, /cones/markers",
+        ("`image_raw` or `image_raw/compressed` (by `input_transport`)", "`imu` (with `attitude` `imu` / `fused`)",
+         "`odom` (with `track: true`, optional: `odom_topic`)"),
+        ("`cone_boxes`", "`/cones`", "`/cones/markers`", "`cones/attitude`", "`image_cropped/debug` (opt-in: "
+         "`debug_image`; the band of `image_raw` after the adapter)", "`/cones/tracked`, `/cones/tracked/markers` "
+         "(with `track: true`)", _DIAG),
+        _PIPELINE, also=(("driver_adapter", ""), ("detection", ""), ("mapping", ""), ("cone_tracker", "with track: true"))),
+    NodeSpec(
+        "cone_tracker", "/cones (+ odom) -> /cones/tracked + /cones/tracked/markers: a local cone map with ids",
+        ("`/cones` (sensor_msgs/PointCloud2)", "`odom` (nav_msgs/Odometry or geometry_msgs/TwistStamped, optional: "
+         "`odom_topic`, `odom_type`)"),
+        ("`/cones/tracked` (sensor_msgs/PointCloud2, the `/cones` fields plus `track_id`)",
+         "`/cones/tracked/markers` (visualization_msgs/MarkerArray)", _DIAG),
+        (dataclasses.replace(PARAMS["calibration"], description="the camera's calibration YAML: a path, or a camera "
+                             "name in calib/ (its band's ground footprint tells where a cone should be seen)"),
+         *_TRACKING)),
+)}
+
+
+def node_params(node: str) -> dict[str, ParamSpec]:
+    """Every parameter the node ``node`` can declare, by name: its own, those of the nodes it includes
+    (its own spec of a name wins), and :data:`COMMON_PARAMS`."""
+    spec = NODES[node]
+    out = {p.name: p for p in spec.params}
+    for other, _ in spec.also:
+        for name, p in node_params(other).items():
+            out.setdefault(name, p)
+    for p in COMMON_PARAMS:
+        out.setdefault(p.name, p)
+    return out
+
+
+def param_line(p: ParamSpec) -> str:
+    """One parameter in one line of plain text (``--help``, docstrings)."""
+    rng = p.range_text()
+    return (f"{p.name} ({p.ros_type}, default {p.default_text()}{'; ' + rng if rng else ''}"
+            f"{'; set at run time' if p.dynamic else ''}): {p.description}")
+
+
+def param_groups(node: str) -> list[tuple[str, tuple[ParamSpec, ...]]]:
+    """The node's parameters in groups ``(title, specs)``: its own, then those of each node it includes
+    that it does not have already, then every node's. Every parameter of :func:`node_params` once."""
+    spec = NODES[node]
+    seen = {p.name for p in spec.params}
+    groups = [("", spec.params)]
+    for other, when in spec.also:
+        more = tuple(p for p in node_params(other).values() if p.name not in seen and p not in COMMON_PARAMS)
+        seen.update(p.name for p in more)
+        groups.append((f"of {other}{', ' + when if when else ''}", more))
+    groups.append(("of every node", COMMON_PARAMS))
+    return groups
+
+
+def help_text(node: str, width: int = 100) -> str:
+    """What ``<node> --help`` prints: usage, topics and every parameter (plain text)."""
+    spec = NODES[node]
+
+    def wrap(text: str, first: str = "  ", rest: str = "      ") -> list[str]:
+        return textwrap.wrap(text.replace("`", ""), width, initial_indent=first, subsequent_indent=rest,
+                             break_on_hyphens=False, break_long_words=False)
+
+    out = wrap(f"usage: ros2 run cone_perception {node} [-h] [--ros-args [-p NAME:=VALUE | --params-file FILE | "
+               "-r FROM:=TO] ...]", "", "    ")
+    out += ["", f"{node}: {spec.summary}", "", "subscribed:"]
+    for t in spec.subscribes:
+        out += wrap(t)
+    out += ["published:"]
+    for t in spec.publishes:
+        out += wrap(t)
+    out += [""] + wrap("parameters (ros2 param describe shows the same; those marked 'set at run time' change with "
+                       "ros2 param set, the others are read-only once the node runs):", "", "")
+    for title, group in param_groups(node):
+        if title:
+            out += [f" {title}:"]
+        for p in group:
+            out += wrap(param_line(p))
+    out += ["", "Every node: the README, \"Nodes and parameters\"; docs/robustness.md for the counts on /diagnostics."]
+    return "\n".join(out) + "\n"
+
+
+# -- the docs generated from the schema (cone-perception params --write writes them into the files) --------
+#: What regenerates the README's tables and the node docstrings.
+REGENERATE = "cone-perception params --write"
+#: The README's and docs' marker of the table of the parameters every node has.
+EVERY_NODE = "every_node"
+
+
+def _md(text: str) -> str:
+    return text.replace("|", "\\|")
+
+
+def _md_range(p: ParamSpec) -> str:
+    if p.choices is not None:
+        return ", ".join(f"`{c}`" if c else '`""`' for c in p.choices)
+    return _md(p.range_text())
+
+
+def markdown_block(key: str) -> str:
+    """The Markdown between the markers of ``key`` (a node, or :data:`EVERY_NODE`): the node's topics
+    and the table of its own parameters."""
+    head = "| parameter | type | default | range | set at run time | meaning |\n|---|---|---|---|---|---|\n"
+    if key == EVERY_NODE:
+        rows, out = COMMON_PARAMS, ""
+    else:
+        spec = NODES[key]
+        rows = spec.params
+        out = f"- Subscribed: {'; '.join(spec.subscribes)}\n- Published: {'; '.join(spec.publishes)}\n\n"
+    out += head + "".join(f"| `{p.name}` | {p.ros_type} | `{p.default_text()}` | {_md_range(p)} | "
+                          f"{'yes' if p.dynamic else ''} | {_md(p.description)} |\n" for p in rows)
+    if key != EVERY_NODE and NODES[key].also:
+        more = [f"`{o}`" + (f" ({w})" if w else "") for o, w in NODES[key].also]
+        mine = node_params(key)
+        differ = sorted({n for o, _ in NODES[key].also for n, p in node_params(o).items() if mine[n] != p})
+        where = f"; where two differ ({', '.join(f'`{n}`' for n in differ)}), the first's" if differ else ""
+        out += f"\nAlso the parameters of {', '.join(more[:-1])} and {more[-1]}, as in their tables{where}.\n"
+    return out
+
+
+def docstring_block(node: str) -> str:
+    """The ``Parameters (generated ...)`` block of the node module's docstring."""
+    lines = [f"Parameters (generated from cone_perception/params.py by ``{REGENERATE}``):"]
+    groups = param_groups(node)
+    for p in groups[0][1]:
+        lines += textwrap.wrap(param_line(p), 100, initial_indent="  ", subsequent_indent="    ",
+                               break_on_hyphens=False, break_long_words=False)
+    also = [f"those {title} ({', '.join(p.name for p in specs)})" for title, specs in groups[1:] if specs]
+    lines += textwrap.wrap("Also " + "; ".join(also) + ".", 100, initial_indent="  ", subsequent_indent="    ",
+                           break_on_hyphens=False, break_long_words=False)
+    return "\n".join(lines) + "\n"

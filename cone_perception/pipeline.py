@@ -39,8 +39,8 @@ class Pipeline:
     ``detect(bgr_cropped, crop) -> BOX_DTYPE`` and a ``timing`` dict of ms).
     ``attitude``: ``fixed``, ``image``, ``imu`` or ``fused`` (see :mod:`cone_perception.attitude`);
     None picks the default (``fused`` with ``imu`` and a mount pose, ``image`` with a mount pose, else
-    ``fixed``). ``imu``: an :class:`~cone_perception.attitude.ImuAttitude` the caller feeds; set
-    :attr:`frame_stamp_ns` before each frame. ``far``: a :class:`~cone_perception.detector.farband.FarBand`
+    ``fixed``). ``imu``: an :class:`~cone_perception.attitude.ImuAttitude` the caller feeds; each
+    ``process_*`` call takes the frame's capture stamp (``stamp_ns``), at which the IMU is read. ``far``: a :class:`~cone_perception.detector.farband.FarBand`
     (full-resolution rows near the horizon, a second forward; its boxes merge with the band's), or None.
     """
 
@@ -52,9 +52,8 @@ class Pipeline:
         self.mapper = ConeMapper(calib)
         self.imu = imu  # an ImuAttitude the caller feeds (modes imu, fused), or None
         self.attitude_mode, self.attitude = attitude_estimator(self.mapper, attitude, imu)
-        self.frame_stamp_ns: int | None = None  # the capture stamp of the frame being processed (for the IMU)
 
-    def _run(self, band: np.ndarray, t_adapter_s: float, strip: np.ndarray | None = None) -> FrameResult:
+    def _run(self, band: np.ndarray, t_adapter_s: float, strip: np.ndarray | None, stamp_ns: int | None) -> FrameResult:
         boxes = self.detector.detect(band, self.calib.crop)
         timing = {"adapter": t_adapter_s * 1e3}
         timing.update({k.removesuffix("_ms"): v for k, v in self.detector.timing.items()})
@@ -65,21 +64,32 @@ class Pipeline:
         att = FIXED
         if self.attitude is not None:
             t0 = time.perf_counter()
-            att = attitude_for_boxes(self.attitude, boxes, self.frame_stamp_ns)
+            att = attitude_for_boxes(self.attitude, boxes, stamp_ns)
             timing["attitude"] = (time.perf_counter() - t0) * 1e3
         t0 = time.perf_counter()
         cones = self.mapper.map_boxes(boxes, att)
         timing["mapping"] = (time.perf_counter() - t0) * 1e3
         return FrameResult(boxes, cones, timing, att, band)
 
-    def process_raw(self, encoding: str, width: int, height: int, step: int, data) -> FrameResult:
-        """sensor_msgs/Image fields -> :class:`FrameResult`. Raises ``FrameError`` for a bad frame."""
+    def _check_stamp(self, stamp_ns: int | None) -> None:
+        if stamp_ns is None and self.imu is not None:
+            raise ValueError(f"attitude {self.attitude_mode!r} reads the IMU at the frame's capture stamp: "
+                             "pass stamp_ns to process_raw / process_compressed")
+
+    def process_raw(self, encoding: str, width: int, height: int, step: int, data,
+                    stamp_ns: int | None = None) -> FrameResult:
+        """sensor_msgs/Image fields -> :class:`FrameResult`. ``stamp_ns``: the frame's capture stamp (ns),
+        needed with an IMU (attitude ``imu`` / ``fused``; a ``ValueError`` without it). Raises
+        ``FrameError`` for a bad frame."""
+        self._check_stamp(stamp_ns)
         t0 = time.perf_counter()
         band, strip = self.adapter.bands_from_raw(encoding, width, height, step, data)
-        return self._run(band, time.perf_counter() - t0, strip)
+        return self._run(band, time.perf_counter() - t0, strip, stamp_ns)
 
-    def process_compressed(self, data) -> FrameResult:
-        """sensor_msgs/CompressedImage data (JPEG/PNG) -> :class:`FrameResult`."""
+    def process_compressed(self, data, stamp_ns: int | None = None) -> FrameResult:
+        """sensor_msgs/CompressedImage data (JPEG/PNG) -> :class:`FrameResult`; ``stamp_ns`` as
+        :meth:`process_raw`."""
+        self._check_stamp(stamp_ns)
         t0 = time.perf_counter()
         band, strip = self.adapter.bands_from_compressed(data)
-        return self._run(band, time.perf_counter() - t0, strip)
+        return self._run(band, time.perf_counter() - t0, strip, stamp_ns)

@@ -97,3 +97,35 @@ def trained_smoke_model() -> tuple[Path, Path, dict]:
     )
     result = train(cfg, progress=False)
     return work / "run" / "best.pt", root, result
+
+
+def assert_same_cones(ref, other, img: np.ndarray, box_px: float, score_tol: float) -> int:
+    """Assert that detector ``other`` finds ``ref``'s cones in ``img`` (``detect_image``), as far as a
+    difference of ``score_tol`` in the scores allows: pairs (same class, IoU >= 0.5) within ``box_px`` px
+    and ``score_tol``; a cone found by one of them only where ``ref`` scores it within ``score_tol`` of the
+    threshold (``ref.conf``; a score there may cross it either way). Which cones sit near the threshold
+    depends on the smoke model, and so on the CPU that trained it; this rule does not. Returns the pairs."""
+    import copy
+
+    from cone_perception import records
+    from cone_perception.evaluation.metrics import match_by_class
+
+    assert (ref.conf, ref.iou) == (other.conf, other.iou)
+    rb, rs, rc = records.boxes_to_arrays(ref.detect_image(img))
+    ob, os_, oc = records.boxes_to_arrays(other.detect_image(img))
+    to_ref, _ = match_by_class(ob, oc, rb, rc, np.zeros(len(rb), bool), 0.5)
+    pair = to_ref >= 0
+    np.testing.assert_allclose(ob[pair], rb[to_ref[pair]], atol=box_px)
+    np.testing.assert_allclose(os_[pair], rs[to_ref[pair]], atol=score_tol)
+    lost = np.setdiff1d(np.arange(len(rb)), to_ref[pair])
+    assert np.all(rs[lost] <= ref.conf + score_tol), f"cones lost: boxes {rb[lost]}, reference scores {rs[lost]}"
+    extra = np.flatnonzero(~pair)
+    if len(extra):  # the reference's own score of each: under the threshold, by at most score_tol
+        low = copy.copy(ref)
+        low.conf = ref.conf - score_tol
+        lb, ls, lc = records.boxes_to_arrays(low.detect_image(img))
+        to_low, _ = match_by_class(ob[extra], oc[extra], lb, lc, np.zeros(len(lb), bool), 0.5)
+        assert np.all(to_low >= 0), f"cones found only by {other.describe()}: boxes {ob[extra]}, scores {os_[extra]}"
+        assert np.all(ls[to_low] <= ref.conf + 1e-6), (ls[to_low], ref.conf)
+        np.testing.assert_allclose(ob[extra], lb[to_low], atol=box_px)
+    return int(pair.sum())

@@ -60,11 +60,15 @@ def test_package_xml_lists_every_imported_dependency() -> None:
 
 
 def test_every_node_has_an_executable_and_every_shipped_file_is_installed() -> None:
+    from cone_perception.nodes import executables
+    from cone_perception.params import NODES
+
     setup_py = (ROOT / "setup.py").read_text()
-    for node in (PKG / "nodes").glob("[!_]*.py"):
-        if "\ndef main(" not in node.read_text():
-            continue  # a library module of the nodes (e.g. live_replay), not a node
-        assert f'"{node.stem} = cone_perception.nodes.{node.stem}:main"' in setup_py, f"no console script for {node.stem}"
+    nodes = {node.stem for node in (PKG / "nodes").glob("[!_]*.py") if "\ndef main(" in node.read_text()}
+    assert nodes == set(NODES), "every node module (one with main()) has its table in params.NODES, and only those"
+    for stem in nodes:  # the executable starts in nodes/executables.py: --help without rclpy
+        assert f'"{stem} = cone_perception.nodes.executables:{stem}"' in setup_py, f"no console script for {stem}"
+        assert callable(getattr(executables, stem))
     assert '"cone-perception = cone_perception.cli:main"' in setup_py
     for folder, patterns in {"calib": ("*.yaml", "*.md"), "launch_configs": ("*.py", "*.yaml", "*.rviz")}.items():
         for pattern in patterns:

@@ -199,3 +199,45 @@ def test_detection_node_debug_image_only_when_on_and_subscribed(ros: RosFixture)
     img = np.frombuffer(bytes(stamped(debug, 3)[0].data), np.uint8).reshape(band.shape)
     assert all(len(_msgs.boxes_from_msg(m)) > 0 for m in stamped(boxes, 3))
     assert (img != band).any(axis=2).mean() > 0.001  # boxes and labels drawn on the band
+
+
+# -- every node declares exactly its table of the schema (issue 28) ----------------------------------
+_NODE_CLASSES = {
+    "driver_adapter": ("cone_perception.nodes.driver_adapter", "DriverAdapterNode"),
+    "detection": ("cone_perception.nodes.detection", "DetectionNode"),
+    "mapping": ("cone_perception.nodes.mapping", "MappingNode"),
+    "pipeline": ("cone_perception.nodes.pipeline", "PipelineNode"),
+    "cone_tracker": ("cone_perception.nodes.cone_tracker", "ConeTrackerNode"),
+}
+
+
+@pytest.mark.parametrize("kind", sorted(_NODE_CLASSES))
+def test_each_node_declares_exactly_its_schema_table(ros: RosFixture, kind: str) -> None:
+    """Names, types, defaults, read-only and descriptions as ``ros2 param describe`` sees them come from
+    cone_perception/params.py (the pipeline with ``track: true`` declares the tracker's too)."""
+    import importlib
+
+    from cone_perception.params import node_params
+
+    module, cls = _NODE_CLASSES[kind]
+    overrides = [Parameter("track", value=True)] if kind == "pipeline" else []
+    node = ros.add(getattr(importlib.import_module(module), cls)(context=ros.context, parameter_overrides=overrides))
+    table = node_params(kind)
+    declared = {n for n in node._parameters if n not in ("use_sim_time", "start_type_description_service")}
+    assert declared == set(table)
+    for name, spec in table.items():
+        d = node.describe_parameter(name)
+        assert d.description == spec.description and d.read_only == (not spec.dynamic), name
+        value = node.get_parameter(name).value
+        want = True if (kind, name) == ("pipeline", "track") else spec.ros_default
+        assert (list(value) if isinstance(spec.default, tuple) else value) == want, name
+
+
+def test_detection_node_needs_no_calibration_but_uses_one_for_the_debug_distances(ros: RosFixture) -> None:
+    from cone_perception.nodes.detection import DetectionNode
+
+    bare = ros.add(DetectionNode(context=ros.context))
+    assert bare.debug.debug.mapper is None  # nothing loaded: the debug image shows no distances
+    with_calib = ros.add(DetectionNode(context=ros.context, namespace="second",
+                                       parameter_overrides=[Parameter("calibration", value="example_mainhoop")]))
+    assert with_calib.debug.debug.mapper is not None and with_calib.debug.debug.mapper.calib.source == CALIB.source

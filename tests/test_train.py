@@ -202,3 +202,22 @@ def test_train_command_writes_checkpoints_and_resumes(tmp_path, capsys):
     assert ck.imgsz == (128, 64)  # 120 rounded up to a multiple of 32
     assert ck.data["train"][0]["images"] == 4 and ck.metrics["epoch"] == 2 and ck.train["epoch"] == 2
     assert len((tmp_path / "run" / "results.csv").read_text().splitlines()) == 3
+
+
+def test_native_bf16_follows_a_onednn_isa_cap(monkeypatch):
+    """ONEDNN_MAX_CPU_ISA below AVX512_CORE_BF16 (how one tries a CPU without native bf16 on one with it)
+    makes ``auto`` precision fp32, as on such a CPU; a cap that keeps bf16 leaves the CPU's own answer."""
+    from cone_perception.train import trainer
+
+    monkeypatch.delenv("ONEDNN_MAX_CPU_ISA", raising=False)
+    monkeypatch.delenv("DNNL_MAX_CPU_ISA", raising=False)
+    own = trainer.native_bf16()
+    for cap in ("AVX2", "avx512_core", "AVX512_CORE_VNNI"):
+        monkeypatch.setenv("ONEDNN_MAX_CPU_ISA", cap)
+        assert not trainer.native_bf16(), cap
+        assert trainer.resolve_precision("auto") == "fp32"
+    monkeypatch.setenv("ONEDNN_MAX_CPU_ISA", "AVX512_CORE_AMX")
+    assert trainer.native_bf16() == own
+    monkeypatch.delenv("ONEDNN_MAX_CPU_ISA")
+    monkeypatch.setenv("DNNL_MAX_CPU_ISA", "AVX2")
+    assert not trainer.native_bf16()

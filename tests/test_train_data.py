@@ -153,3 +153,59 @@ def test_resume_needs_out(tmp_path, capsys):
     (src / "d.yaml").write_text(yaml.safe_dump({"train": [{"path": "."}]}))
     assert cli_main(["train", "--data", str(src / "d.yaml"), "--resume"]) == 2
     assert "--resume: needs --out" in capsys.readouterr().err
+
+
+def test_synth_dataset_of_one_track_has_no_val_and_trains(tmp_path, capsys, caplog):
+    """Issue 29: 12 frames are one track (--frames-per-track 20): no val split rather than an empty one the
+    trainer refuses; train on that data.yaml trains (without validation, saying how to get one). A data.yaml
+    that names an empty val folder (an older synth dataset) trains too, with a warning naming it."""
+    import logging
+
+    data = tmp_path / "synth"
+    with caplog.at_level(logging.WARNING):
+        assert cli_main(["synth", "dataset", "--n", "12", "--out", str(data), "--size", "320x180", "--no-progress"]) == 0
+    assert "12 frames make one track (--frames-per-track 20): no val split" in caplog.text
+    doc = yaml.safe_load((data / "data.yaml").read_text())
+    assert doc["train"] == "images/train" and "val" not in doc and not (data / "images/val").exists()
+    assert len(list((data / "images/train").glob("*.jpg"))) == 12
+    args = ["train", "--model", "p", "--imgsz", "160x96", "--batch", "4", "--workers", "0", "--epochs", "1",
+            "--max-batches", "2", "--no-progress", "--json", "--precision", "fp32"]
+    capsys.readouterr()
+    assert cli_main([*args, "--data", str(data / "data.yaml"), "--out", str(tmp_path / "run")]) == 0
+    out, err = capsys.readouterr()
+    assert "no val split: training without validation" in err and "name a folder of other frames under val:" in err
+    assert json.loads(out.strip().splitlines()[-1])["last"]["epoch"] == 1 and (tmp_path / "run/best.pt").is_file()
+
+    (data / "images/val").mkdir()
+    (data / "labels/val").mkdir()
+    (data / "old.yaml").write_text(yaml.safe_dump({**doc, "val": "images/val"}))
+    caplog.clear()
+    with caplog.at_level(logging.WARNING):
+        tr, va, _ = load_data_yaml(data / "old.yaml")
+        assert cli_main([*args, "--data", str(data / "old.yaml"), "--out", str(tmp_path / "run2")]) == 0
+    assert va == [] and len(tr[0].image_paths) == 12
+    assert f"old.yaml: val: no images in {data / 'images/val'}: that split is left out" in caplog.text
+    assert (tmp_path / "run2/best.pt").is_file()
+    # a val folder emptied by a clip filter stays an error (a typo in clips must not drop the validation)
+    (data / "clips.yaml").write_text(yaml.safe_dump({"train": [{"path": ".", "images": "images/train"}],
+                                                        "val": [{"path": ".", "images": "images/train", "clips": ["accel"]}]}))
+    with pytest.raises(ConfigError, match=r"val\[0\]\.path.*no images.*for clips \['accel'\]"):
+        load_data_yaml(data / "clips.yaml")
+
+
+@pytest.mark.parametrize("n, frames_per_track, val_frac, want", [
+    (4, 2, 0.1, (2, 2)),   # two tracks: one in val although 0.1 of 2 rounds to 0
+    (4, 2, 0.9, (2, 2)),   # 0.9 of 2 tracks rounds to 2: train keeps one
+    (4, 2, 0.0, (4, 0)),   # asked for none: none
+    (3, 4, 0.5, (3, 0)),   # one track: none
+])
+def test_synth_dataset_splits_whole_tracks_and_never_an_empty_one(tmp_path, n, frames_per_track, val_frac, want):
+    out = tmp_path / "d"
+    assert cli_main(["synth", "dataset", "--n", str(n), "--frames-per-track", str(frames_per_track), "--val-frac",
+                     str(val_frac), "--out", str(out), "--size", "160x96", "--no-progress"]) == 0
+    n_train = len(list((out / "images/train").glob("*.jpg")))
+    n_val = len(list((out / "images/val").glob("*.jpg")))
+    assert (n_train, n_val) == want
+    assert ("val" in yaml.safe_load((out / "data.yaml").read_text())) == (n_val > 0)
+    tr, va, _ = load_data_yaml(out / "data.yaml")  # what train reads: no empty split
+    assert sum(len(e.image_paths) for e in tr) == n_train and sum(len(e.image_paths) for e in va) == n_val

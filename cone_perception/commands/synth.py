@@ -48,7 +48,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--n", type=int, required=True, help="number of frames")
     p.add_argument("--out", type=Path, required=True, help="output directory (new or empty)")
     p.add_argument("--frames-per-track", type=int, default=20, help="frames per random track and look (default 20)")
-    p.add_argument("--val-frac", type=float, default=0.1, help="fraction of tracks in the val split (default 0.1)")
+    p.add_argument("--val-frac", type=float, default=0.1, help="fraction of tracks in the val split (default 0.1; at least one track when there are two or more; "
+                        "frames of one track only: no val split, data.yaml without val:)")
     p.add_argument(
         "--vary-mount",
         action="store_true",

@@ -128,8 +128,9 @@ def _names_for(entry: dict, root: Path, source: str, idx: str) -> list[str]:
     return [str(n) for n in names]
 
 
-def load_entry(entry: dict, base_dir: Path, source: str, idx: str) -> DatasetEntry:
-    """Read one dataset entry of a data YAML (index its images, parse its labels)."""
+def load_entry(entry: dict, base_dir: Path, source: str, idx: str, allow_empty: bool = False) -> DatasetEntry | None:
+    """Read one dataset entry of a data YAML (index its images, parse its labels). A folder without images
+    is a :class:`ConfigError`; with ``allow_empty`` (val) a warning and None, unless clips were asked for."""
     if not isinstance(entry, dict) or "path" not in entry:
         raise ConfigError(source, idx, "each dataset needs at least 'path:'")
     unknown = set(entry) - {"path", "images", "labels", "names", "restore_aspect", "clips", "exclude_clips", "weight"}
@@ -177,6 +178,9 @@ def load_entry(entry: dict, base_dir: Path, source: str, idx: str) -> DatasetEnt
         log.warning("%s", msg)
     if len(problems) > MAX_REPORTED:
         log.warning("%s: %d more label problems not shown", root, len(problems) - MAX_REPORTED)
+    if not images and allow_empty and not clips and not exclude:
+        log.warning("%s: %s: no images in %s: that split is left out", source, idx, images_dir)
+        return None
     if not images:
         raise ConfigError(source, f"{idx}.path", f"no images in {images_dir}" + (f" for clips {sorted(clips)}" if clips else ""))
     del stems
@@ -203,8 +207,9 @@ def load_data_yaml(path: str | Path) -> tuple[list[DatasetEntry], list[DatasetEn
         raise ConfigError(src, "train", "needs a list of datasets under 'train:' (or an Ultralytics 'train: images/train')")
     if is_yolo_style(doc):
         splits = yolo_entries(doc, path)
-        loaded = {k: [load_entry({a: b for a, b in e.items() if a != "_key"}, path.parent, src, e["_key"]) for e in v]
-                  for k, v in splits.items()}
+        loaded = {k: [load_entry({a: b for a, b in e.items() if a != "_key"}, path.parent, src, e["_key"], k == "val")
+                      for e in v] for k, v in splits.items()}
+        loaded = {k: [e for e in v if e is not None] for k, v in loaded.items()}
         rest = {k: v for k, v in doc.items() if k not in ("train", "val")}
         if loaded.get("test"):
             rest["test_entries"] = loaded["test"]
@@ -214,7 +219,8 @@ def load_data_yaml(path: str | Path) -> tuple[list[DatasetEntry], list[DatasetEn
         items = doc.get(key) or []
         if isinstance(items, dict):
             items = [items]
-        out.append([load_entry(e, path.parent, src, f"{key}[{i}]") for i, e in enumerate(items)])
+        entries = [load_entry(e, path.parent, src, f"{key}[{i}]", key == "val") for i, e in enumerate(items)]
+        out.append([e for e in entries if e is not None])
     rest = {k: v for k, v in doc.items() if k not in ("train", "val")}
     return out[0], out[1], rest
 

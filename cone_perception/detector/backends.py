@@ -3,6 +3,7 @@ Each runner takes (1, 3, H, W) float32 RGB 0..1 and returns (4 + nc, N) float32 
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Callable
 
@@ -38,6 +39,25 @@ def resolve_backend(backend: str, path: str | Path | None = None, device: str = 
     except ImportError:
         return "torch"
     return "onnx"
+
+
+#: oneDNN instruction-set caps (``ONEDNN_MAX_CPU_ISA``) without AVX512-BF16 or AMX: bfloat16 is emulated there
+ONEDNN_ISAS_WITHOUT_BF16 = ("SSE41", "AVX", "AVX2", "AVX2_VNNI", "AVX2_VNNI_2", "AVX512_CORE", "AVX512_CORE_VNNI")
+
+
+def native_bf16() -> bool:
+    """Whether this CPU computes bfloat16 natively (x86 AVX512-BF16 or AMX), so bf16 autocast pays. A cap on
+    oneDNN's instruction set below that (``ONEDNN_MAX_CPU_ISA``, or the older ``DNNL_MAX_CPU_ISA``, e.g.
+    ``AVX512_CORE`` to act as a CPU without it) counts as none: the convolutions then emulate bfloat16."""
+    cap = (os.environ.get("ONEDNN_MAX_CPU_ISA") or os.environ.get("DNNL_MAX_CPU_ISA") or "").strip().upper()
+    if cap in ONEDNN_ISAS_WITHOUT_BF16:
+        return False
+    cpu = getattr(torch, "cpu", None)
+    probes = ("_is_avx512_bf16_supported", "_is_amx_tile_supported")
+    try:
+        return any(bool(getattr(cpu, n)()) for n in probes if hasattr(cpu, n))
+    except RuntimeError:
+        return False
 
 
 class TorchRunner:

@@ -40,7 +40,8 @@ from ..errors import ConfigError
 from ..model.checkpoint import RESTORE_HINT, Checkpoint, load_checkpoint
 from ..model.decode import postprocess
 from ..params import DEFAULT_BACKEND, DEFAULT_CONF, DEFAULT_IOU, DEFAULT_MAX_DET
-from .backends import BACKEND_CHOICES, OrtRunner, TorchRunner, onnx_input_size, ort_session, resolve_backend
+from .backends import (BACKEND_CHOICES, OrtRunner, TorchRunner, native_bf16, onnx_input_size, ort_session,
+                       resolve_backend)
 from .model_files import external_names, find_sidecar, sidecar_path
 from .preprocess import band_input_size, preprocess
 
@@ -199,6 +200,10 @@ class Detector:
         if bf16 and (backend != "torch" or device != "cpu" or fp16):
             raise ConfigError(ck.path, "bf16", f"bf16 is CPU autocast for backend 'torch' (got backend {backend!r}, "
                               f"device {device!r}{', fp16' if fp16 else ''}); on a GPU use fp16")
+        if bf16:
+            if not native_bf16():
+                log.warning("bf16: this CPU has no native bfloat16 (AVX512-BF16 or AMX), so autocast emulates it "
+                            "and runs slower than fp32; leave bf16 off here (the boxes are the same)")
         class_map = class_map_from_names(ck.class_names, ck.path)
         size = (int(imgsz[0]), int(imgsz[1])) if imgsz else ck.imgsz
         model = ck.build_model()

@@ -1,23 +1,17 @@
-"""Attitude parameters, the IMU subscription and the ``cones/attitude`` publisher shared by the
-``mapping`` and ``pipeline`` nodes (the logic is in :mod:`cone_perception.attitude`).
-
-Parameters
-  attitude (str, ""): ``fixed`` | ``image`` | ``imu`` | ``fused``; "" = ``image`` when the calibration
-    has a mount pose, else ``fixed`` (a node does not know at start whether an IMU will publish:
-    ask for ``imu`` / ``fused`` explicitly).
-  imu_rest_deg (double[2], [0, 0]): the IMU's pitch and roll (degrees) with the car at rest on the
-    level ground of the calibration (``cone-perception imu-rest REST_BAG`` measures it).
+"""The attitude parameters (``attitude``, ``imu_rest_deg``: :mod:`cone_perception.params`) and the IMU
+subscription shared by the ``mapping`` and ``pipeline`` nodes (the logic is in
+:mod:`cone_perception.attitude`; the nodes publish ``cones/attitude`` themselves:
+:meth:`~cone_perception.nodes._common.PerceptionNode.publish_attitude`).
 """
 
 from __future__ import annotations
 
-from geometry_msgs.msg import Vector3Stamped
 from sensor_msgs.msg import Imu
 
 from ..attitude import ImuAttitude, QUAT_NORM_TOL
 from . import _msgs
 from ..errors import FrameError
-from ._common import QOS_DATA
+from ._params import declare
 
 #: IMU in: best effort (IMU drivers publish so), a short queue (100 Hz and more).
 IMU_QUEUE = 50
@@ -25,15 +19,11 @@ IMU_QUEUE = 50
 
 def declare_attitude(node) -> tuple[str, ImuAttitude | None]:
     """Declare ``attitude`` and ``imu_rest_deg``; subscribe ``imu`` for modes imu / fused.
-    Returns ``(requested mode or "", ImuAttitude or None)``; creates ``node.pub_attitude``."""
-    mode = str(node.declare_parameter("attitude", "").value)
-    rest = [float(v) for v in node.declare_parameter("imu_rest_deg", [0.0, 0.0]).value]
+    Returns ``(requested mode or "", ImuAttitude or None)``."""
+    mode = str(declare(node, "attitude"))
+    rest = [float(v) for v in declare(node, "imu_rest_deg")]  # two numbers: checked by its spec
     imu = None
     if mode in ("imu", "fused"):
-        if len(rest) != 2:
-            from ..errors import ConfigError
-
-            raise ConfigError("parameter", "imu_rest_deg", f"must be [pitch, roll] in degrees, got {rest}")
         imu = ImuAttitude((rest[0], rest[1]))
 
         def on_imu(msg: Imu) -> None:
@@ -45,10 +35,4 @@ def declare_attitude(node) -> tuple[str, ImuAttitude | None]:
                                  f"IMU message not used ({cause}; quaternion norm tolerance {QUAT_NORM_TOL})")
 
         node.create_subscription(Imu, "imu", node.guarded(on_imu, "imu", frames=False), IMU_QUEUE)
-    node.pub_attitude = node.create_publisher(Vector3Stamped, "cones/attitude", QOS_DATA)
     return mode, imu
-
-
-def publish_attitude(node, att, header) -> None:
-    """Publish the attitude a frame was mapped with, the frame's stamp, in the cones frame."""
-    node.pub_attitude.publish(_msgs.attitude_msg(att, _msgs.copy_header(header, node.cones_frame_id)))

@@ -19,10 +19,14 @@ except ConfigError as _e:  # an unknown CONE_PERCEPTION_DDS: one line, exit 1
 
 import rclpy  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue  # noqa: E402
+from geometry_msgs.msg import Vector3Stamped  # noqa: E402
 from sensor_msgs.msg import CompressedImage, Image, PointCloud2  # noqa: E402
 from visualization_msgs.msg import MarkerArray  # noqa: E402
 
 from . import _msgs  # noqa: E402
+from ._params import declare, specs_of  # noqa: E402
+from ..params import NODES, help_text  # noqa: E402
+from .executables import wants_help  # noqa: E402
 try:  # noqa: E402 - Jazzy; Humble has the same classes in rclpy.qos_event
     from rclpy.event_handler import SubscriptionEventCallbacks, UnsupportedEventTypeError
 except ImportError:  # pragma: no cover - Humble
@@ -62,11 +66,10 @@ class PerceptionNode(Node):
     :class:`~cone_perception.stats.NodeHealth`) and publishes its health on ``/diagnostics`` once
     a second.
 
-    Parameters (every node): ``input_timeout_s`` (1.0; silence on an input longer than this is an
-    ERROR, 0 = never), ``max_frame_age_s`` (0.0 = off; a frame whose header stamp is older than this
-    on arrival is counted stale: set it on the car, where the camera stamps with the node's clock),
-    ``input_rate_hz`` (0.0 = learnt from the stamps; the publisher's nominal rate, for counting the
-    frames missing from its stamps).
+    Parameters (every node): ``input_timeout_s``, ``max_frame_age_s``, ``input_rate_hz``
+    (:data:`cone_perception.params.COMMON_PARAMS`). ``name`` is the node executable's name
+    (:data:`cone_perception.params.NODES`): its parameter table (:attr:`param_specs`), which
+    :func:`~cone_perception.nodes._params.declare` declares from.
 
     Every frame sent on an image input (best effort, depth 1: newest frame only) is accounted for
     (:mod:`cone_perception.stats`): the publisher's sequence number of each frame taken (in the
@@ -79,9 +82,10 @@ class PerceptionNode(Node):
 
     def __init__(self, name: str, **kwargs):
         super().__init__(name, **kwargs)
-        timeout_s = float(self.declare_parameter("input_timeout_s", 1.0).value)
-        max_age_s = float(self.declare_parameter("max_frame_age_s", 0.0).value)
-        rate_hz = float(self.declare_parameter("input_rate_hz", 0.0).value)
+        self.param_specs = specs_of(name)
+        timeout_s = float(declare(self, "input_timeout_s"))
+        max_age_s = float(declare(self, "max_frame_age_s"))
+        rate_hz = float(declare(self, "input_rate_hz"))
         self.health = NodeHealth(timeout_s, max_age_s, 1.0 / rate_hz if rate_hz > 0 else 0.0)
         self.stats = self.health.stats
         self._last_warn: dict[str, float] = {}
@@ -214,10 +218,12 @@ class PerceptionNode(Node):
             return self.create_subscription(msgtype, topic, callback, qos, **kwargs)
 
     def advertise_cones(self, frame_id: str, markers: bool) -> None:
-        """Publishers of ``/cones`` (and ``/cones/markers`` if ``markers``) in ``frame_id``."""
+        """Publishers of ``/cones``, ``/cones/markers`` (published if ``markers``) and ``cones/attitude``
+        in ``frame_id``."""
         self.cones_frame_id, self.publish_markers = frame_id, markers
         self.pub_cones = self.create_publisher(PointCloud2, "/cones", QOS_DATA)
         self.pub_markers = self.create_publisher(MarkerArray, "/cones/markers", QOS_DATA)
+        self.pub_attitude = self.create_publisher(Vector3Stamped, "cones/attitude", QOS_DATA)
 
     def publish_cones(self, cones, header) -> None:
         """Publish ``CONE_DTYPE`` records with the camera frame's stamp, in the cones frame."""
@@ -225,6 +231,11 @@ class PerceptionNode(Node):
         self.pub_cones.publish(_msgs.cones_msg(cones, h))
         if self.publish_markers:
             self.pub_markers.publish(_msgs.cone_markers(cones, h))
+
+    def publish_attitude(self, att, header) -> None:
+        """Publish the :class:`~cone_perception.attitude.Attitude` a frame's cones were mapped with, the
+        frame's stamp, in the cones frame."""
+        self.pub_attitude.publish(_msgs.attitude_msg(att, _msgs.copy_header(header, self.cones_frame_id)))
 
     def _publish_diagnostics(self) -> None:
         try:  # a timer callback: nothing in it may end the node either
@@ -282,8 +293,12 @@ def clean_stale_shm(name: str) -> None:
 
 
 def run_node(factory: Callable[[], Node], args: list[str] | None = None, name: str = "cone_perception") -> int:
-    """``main()`` of a node: init, build (a config error exits 1 with one line), spin, shut down."""
+    """``main()`` of a node: init, build (a config error exits 1 with one line), spin, shut down; with
+    ``-h`` / ``--help`` (outside ``--ros-args``) the node's help instead (``python -m`` of a node module)."""
     args = sys.argv if args is None else args
+    if name in NODES and wants_help(list(args[1:])):
+        sys.stdout.write(help_text(name))
+        return 0
     clean_stale_shm(name)
     rclpy.init(args=args)
     node = executor = None

@@ -21,9 +21,10 @@ DEBUG_TOPIC = "image_cropped/debug"
 
 
 class DebugImagePublisher:
-    """Declares ``debug_image`` / ``debug_image_hz`` on ``node``, both changeable at run time."""
+    """Declares ``debug_image`` / ``debug_image_hz`` on ``node``, both changeable at run time.
+    ``mapper``: for the cones' distances on the image (None: no distances)."""
 
-    def __init__(self, node: Node, mapper: ConeMapper, runtime: RuntimeParameters) -> None:
+    def __init__(self, node: Node, mapper: ConeMapper | None, runtime: RuntimeParameters) -> None:
         self.node = node
         self.debug = DebugImage(mapper, float(declare(node, "debug_image_hz")))
         self.pub = None

@@ -1,6 +1,7 @@
-"""Parameters of a node from :data:`cone_perception.params.PARAMS`: declared with descriptors
-(description, type, range, read-only unless dynamic), and changed at run time through one
-on-set callback that validates every value and then applies it."""
+"""Parameters of a node from its table in :mod:`cone_perception.params` (:func:`~cone_perception.params.node_params`):
+declared with descriptors (description, type, range, read-only unless dynamic), and changed at run time
+through one on-set callback that validates every value and then applies it. No node declares a
+parameter any other way (tested)."""
 
 from __future__ import annotations
 
@@ -10,14 +11,28 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from ..params import PARAMS, ParamSpec
+from ..errors import ConfigError
+from ..params import COMMON_PARAMS, NODES, PARAMS, ParamSpec, node_params
 
 _ROS_TYPES = {
     bool: ParameterType.PARAMETER_BOOL,
     int: ParameterType.PARAMETER_INTEGER,
     float: ParameterType.PARAMETER_DOUBLE,
     str: ParameterType.PARAMETER_STRING,
+    tuple: ParameterType.PARAMETER_DOUBLE_ARRAY,
 }
+
+
+def specs_of(kind: str) -> dict[str, ParamSpec]:
+    """The parameter table of the node executable ``kind`` (every parameter by name for another node)."""
+    if kind in NODES:
+        return node_params(kind)
+    return {**PARAMS, **{p.name: p for p in COMMON_PARAMS}}
+
+
+def _spec(node: Node, name: str) -> ParamSpec:
+    table = getattr(node, "param_specs", None) or specs_of(node.get_name())
+    return table[name]
 
 
 def descriptor(spec: ParamSpec) -> ParameterDescriptor:
@@ -29,7 +44,9 @@ def descriptor(spec: ParamSpec) -> ParameterDescriptor:
         read_only=not spec.dynamic,
     )
     if spec.choices is not None:
-        d.additional_constraints = "one of: " + ", ".join(spec.choices)
+        d.additional_constraints = "one of: " + ", ".join(c or '""' for c in spec.choices)
+    elif spec.range_text():
+        d.additional_constraints = spec.range_text()
     if spec.type is float and spec.min is not None and spec.max is not None:
         d.floating_point_range = [FloatingPointRange(from_value=float(spec.min), to_value=float(spec.max), step=0.0)]
     elif spec.type is int and spec.min is not None and spec.max is not None:
@@ -38,16 +55,15 @@ def descriptor(spec: ParamSpec) -> ParameterDescriptor:
 
 
 def declare(node: Node, name: str):
-    """Declare the parameter ``name`` of :data:`PARAMS` on ``node``; returns its value (checked: a
-    value from a parameter file out of range or of the wrong type stops the node with the reason)."""
-    spec = PARAMS[name]
-    value = node.declare_parameter(name, spec.default, descriptor(spec)).value
+    """Declare the parameter ``name`` of the node's table on ``node``; returns its value (checked: a value
+    from a parameter file out of range or of the wrong type stops the node with the reason). An array
+    comes back as a list."""
+    spec = _spec(node, name)
+    value = node.declare_parameter(name, spec.ros_default, descriptor(spec)).value
     why = spec.check(value)
     if why:
-        from ..errors import ConfigError
-
         raise ConfigError(f"parameter {name}", None, why)
-    return value
+    return list(value) if isinstance(spec.default, tuple) else value
 
 
 class RuntimeParameters:
@@ -63,14 +79,14 @@ class RuntimeParameters:
 
     def register(self, name: str, apply: Callable[[object], None]) -> None:
         """Call ``apply(new_value)`` whenever ``name`` is set at run time (after it passed its check)."""
-        if not PARAMS[name].dynamic:
+        if not _spec(self.node, name).dynamic:
             raise ValueError(f"parameter {name} is not dynamic")
         self._apply[name] = apply
 
     def _on_set(self, params: list[Parameter]) -> SetParametersResult:
         mine = [p for p in params if p.name in self._apply]
         for p in mine:  # all checked before any is applied: a set of several is all or nothing
-            why = PARAMS[p.name].check(p.value)
+            why = _spec(self.node, p.name).check(p.value)
             if why:
                 self.node.get_logger().warning(f"parameter change refused: {why}")
                 return SetParametersResult(successful=False, reason=why)

@@ -1,12 +1,7 @@
-"""The tracker in a node (``cone_tracker``, and ``pipeline`` with ``track: true``): parameters,
-odometry in, ``/cones/tracked`` and ``/cones/tracked/markers`` out. The logic is
-:class:`cone_perception.tracking.TrackingStage`.
-
-Parameters
-  odom_topic (str, "odom"): the car's motion; "" = none (motion estimated from the cones).
-  odom_type ("odometry" | "twist"): nav_msgs/Odometry (twist.twist) or geometry_msgs/TwistStamped.
-  odom_max_age_s (float, 0.1): odometry older than this at a frame is not used for it (counted).
-  publish_tracked_markers (bool, true): cylinders with the track ids as text, for rviz2.
+"""The tracker in a node (``cone_tracker``, and ``pipeline`` with ``track: true``): its parameters
+(``odom_topic``, ``odom_type``, ``odom_max_age_s``, ``publish_tracked_markers``: the ``cone_tracker``
+table of :mod:`cone_perception.params`), odometry in, ``/cones/tracked`` and ``/cones/tracked/markers``
+out. The logic is :class:`cone_perception.tracking.TrackingStage`.
 
 Health: the tracker's event counts (:attr:`cone_perception.tracking.ConeTracker.events`) are values
 ``tracker:<event>`` of the node's ``/diagnostics`` status; a gap, stale odometry, a refused twist, a
@@ -20,10 +15,10 @@ from nav_msgs.msg import Odometry
 from sensor_msgs.msg import PointCloud2
 from visualization_msgs.msg import MarkerArray
 
-from ..errors import ConfigError
 from ..tracking import INPUT_EVENTS, TrackingStage
 from . import _msgs
 from ._common import QOS_DATA, WARN_THROTTLE_S
+from ._params import declare
 
 TRACKED_TOPIC = "/cones/tracked"
 
@@ -34,12 +29,10 @@ class NodeTracking:
     def __init__(self, node, calib) -> None:
         self.node = node
         self.frame_id = calib.frame_id
-        odom_topic = node.declare_parameter("odom_topic", "odom").value
-        odom_type = node.declare_parameter("odom_type", "odometry").value
-        max_age = float(node.declare_parameter("odom_max_age_s", 0.1).value)
-        self.markers = bool(node.declare_parameter("publish_tracked_markers", True).value)
-        if not max_age > 0:
-            raise ConfigError("parameter", "odom_max_age_s", f"must be > 0 s, got {max_age}")
+        odom_topic = declare(node, "odom_topic")
+        odom_type = declare(node, "odom_type")  # odometry | twist: checked by its spec
+        max_age = float(declare(node, "odom_max_age_s"))  # > 0 s: checked by its spec
+        self.markers = bool(declare(node, "publish_tracked_markers"))
         self.stage = TrackingStage(calib, odom_max_age_s=max_age)
         # on /diagnostics as tracker:<event>; stamps are warned as dropped frames already
         node.health.watch("tracker", self.stage.events, warn=[e for e in INPUT_EVENTS if not e.startswith("stamp_")])
@@ -49,11 +42,9 @@ class NodeTracking:
             if odom_type == "odometry":
                 node.create_subscription(Odometry, odom_topic, node.guarded(
                     lambda m: self._twist(m.header, m.twist.twist), odom_topic, frames=False, optional=True), QOS_DATA)
-            elif odom_type == "twist":
+            else:
                 node.create_subscription(TwistStamped, odom_topic, node.guarded(
                     lambda m: self._twist(m.header, m.twist), odom_topic, frames=False, optional=True), QOS_DATA)
-            else:
-                raise ConfigError("parameter", "odom_type", f"must be 'odometry' or 'twist', got {odom_type!r}")
         self._reported = {}
 
     def _twist(self, header, tw) -> None:

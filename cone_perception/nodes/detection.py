@@ -1,20 +1,40 @@
 """detection node: ``image_cropped`` (bgr8) + its ``camera_info`` -> ``cone_boxes`` (full-image px).
 
-Parameters
-  model (str, "" = the shipped default model), backend ("auto" | "torch" | "torchscript" | "onnx";
-  auto: ONNX Runtime on the CPU where installed, else torch), device ("cpu" | "cuda" | "cuda:N"),
-  fp16 (bool, CUDA only), bf16 (bool, CPU autocast, backend torch), conf (0.25), iou (0.45),
-  max_det (300), threads (1, see detector.RUNTIME_THREADS; 0 = library default), calibration
-  (for the debug image's distances), debug_image (false), debug_image_hz (5).
-  Changeable at run time (``ros2 param set``): conf, iou, max_det, debug_image, debug_image_hz.
-  Descriptions and ranges: ``cone_perception/params.py`` (``ros2 param describe``).
 The crop and downscale of each image come from the newest ``image_cropped/camera_info``
 (``roi``, ``binning``), so boxes go out in full-image pixels whatever the band. A ``camera_info`` is
 validated as an image is (sizes, roi inside the image, binning 1/2/4, band size:
 :func:`cone_perception.crop.camera_info_crop`); a bad one is dropped and counted, the node keeps its
 crop. A fixed-size network built from a checkpoint (ONNX Runtime, the CPU default) is built for the
 band's size when a ``camera_info`` shows another one: once per distinct band, at most
-:data:`MAX_NETWORK_BANDS` (kept; frames meanwhile are dropped as any late frame).
+:data:`MAX_NETWORK_BANDS` (kept; frames meanwhile are dropped as any late frame). The node needs no
+calibration; given one (``calibration``), its debug image shows each cone's distance.
+
+Parameters (generated from cone_perception/params.py by ``cone-perception params --write``):
+  model (string, default ""; a .pt, .onnx or .torchscript path): model file (.pt checkpoint,
+    TorchScript or ONNX); empty = the shipped default model (models/cone_detector.pt)
+  backend (string, default auto; auto | torch | torchscript | onnx): inference backend; auto = ONNX
+    Runtime for a checkpoint on the CPU where installed, else eager torch; an exported file runs
+    with its own
+  device (string, default cpu; cpu, cuda, cuda:N): where the network runs (torch device)
+  fp16 (bool, default false): half precision on the GPU (CUDA only)
+  bf16 (bool, default false): bfloat16 autocast on the CPU (backend torch); pays only on CPUs with
+    native bf16
+  threads (int, default 1; 0 .. 256): the network's CPU threads; 0 = the library's default (all
+    cores); 1 leaves the other cores to the rest of the car (docs/benchmarks.md, Backend and
+    threads)
+  conf (double, default 0.25; 0.0 .. 1.0; set at run time): confidence threshold: boxes scoring at
+    most this are dropped
+  iou (double, default 0.45; 0.0 .. 1.0; set at run time): NMS IoU threshold (class-aware): a box
+    overlapping a better one of its class by more is dropped
+  max_det (int, default 300; 1 .. 1000; set at run time): most boxes per frame (best first)
+  debug_image (bool, default false; set at run time): publish image_cropped/debug (bgr8): the band
+    with boxes, classes, scores and each cone's distance; drawn only while someone subscribes
+  debug_image_hz (double, default 5.0; 0.1 .. 100.0; set at run time): most debug images per second
+  calibration (string, default ""; empty, a YAML path or a camera name in calib/): optional: a
+    calibration (a path, or a camera name in calib/) for the cones' distances on the debug image;
+    empty = none loaded, the debug image shows no distances (the node itself needs none: the crop
+    comes with each camera_info)
+  Also those of every node (input_timeout_s, max_frame_age_s, input_rate_hz).
 """
 
 from __future__ import annotations
@@ -46,7 +66,9 @@ class DetectionNode(PerceptionNode):
         self.runtime = RuntimeParameters(self)
         for name in DetectorLoader.RUNTIME:
             self.runtime.register(name, lambda v, name=name: self.loader.set_threshold(self.detector, name, v))
-        self.debug = DebugImagePublisher(self, ConeMapper(load_calibration(declare(self, "calibration"))), self.runtime)
+        calib_name = declare(self, "calibration")  # optional: only the debug image's distances use it
+        self.debug = DebugImagePublisher(self, ConeMapper(load_calibration(calib_name)) if calib_name else None,
+                                         self.runtime)
         self.crop = None
         self.pending = None  # newest image received before any camera_info
         self.networks = [self.detector]  # the model's own and those built for a band (MAX_NETWORK_BANDS more)

@@ -1,10 +1,13 @@
 """driver_adapter node: camera frames -> ``image_cropped`` (bgr8) + ``image_cropped/camera_info``.
 
-Parameters
-  calibration (str, "example_mainhoop"): calibration YAML path or shipped camera name; its
-      ``image_width/height``, ``crop`` and ``downscale`` define the band.
-  input_transport (str, "raw"): "raw" subscribes ``image_raw`` (sensor_msgs/Image: yuv422_yuy2 /
-      yuyv, bgr8, rgb8); "compressed" subscribes ``image_raw/compressed`` (JPEG/PNG).
+Parameters (generated from cone_perception/params.py by ``cone-perception params --write``):
+  calibration (string, default example_mainhoop; a YAML path or a camera name in calib/): the
+    camera's calibration YAML: a path, or a camera name in the package's calib/ (its image size,
+    crop and downscale define the band; its homography and mount pose map boxes to metres)
+  input_transport (string, default raw; raw | compressed): camera input: raw subscribes image_raw
+    (sensor_msgs/Image: yuv422_yuy2 / yuyv, bgr8, rgb8), compressed subscribes image_raw/compressed
+    (sensor_msgs/CompressedImage, JPEG/PNG)
+  Also those of every node (input_timeout_s, max_frame_age_s, input_rate_hz).
 """
 
 from __future__ import annotations

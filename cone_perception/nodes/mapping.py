@@ -1,11 +1,18 @@
 """mapping node: ``cone_boxes`` (full-image px) -> ``/cones`` (rear_axle metres) + ``/cones/markers``.
 
-Parameters
-  calibration (str, "example_mainhoop"): calibration YAML path or shipped camera name.
-  publish_markers (bool, true): also publish ``/cones/markers`` for rviz2; changeable at run time.
-  attitude (str, ""), imu_rest_deg (double[2]): camera attitude per frame (nodes/_attitude.py); the
-    attitude used is published on ``cones/attitude`` (geometry_msgs/Vector3Stamped, x = roll,
-    y = pitch, radians); ``imu`` (sensor_msgs/Imu) in for attitude ``imu`` / ``fused``.
+Parameters (generated from cone_perception/params.py by ``cone-perception params --write``):
+  calibration (string, default example_mainhoop; a YAML path or a camera name in calib/): the
+    camera's calibration YAML: a path, or a camera name in the package's calib/ (its image size,
+    crop and downscale define the band; its homography and mount pose map boxes to metres)
+  publish_markers (bool, default true; set at run time): also publish /cones/markers
+    (visualization_msgs/MarkerArray) for rviz2
+  attitude (string, default ""; "" | fixed | image | imu | fused): the camera attitude per frame
+    (docs/attitude.md): fixed, image (from the boxes), imu or fused; empty = image when the
+    calibration has a mount pose, else fixed (ask for imu / fused explicitly)
+  imu_rest_deg (double[2], default [0.0, 0.0]): the IMU's pitch and roll (degrees) with the car at
+    rest on the level ground of the calibration (cone-perception imu-rest measures it); for attitude
+    imu / fused
+  Also those of every node (input_timeout_s, max_frame_age_s, input_rate_hz).
 """
 
 from __future__ import annotations
@@ -18,7 +25,7 @@ from ..attitude import attitude_estimator, attitude_for_boxes
 from ..geometry.calib import load_calibration
 from ..mapping import ConeMapper, validate_boxes
 from . import _msgs
-from ._attitude import declare_attitude, publish_attitude
+from ._attitude import declare_attitude
 from ._params import RuntimeParameters, declare
 
 
@@ -43,7 +50,7 @@ class MappingNode(PerceptionNode):
         validate_boxes(boxes)  # a bad message is dropped before it can move the attitude filter
         att = attitude_for_boxes(self.attitude, boxes, _msgs.stamp_ns(msg.header))
         self.publish_cones(self.mapper.map_boxes(boxes, att), msg.header)
-        publish_attitude(self, att, msg.header)
+        self.publish_attitude(att, msg.header)
 
 
 def main(args=None) -> int:

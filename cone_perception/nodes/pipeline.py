@@ -2,12 +2,20 @@
 
 ``image_raw`` (or ``image_raw/compressed``) in; ``cone_boxes``, ``/cones`` and ``/cones/markers`` out.
 
-Parameters: those of ``driver_adapter`` (calibration, input_transport), ``mapping``
-(publish_markers, attitude, imu_rest_deg; ``imu`` in for attitude imu / fused) and ``detection`` (model,
-backend, device, fp16, bf16, conf, iou, max_det, threads, debug_image, debug_image_hz; the debug image is
-the band of ``image_raw`` after the adapter); ``track`` (bool, false): also the tracker stage,
-``/cones/tracked`` out (parameters as ``cone_tracker``).
-Changeable at run time: publish_markers, conf, iou, max_det, debug_image, debug_image_hz.
+The network is built for the calibration's band at start-up; with ``track: true`` the tracker stage
+runs too and gets each frame's attitude.
+
+Parameters (generated from cone_perception/params.py by ``cone-perception params --write``):
+  far_rows (string, default ""; V0,V1 or empty): image rows V0,V1 also run at full resolution, the
+    whole width (the far band for small, far cones; a second forward, about a third of the frames/s;
+    docs/detector.md, Far band); empty = off
+  track (bool, default false): also the tracker stage: /cones/tracked out (the parameters of
+    cone_tracker); it gets each frame's attitude, which a separate cone_tracker does not
+  Also those of driver_adapter (calibration, input_transport); those of detection (model, backend,
+    device, fp16, bf16, threads, conf, iou, max_det, debug_image, debug_image_hz); those of mapping
+    (publish_markers, attitude, imu_rest_deg); those of cone_tracker, with track: true (odom_topic,
+    odom_type, odom_max_age_s, publish_tracked_markers); those of every node (input_timeout_s,
+    max_frame_age_s, input_rate_hz).
 """
 
 from __future__ import annotations
@@ -22,10 +30,11 @@ from ..geometry.calib import load_calibration
 from ..errors import FrameError
 from ..pipeline import FrameResult, Pipeline
 from . import _msgs
-from ._attitude import declare_attitude, publish_attitude
+from ._attitude import declare_attitude
 from ._debug import DebugImagePublisher
 from ._detector_params import DetectorLoader
 from ._params import RuntimeParameters, declare
+from ._tracking import NodeTracking
 
 
 class PipelineNode(PerceptionNode):
@@ -60,28 +69,26 @@ class PipelineNode(PerceptionNode):
             self.runtime.register(name, lambda v, name=name: self._set_threshold(name, v))
         self.debug = DebugImagePublisher(self, self.pipeline.mapper, self.runtime)
         self.tracking = None
-        if bool(self.declare_parameter("track", False).value):
-            from ._tracking import NodeTracking
-
+        if bool(declare(self, "track")):
             self.tracking = NodeTracking(self, calib)
         self.subscribe_camera(transport)
         self.get_logger().info(f"calibration {calib.source}, frame {calib.frame_id}, attitude {self.pipeline.attitude_mode}")
 
     def on_raw(self, msg: Image) -> None:
         t0 = time.perf_counter()
-        self.pipeline.frame_stamp_ns = _msgs.stamp_ns(msg.header)
-        self._publish(self.pipeline.process_raw(msg.encoding, msg.width, msg.height, msg.step, msg.data), msg.header, t0)
+        res = self.pipeline.process_raw(msg.encoding, msg.width, msg.height, msg.step, msg.data,
+                                        stamp_ns=_msgs.stamp_ns(msg.header))
+        self._publish(res, msg.header, t0)
 
     def on_compressed(self, msg: CompressedImage) -> None:
         t0 = time.perf_counter()
-        self.pipeline.frame_stamp_ns = _msgs.stamp_ns(msg.header)
-        self._publish(self.pipeline.process_compressed(msg.data), msg.header, t0)
+        self._publish(self.pipeline.process_compressed(msg.data, stamp_ns=_msgs.stamp_ns(msg.header)), msg.header, t0)
 
     def _publish(self, res: FrameResult, header, t0: float) -> None:
         self.pub_boxes.publish(_msgs.boxes_msg(res.boxes, header))
         self.publish_cones(res.cones, header)
         self.debug.publish(res.band, res.boxes, self.pipeline.calib.crop, header)
-        publish_attitude(self, res.attitude, header)
+        self.publish_attitude(res.attitude, header)
         if self.tracking is not None:
             try:
                 self.tracking.process(res.cones, header, res.attitude)

@@ -36,11 +36,11 @@ def process_frame(pipeline: Pipeline, frame: Frame):
     """Run one bag frame through the pipeline (raises :class:`FrameError`)."""
     if frame.error is not None:
         raise frame.error
-    pipeline.frame_stamp_ns = frame.stamp_ns
     msg = frame.msg
     if frame.msgtype == bagio.COMPRESSED_IMAGE:
-        return pipeline.process_compressed(msg.data)
-    return pipeline.process_raw(msg.encoding, int(msg.width), int(msg.height), int(msg.step), msg.data)
+        return pipeline.process_compressed(msg.data, stamp_ns=frame.stamp_ns)
+    return pipeline.process_raw(msg.encoding, int(msg.width), int(msg.height), int(msg.step), msg.data,
+                                stamp_ns=frame.stamp_ns)
 
 
 @dataclass

@@ -23,6 +23,7 @@ pixels wide and high and whose visible fraction is at least
 from __future__ import annotations
 
 import json
+import logging
 from pathlib import Path
 
 import cv2
@@ -56,6 +57,8 @@ ATTITUDE_GT_TOPIC = "/attitude_gt"
 IMU_TOPIC = "/imu"
 ODOM_TOPIC = "/odom"
 CAMERA_FRAME = "camera"
+
+log = logging.getLogger(__name__)
 
 
 def check_writable_dir(path: Path, what: str) -> None:
@@ -125,13 +128,20 @@ def write_dataset(
     n_val = int(round(n_tracks * val_frac))
     if val_frac > 0 and n_val == 0 and n_tracks >= 2:
         n_val = 1
-    for split in ("train", "val"):
+    n_val = min(n_val, n_tracks - 1)  # whole tracks (frames of one track look alike); train keeps one at least
+    if val_frac > 0 and n_val == 0:
+        log.warning("synth dataset: %d frames make one track (--frames-per-track %d): no val split (data.yaml has no "
+                    "val:, 'train' then trains without validation); for one, give --n above --frames-per-track",
+                    n, frames_per_track)
+    splits = ("train", "val") if n_val else ("train",)
+    for split in splits:
         (out / "images" / split).mkdir(parents=True, exist_ok=True)
         (out / "labels" / split).mkdir(parents=True, exist_ok=True)
     cfg.save_calibration(out / "calib.yaml")
     (out / "data.yaml").write_text(
         yaml.safe_dump(
-            {"path": str(out.resolve()), "train": "images/train", "val": "images/val", "nc": len(CLASS_NAMES), "names": list(CLASS_NAMES)},
+            {"path": str(out.resolve()), "train": "images/train", **({"val": "images/val"} if n_val else {}),
+             "nc": len(CLASS_NAMES), "names": list(CLASS_NAMES)},
             sort_keys=False,
         ),
         encoding="utf-8",

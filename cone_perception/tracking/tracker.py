@@ -69,6 +69,11 @@ class TrackerConfig:
     register_min_inliers: int = 3
     prior_std_m: float = 0.02  # constant-velocity prior of the registration: translation per frame
     prior_std_rad: float = 0.005  # and yaw per frame
+    search_m: float = 1.5  # registration: a detection's correspondence candidates lie this near its predicted track
+    search_gap_m: float = 3.0  # the same after a gap (max_gap_s): the prior motion is less sure
+    registration_failed_std_m: float = 0.1  # extra position std of every track when the registration failed
+    gap_std_m: float = 0.1  # extra position std of every track after a gap: gap_std_m + gap_std_m_per_s * (dt - max_gap_s)
+    gap_std_m_per_s: float = 0.5
     max_range_m: float = 20.0  # detections farther than this are not used (too uncertain along the ray)
     spawn_chi2: float = 50.0  # an unassigned detection this near (Mahalanobis^2) to a track starts no new one
     merge_chi2: float = 6.0  # two tracks this near (and of one class) are merged into the older one
@@ -234,18 +239,19 @@ class ConeTracker:
                     prior_std = None if gap or self.velocity is None else (cfg.prior_std_m, cfg.prior_std_rad)
                     joint = cfg.register_attitude and np.any(Sa)
                     reg = register_cones(z, zc, self.xy, self._classes(), prior, Rz - Ra if joint else Rz, self.P, prior_std,
-                                         search_m=3.0 if gap else 1.5, min_inliers=cfg.register_min_inliers,
+                                         search_m=cfg.search_gap_m if gap else cfg.search_m,
+                                         min_inliers=cfg.register_min_inliers,
                                          det_att_jac=Jz if joint else None, att_cov_deg2=Sa if joint else None)
                     info.inliers = reg.inliers
                     if reg.ok:
                         motion, info.motion_source = reg.motion, "registration"
                     else:
                         self.events["registration_failed"] += 1
-                        extra = 0.1  # m: the prior may be off
+                        extra = cfg.registration_failed_std_m  # the prior may be off
                 elif cfg.register and len(self):
                     self.events["registration_failed"] += 1
             if gap:
-                extra = max(extra, 0.5 * (dt - cfg.max_gap_s) + 0.1)
+                extra = max(extra, cfg.gap_std_m_per_s * (dt - cfg.max_gap_s) + cfg.gap_std_m)
                 self.certainty *= np.exp(-dt / cfg.gap_tau_s)
             self.predict(motion, dt, extra)
             if dt > 0 and (not gap or info.motion_source in ("odometry", "registration")):

@@ -25,6 +25,7 @@ from tqdm import tqdm
 
 from ..classes import CLASS_NAMES
 from ..data.datasets import load_data_yaml, summary_table
+from ..detector.backends import native_bf16
 from ..errors import ConfigError
 from ..evaluation.metrics import ImageDetections, coco_map
 from ..model import PRETRAINED_BACKBONES, ConeYOLO, is_model_name, model_config, model_names
@@ -110,16 +111,6 @@ class ModelEMA:
 
 
 PRECISIONS = ("auto", "fp32", "bf16", "fp16")
-
-
-def native_bf16() -> bool:
-    """Whether this CPU computes bfloat16 natively (x86 AVX512-BF16 or AMX), so bf16 autocast pays."""
-    cpu = getattr(torch, "cpu", None)
-    probes = ("_is_avx512_bf16_supported", "_is_amx_tile_supported")
-    try:
-        return any(bool(getattr(cpu, n)()) for n in probes if hasattr(cpu, n))
-    except RuntimeError:
-        return False
 
 
 def resolve_precision(precision: str, device: str = "cpu") -> str:
@@ -319,7 +310,9 @@ def _train(cfg: TrainConfig, info: "distributed.DistInfo", resume: bool, progres
     say(f"dataset ({cfg.data}):\n" + summary_table({"train": train_entries, "val": val_entries,
                                                      "test (not used)": rest.get("test_entries", [])}))
     if not val_entries:
-        say("no val split: no mAP per epoch; best.pt is the epoch with the lowest training loss")
+        say("no val split: training without validation (no mAP per epoch; best.pt is the epoch with the lowest "
+            "training loss). For one, name a folder of other frames under val: in the data YAML ('synth dataset' "
+            "writes one when --n spans two tracks or more: --n above --frames-per-track)")
 
     model.train()
     model = model.to(device)

@@ -80,12 +80,14 @@ class RateLimit:
 
 
 class DebugImage:
-    """What a node needs for its debug image: the mapper for the distances and the rate limit."""
+    """What a node needs for its debug image: the mapper for the distances (None: no distances, ``-``)
+    and the rate limit."""
 
-    def __init__(self, mapper: ConeMapper, hz: float = 5.0) -> None:
+    def __init__(self, mapper: ConeMapper | None, hz: float = 5.0) -> None:
         self.mapper = mapper
         self.limit = RateLimit(hz)
 
     def render(self, band_bgr: np.ndarray, boxes: np.ndarray, crop: CropSpec) -> np.ndarray:
         """The debug image of one frame: :func:`draw_debug_band` with :func:`box_ranges_m`."""
-        return draw_debug_band(band_bgr, boxes, crop, box_ranges_m(self.mapper, boxes))
+        ranges = None if self.mapper is None else box_ranges_m(self.mapper, boxes)
+        return draw_debug_band(band_bgr, boxes, crop, ranges)
