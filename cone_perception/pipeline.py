@@ -30,6 +30,7 @@ class FrameResult:
     timing_ms: dict[str, float] = field(default_factory=dict)
     attitude: Attitude = FIXED  # the body attitude offset the cones were mapped with
     band: np.ndarray | None = None  # (H, W, 3) uint8 BGR: the cropped band the detector saw
+    weak_cones: np.ndarray | None = None  # CONE_DTYPE below cones_conf, for the tracker only (None: no split)
 
 
 class Pipeline:
@@ -42,9 +43,14 @@ class Pipeline:
     ``fixed``). ``imu``: an :class:`~cone_perception.attitude.ImuAttitude` the caller feeds; each
     ``process_*`` call takes the frame's capture stamp (``stamp_ns``), at which the IMU is read. ``far``: a :class:`~cone_perception.detector.farband.FarBand`
     (full-resolution rows near the horizon, a second forward; its boxes merge with the band's), or None.
+    ``cones_conf``: with a detector run at a lower threshold (the tracker's confirmation threshold), the
+    score that splits its boxes: those at or above it are the frame's boxes and ``/cones`` (and fit the
+    attitude), those below are mapped with the same attitude into :attr:`FrameResult.weak_cones`, for the
+    tracker only (docs/tracking.md, "Weak detections"). None: no split.
     """
 
-    def __init__(self, calib: Calibration, detector, attitude: str | None = None, imu=None, far: FarBand | None = None):
+    def __init__(self, calib: Calibration, detector, attitude: str | None = None, imu=None, far: FarBand | None = None,
+                 cones_conf: float | None = None):
         self.calib = calib
         self.far = far  # the far band (full-resolution rows near the horizon, detector/farband.py), or None
         self.adapter = DriverAdapter(calib.crop, calib.image_width, calib.image_height, far.crop if far else None)
@@ -52,6 +58,7 @@ class Pipeline:
         self.mapper = ConeMapper(calib)
         self.imu = imu  # an ImuAttitude the caller feeds (modes imu, fused), or None
         self.attitude_mode, self.attitude = attitude_estimator(self.mapper, attitude, imu)
+        self.cones_conf = cones_conf
 
     def _run(self, band: np.ndarray, t_adapter_s: float, strip: np.ndarray | None, stamp_ns: int | None) -> FrameResult:
         boxes = self.detector.detect(band, self.calib.crop)
@@ -61,6 +68,10 @@ class Pipeline:
             t0 = time.perf_counter()
             boxes = self.far.merged(boxes, strip)
             timing["far_band"] = (time.perf_counter() - t0) * 1e3
+        weak = None
+        if self.cones_conf is not None:
+            strong = boxes["score"] >= self.cones_conf
+            boxes, weak = boxes[strong], boxes[~strong]
         att = FIXED
         if self.attitude is not None:
             t0 = time.perf_counter()
@@ -68,8 +79,9 @@ class Pipeline:
             timing["attitude"] = (time.perf_counter() - t0) * 1e3
         t0 = time.perf_counter()
         cones = self.mapper.map_boxes(boxes, att)
+        weak_cones = self.mapper.map_boxes(weak, att) if weak is not None else None
         timing["mapping"] = (time.perf_counter() - t0) * 1e3
-        return FrameResult(boxes, cones, timing, att, band)
+        return FrameResult(boxes, cones, timing, att, band, weak_cones)
 
     def _check_stamp(self, stamp_ns: int | None) -> None:
         if stamp_ns is None and self.imu is not None:

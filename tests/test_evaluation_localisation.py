@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cone_perception.evaluation import DISTANCE_GROUPS, LocalisationReport, distance_group, match_cones
+from cone_perception.evaluation import DISTANCE_GROUPS, LocalisationReport, distance_group, format_localisation, match_cones
 from cone_perception.records import CONE_DTYPE
 
 
@@ -69,3 +69,26 @@ def test_the_15_25_m_band_beside_the_groups() -> None:
     band, far = s["extra_groups"]["15-25 m"], s["groups"]["very far >15 m"]
     assert band["n_true"] == 2 and band["n_matched"] == 2 and np.isclose(band["median_err_m"], 0.4)
     assert far["n_matched"] == 3 and np.isclose(far["median_err_m"], 0.5)
+
+
+def test_range_bands_to_40_m_count_half_visible_cones_and_false_cones_by_range():
+    """Issue 26's look-ahead bands: out to 40 m whatever the calibration's range (a cone beyond it is a
+    miss in its band), only cones at least ``min_visible`` count for recall (a detection on a less
+    visible one is no false cone), false cones by the detection's own range."""
+    rep = LocalisationReport(max_range_m=30.0, min_visible=0.5)
+    truth = _cones([[10.0, 0.0], [20.0, 1.0], [28.0, 0.0], [35.0, 2.0], [38.0, -2.0]])
+    truth["score"] = [1.0, 1.0, 0.3, 1.0, 0.8]
+    pred = _cones([[10.1, 0.0], [20.3, 1.0], [28.2, 0.0], [32.0, 12.0], [3.0, 1.0]])
+    rep.add_frame(pred, truth)
+    rep.add_frame(pred[:0], truth[:0])
+    s = rep.summary()
+    b = s["extra_groups"]
+    assert list(b) == ["0-7 m", "7-15 m", "15-25 m", "25-40 m"]
+    assert (b["25-40 m"]["n_true"], b["25-40 m"]["recall"]) == (2, 0.0)  # the 28 m cone is 30 % visible
+    assert b["25-40 m"]["false_cones"] == 1 and b["25-40 m"]["false_per_frame"] == 0.5  # the one at 34 m
+    assert b["0-7 m"]["false_cones"] == 1 and b["7-15 m"]["recall"] == 1.0
+    assert s["bands"]["false_cones"] == 2 and s["bands"]["false_per_frame"] == 1.0
+    far = s["groups"]["very far >15 m"]  # the groups keep the 30 m cut and every visible cone
+    assert far["n_true"] == 2 and far["recall"] == 1.0
+    assert s["false_positives"] == 1  # within 30 m: the one at 3.2 m
+    assert "25-40 m" in format_localisation(s)

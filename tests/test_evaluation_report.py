@@ -401,6 +401,22 @@ def test_recall_by_box_height_at_the_model_input():
     assert r["at_least_min_height"]["recall"] == pytest.approx(3 / 5)
 
 
+def test_recall_by_box_height_in_image_px():
+    """Issue 26: recall by box height at the ground-truth image's own scale (the unit names it), in the
+    small-cone bins, whatever the prediction file's input_scale."""
+    from cone_perception.evaluation.groundtruth import EvalImage
+    from cone_perception.evaluation.report import IMAGE_HEIGHT_BINS, recall_by_box_height
+
+    hs = np.array([5.0, 8.0, 10.0, 15.0, 30.0])
+    gt = np.column_stack([np.arange(5) * 200.0, np.full(5, 100.0), np.arange(5) * 200.0 + 10, 100.0 + hs])
+    found = np.array([True, False, True, False, True])
+    im = EvalImage("a", W, H, gt, np.full(5, BLUE), np.zeros(5, bool), None, gt[found], np.ones(3), np.full(3, BLUE), 0.5)
+    r = recall_by_box_height([im], 0.25, 0.5, IMAGE_HEIGHT_BINS, image_px=True)
+    assert r["unit"] == f"image px of the {W}x{H} images"
+    assert list(r["bins"]) == ["0-6 px", "6-9 px", "9-12 px", "12-20 px", ">= 20 px"]
+    assert [(b["num_gt"], b["recall"]) for b in r["bins"].values()] == [(1, 1.0), (1, 0.0), (1, 1.0), (1, 0.0), (1, 1.0)]
+
+
 def test_prediction_input_scale_round_trip_and_bad_value(tmp_path):
     from cone_perception.data.predictions import prediction_line
 

@@ -58,7 +58,12 @@ def test_replay_track_writes_tracked_cones_and_fills_dropped_detections(drive, t
 
     assert main(["eval", "--tracked", str(out), "--gt", str(bag_side_paths(drive)[1]), "--out", str(tmp_path / "ev")]) == 0
     m = json.loads((tmp_path / "ev" / "metrics.json").read_text())
-    assert m["raw"] == pytest.approx(s["raw"], nan_ok=True)
+    raw_bands, s_raw = s["raw"]["bands"], {k: v for k, v in s["raw"].items() if k != "bands"}
+    assert {k: v for k, v in m["raw"].items() if k != "bands"} == pytest.approx(s_raw, nan_ok=True)
+    for kind, bands in (("raw", raw_bands), ("tracked", s["tracked"]["bands"])):  # the range bands (issue 26) alike
+        assert list(bands) == ["0-7 m", "7-15 m", "15-25 m", "25-40 m"]
+        for name, b in bands.items():
+            assert m[kind]["bands"][name] == pytest.approx(b, nan_ok=True), (kind, name)
     for k in ("recall", "false_per_frame", "median_err_0_7_m", "id_switches", "id_switches_all", "idf1",
               "err_7_15_ratio_to_raw"):
         assert m["tracked"][k] == pytest.approx(s["tracked"][k], nan_ok=True), k
@@ -74,6 +79,31 @@ def test_replay_cli_refuses_drop_and_odometry_live(drive, capsys):
     assert main(["replay", str(drive), "--live", "fused", "--track", "--drop-detections", "0.2"]) != 0
     assert "offline only" in capsys.readouterr().err
     assert main(["replay", str(drive), "--live", "fused", "--track", "--odom-topic", "/odom"]) != 0
+    assert "offline only" in capsys.readouterr().err
+
+
+def test_replay_weak_detections_reach_the_tracker_only(drive, tmp_path, capsys):
+    """Issue 26: with --track-conf the detector runs at the lower score; /cones, its scoring and the boxes
+    stay those of --conf (the same as without), the detections in between go to the tracker (counted in
+    its events), and --tracker sets TrackerConfig fields."""
+    from cone_perception.cli import main
+
+    base = ["replay", str(drive), "--calib", str(bag_side_paths(drive)[0]), "--gt-topic", "/cones_gt", "--track",
+            "--attitude", "fixed", "--no-progress", "--tracker", "max_range_m=40", "--tracker", "spawn_max_m=2"]
+    assert main(base + ["--json", str(tmp_path / "a.json")]) == 0
+    assert main(base + ["--track-conf", "0.05", "--json", str(tmp_path / "b.json")]) == 0
+    a, b = (json.loads((tmp_path / f"{k}.json").read_text()) for k in "ab")
+    assert a["localisation"] == b["localisation"]  # /cones unchanged by the weak detections
+    assert "weak_hit" not in a["tracking"]["events"]
+    assert b["tracking"]["events"].get("weak_hit", 0) + b["tracking"]["events"].get("weak_spawn", 0) > 0
+    assert list(b["tracking"]["tracked"]["bands"]) == ["0-7 m", "7-15 m", "15-25 m", "25-40 m"]
+    capsys.readouterr()
+    for extra, word in ((["--tracker", "nonsense=1"], "TrackerConfig field"), (["--tracker", "max_range_m=far"], "float"),
+                        (["--track-conf", "0.5"], "--track-conf"), (["--max-range", "-3"], "--max-range")):
+        assert main(base + extra) == 2, extra
+        assert word in capsys.readouterr().err, extra
+    assert main(["replay", str(drive), "--track-conf", "0.1"]) == 2  # needs --track
+    assert main(["replay", str(drive), "--live", "fused", "--track", "--tracker", "max_range_m=40"]) == 2
     assert "offline only" in capsys.readouterr().err
 
 

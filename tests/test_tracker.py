@@ -415,3 +415,81 @@ def test_stage_hands_the_frame_attitude_to_the_tracker_and_the_jacobian_matches_
         stage = TrackingStage(calib, TrackerConfig(attitude_common=common))
         stage.process(DT_NS, with_att, attitude)
         assert (np.abs(stage.tracker.C).max() > 0) == expect
+
+
+def test_weak_detections_confirm_a_recurring_cone_and_keep_a_track_alive():
+    """Issue 26, item 3: a detection below the /cones threshold (strong_score) is weak. One at one ground
+    position frame after frame becomes a published cone after a few frames (not at once); weak detections
+    on a confirmed track keep it published where, without them, misses in view remove it; a lone weak
+    detection that does not recur is never published."""
+    cfg = TrackerConfig(strong_score=0.25)
+    assert 1.0 < cfg.weak_likelihood_ratio
+    trk = ConeTracker(cfg, fov=box_fov())
+    published = []
+    for k in range(6):
+        z = [cones([[12.0, 2.0]], BLUE, score=0.12)]
+        if k == 0:
+            z.append(cones([[15.0, -2.0]], YELLOW, score=0.12))  # seen once, never again
+        trk.update(k * DT_NS, np.concatenate(z), Motion2D() if k else None)
+        published.append(trk.output()["class_id"].tolist())
+    assert published[0] == [] and published[1] == []  # one or two weak sightings: not yet a cone
+    assert published[-1] == [BLUE]  # recurring: confirmed
+    assert trk.events["weak_spawn"] == 2 and trk.events["weak_hit"] == 5
+    out = trk.output()
+    assert out["score"][0] < 0.8 and out["cov_xx"][0] > 0  # certainty says how sure
+
+    # a strong track kept alive by weak detections, against one left without detections
+    def run(weak: bool) -> list[int]:
+        t = ConeTracker(TrackerConfig(strong_score=0.25), fov=box_fov())
+        counts = []
+        for k in range(12):
+            z = cones([[10.0, 2.0]], BLUE, score=0.8) if k < 2 else (cones([[10.0, 2.0]], BLUE, score=0.1) if weak else cones([], BLUE))
+            t.update(k * DT_NS, z, Motion2D() if k else None)
+            counts.append(len(t.output()))
+        return counts
+
+    assert run(True)[-1] == 1 and run(False)[-1] == 0
+
+
+def test_without_strong_score_a_low_score_still_lowers_the_certainty():
+    """strong_score 0 (the default): every detection is strong, low scores count against a cone as before."""
+    assert TrackerConfig().strong_score == 0.0
+    trk = ConeTracker(fov=box_fov())
+    for k in range(6):
+        trk.update(k * DT_NS, cones([[12.0, 2.0]], BLUE, score=0.12), Motion2D() if k else None)
+    assert len(trk.output()) == 0 and "weak_hit" not in trk.events
+
+
+def test_weak_detections_do_not_steer_the_registration():
+    """Weak detections are left out of the ego-motion registration: with too few strong cones it fails
+    (counted) however many weak ones there are."""
+    trk = ConeTracker(TrackerConfig(strong_score=0.25), fov=box_fov())
+    pts = [[6.0, 2.0], [6.0, -2.0], [10.0, 2.0], [10.0, -2.0], [14.0, 2.0]]
+    trk.update(0, cones(pts, BLUE, score=0.9))
+    trk.update(DT_NS, cones(pts, BLUE, score=0.1))
+    assert trk.events["registration_failed"] == 1
+    trk.update(2 * DT_NS, cones(pts, BLUE, score=0.9))
+    assert trk.events["registration_failed"] == 1
+
+
+def test_spawn_max_m_gives_the_next_far_cone_of_a_row_its_own_track():
+    """Two cones of a row 4.5 m apart at 30 m, each with a covariance metres long along the ray: inside
+    spawn_chi2 of each other, so by default only the first gets a track; with spawn_max_m 2 the second
+    starts its own (they are farther apart than that) and both are kept apart afterwards."""
+
+    def far(xy):
+        c = cones(xy, BLUE, score=0.9)
+        c["cov_xx"], c["cov_yy"] = 2.5**2, 0.2**2
+        return c
+
+    def run(**kw) -> list[list[int]]:
+        trk = ConeTracker(TrackerConfig(max_range_m=40.0, **kw))
+        trk.update(0, far([[30.0, 2.0]]))
+        ids = []
+        for k in range(1, 8):
+            trk.update(k * DT_NS, far([[30.0, 2.0], [34.5, 2.0]]), Motion2D())
+            ids.append(trk.output()["track_id"].tolist())
+        return ids
+
+    assert all(i == [1] for i in run())
+    assert all(i == [1, 2] for i in run(spawn_max_m=2.0))  # the same two ids every frame: not merged, not respawned

@@ -2,6 +2,7 @@
 
   cone-perception replay BAG [--calib CAL] [--model M] [--out OUT] [--gt-topic /cones_gt]
   cone-perception replay BAG --track [--drop-detections P] [--odom-topic odom] [--gt-topic /cones_gt] [...]
+  cone-perception replay BAG --track [--tracker FIELD=VALUE ...] [--track-conf S] [--max-range M] [...]
   cone-perception replay BAG --live fused|separate [--track] [...]
 
 Offline: every frame of the bag's camera topic (YUYV, bgr8/rgb8 or JPEG/PNG) goes through the
@@ -9,7 +10,8 @@ same code as the fused node; ``/cone_boxes`` and ``/cones`` are written to OUT (
 with the original stamps. Live: the frames are published (raw CDR) into node processes - the
 three separate nodes or the fused ``pipeline`` node - and what they publish is recorded.
 Prints frames, throughput, per-stage latency percentiles, dropped frames by cause, and with
-``--gt-topic`` the localisation table (recall and position error per distance group).
+``--gt-topic`` the localisation table (recall and position error per distance group) and the range
+bands to 40 m (recall and false cones; issue 26).
 ``--track`` adds the cone tracker (``/cones/tracked``); on a synthetic bag with ``--gt-topic`` it prints
 recall, false cones, error, id switches, IDF1 and ego-motion error within 15 m, tracked against raw
 (live: no ego-motion error, the nodes do not publish their estimate).
@@ -20,6 +22,8 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import fields as dataclass_fields
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -28,11 +32,13 @@ from tqdm import tqdm
 from ..attitude import ATTITUDE_MODES
 from ..data.outfiles import print_written, refuse_existing, remove_bag
 from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, RUNTIME_THREADS, Detector, default_model_path
-from ..evaluation import LocalisationReport, format_localisation
+from ..errors import ConfigError
+from ..evaluation import GT_MIN_VISIBLE, LocalisationReport, format_localisation
 from ..evaluation.attitude import format_attitude_report
 from ..geometry.calib import DEFAULT_CAMERA, load_calibration, resolve_calibration_path
 from ..params import DEFAULT_CONF
 from ..timing import format_table, summarize
+from ..tracking import TrackerConfig
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -60,6 +66,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--odom-topic", default=None,
                    help="offline, --track: the car's motion from this nav_msgs/Odometry or geometry_msgs/TwistStamped topic "
                         "of the bag (default: estimated from the cones)")
+    p.add_argument("--track-conf", type=float, default=None, metavar="S",
+                   help="offline, --track: run the detector at this lower score threshold; detections from S up to --conf "
+                        "go to the tracker only (weak detections: a cone on /cones/tracked once they recur or land on a "
+                        "track; docs/tracking.md 'Weak detections'). Default: off")
+    p.add_argument("--tracker", action="append", default=[], metavar="FIELD=VALUE",
+                   help="offline, --track: set a TrackerConfig field (cone_perception/tracking/tracker.py, units in its "
+                        "names), repeatable, e.g. --tracker max_range_m=40 --tracker spawn_max_m=2")
+    p.add_argument("--max-range", type=float, default=None, metavar="M",
+                   help="offline: use this max_range_m instead of the calibration's (cones farther are dropped; to "
+                        "measure a range before setting it in a calibration)")
     p.add_argument("--far-rows", default=None, metavar="V0,V1",
                    help="also run these image rows at full resolution (the far band, docs/detector.md 'Far band'); "
                         "live: the pipeline node's far_rows (fused only)")
@@ -88,17 +104,23 @@ def _progress(disable: bool):
 
 def run(args: argparse.Namespace) -> int:
     calib = load_calibration(args.calib)
-    if args.live and (args.drop_detections or args.odom_topic):
-        from ..errors import ConfigError
-
-        raise ConfigError("--live", None, "--drop-detections and --odom-topic work offline only")
+    if args.live and (args.drop_detections or args.odom_topic or args.track_conf is not None
+                      or args.tracker or args.max_range is not None):
+        raise ConfigError("--live", None, "--drop-detections, --odom-topic, --track-conf, --tracker and --max-range "
+                                          "work offline only")
+    if args.track_conf is not None and not (args.track and 0.0 < args.track_conf < args.conf):
+        raise ConfigError("--track-conf", None, f"needs --track and a score in (0, --conf {args.conf:g}), got {args.track_conf:g}")
+    if args.max_range is not None and not (np.isfinite(args.max_range) and args.max_range > 0):
+        raise ConfigError("--max-range", None, f"must be a positive number of metres, got {args.max_range:g}")
+    if args.tracker and not args.track:
+        raise ConfigError("--tracker", None, "needs --track")
+    if args.max_range is not None:
+        calib = replace(calib, max_range_m=float(args.max_range))
     if args.far_rows:  # a bad value fails before any model loads or node starts
         from ..detector.farband import far_band_crop
 
         far_band_crop(args.far_rows, calib.image_width, calib.image_height, calib.crop, "--far-rows")
         if args.live == "separate":
-            from ..errors import ConfigError
-
             raise ConfigError("--far-rows", None, "needs the fused pipeline node (--live fused or offline)")
     refuse_existing([p for p in (args.out, args.json) if p is not None], args.force, "replay")
     if args.out is not None:
@@ -121,7 +143,6 @@ def _imu_source(args, calib):
     """An ImuAttitude when the bag has the IMU topic and the mode may use it, else None."""
     from ..attitude import ImuAttitude
     from ..data.bagio import bag_topics
-    from ..errors import ConfigError
 
     if args.attitude in ("fixed", "image") or not calib.has_attitude_model and args.attitude is None:
         return None
@@ -143,17 +164,19 @@ def _run_offline(args, calib) -> dict:
 
     tracking = _tracking(args, calib)  # its bad options fail before the model loads
     # built for the calibration's band, as the pipeline node does (a fixed-size backend never letterboxes)
+    conf = args.track_conf if args.track_conf is not None else args.conf  # the pipeline splits at --conf
     det = Detector.load_for_band(args.model or default_model_path(), (calib.crop.out_width, calib.crop.out_height),
-                                 backend=args.backend, conf=args.conf, threads=args.threads or None, bf16=args.bf16)
+                                 backend=args.backend, conf=conf, threads=args.threads or None, bf16=args.bf16)
     det.warmup()
     far = None
     if args.far_rows:
         from ..detector.farband import FarBand
 
         far = FarBand.load(det.source, args.far_rows, calib.image_width, calib.image_height, calib.crop, "--far-rows",
-                           backend=args.backend, conf=args.conf, threads=args.threads or None, bf16=args.bf16)
+                           backend=args.backend, conf=conf, threads=args.threads or None, bf16=args.bf16)
     imu = _imu_source(args, calib)
-    res = offline_replay(args.bag, Pipeline(calib, det, args.attitude, imu, far), args.topic, args.out, args.gt_topic,
+    pipeline = Pipeline(calib, det, args.attitude, imu, far, cones_conf=args.conf if args.track_conf is not None else None)
+    res = offline_replay(args.bag, pipeline, args.topic, args.out, args.gt_topic,
                          _progress(args.no_progress), imu_topic=args.imu_topic, tracking=tracking)
     stages = res.timer.summary()
     n = res.stats.ok
@@ -185,6 +208,29 @@ def _run_offline(args, calib) -> dict:
             "stages": stages, "localisation": res.localisation, "tracking": res.tracking}
 
 
+def tracker_config(settings: list[str]) -> TrackerConfig:
+    """A :class:`TrackerConfig` with ``FIELD=VALUE`` settings (``--tracker``); a bad one raises ConfigError naming it."""
+    config, fields = TrackerConfig(), {f.name: f for f in dataclass_fields(TrackerConfig)}
+    for item in settings:
+        name, sep, text = item.partition("=")
+        if not sep or name not in fields:
+            raise ConfigError("--tracker", item, f"must be FIELD=VALUE with a TrackerConfig field ({', '.join(fields)})")
+        kind = type(getattr(config, name))
+        try:
+            if kind is bool:
+                if text.lower() not in ("true", "false", "1", "0"):
+                    raise ValueError(text)
+                value = text.lower() in ("true", "1")
+            else:
+                value = kind(text)
+                if not np.isfinite(value) and not (kind is float and np.isposinf(value)):
+                    raise ValueError(text)
+        except ValueError:
+            raise ConfigError("--tracker", item, f"{name} takes a {kind.__name__}, got {text!r}") from None
+        setattr(config, name, value)
+    return config
+
+
 def _tracking(args, calib):
     """The replay's tracking (``--track``, ``--drop-detections``), or None."""
     if not args.track and args.drop_detections == 0:
@@ -194,7 +240,10 @@ def _tracking(args, calib):
 
     truth = drive_truth_beside(args.bag) if args.gt_topic else None
     twists = read_twists(args.bag, args.odom_topic) if (args.odom_topic and args.track) else None
-    return ReplayTracking(calib, args.track, args.drop_detections, args.drop_seed, truth, twists)
+    config = tracker_config(args.tracker)
+    if args.track_conf is not None:
+        config.strong_score = args.conf
+    return ReplayTracking(calib, args.track, args.drop_detections, args.drop_seed, truth, twists, config)
 
 
 def _run_live(args, calib) -> dict:
@@ -224,7 +273,7 @@ def _run_live(args, calib) -> dict:
     loc = None
     if args.gt_topic:
         truth = read_ground_truth(args.bag, args.gt_topic)
-        rep = LocalisationReport(max_range_m=calib.max_range_m)
+        rep = LocalisationReport(max_range_m=calib.max_range_m, min_visible=GT_MIN_VISIBLE)
         for stamp, cones in sorted(res.cones.items()):
             if stamp in truth:
                 rep.add_frame(cones, truth[stamp])

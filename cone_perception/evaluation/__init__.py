@@ -11,7 +11,10 @@ The names below are the face of the former module ``cone_perception.evaluation``
 """
 
 from .localisation import (
+    BANDS_MAX_M,
     DISTANCE_GROUPS,
+    EXTRA_GROUPS,
+    GT_MIN_VISIBLE,
     MAX_PAIR_M,
     LocalisationReport,
     PairDistanceReport,
@@ -22,6 +25,6 @@ from .localisation import (
 )
 
 __all__ = [
-    "DISTANCE_GROUPS", "MAX_PAIR_M", "LocalisationReport", "PairDistanceReport", "blue_yellow_pairs",
+    "BANDS_MAX_M", "DISTANCE_GROUPS", "EXTRA_GROUPS", "GT_MIN_VISIBLE", "MAX_PAIR_M", "LocalisationReport", "PairDistanceReport", "blue_yellow_pairs",
     "distance_group", "format_localisation", "match_cones",
 ]

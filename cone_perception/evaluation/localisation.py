@@ -26,8 +26,17 @@ DISTANCE_GROUPS: tuple[tuple[str, float, float], ...] = (
     ("very far >15 m", 15.0, np.inf),
 )
 
-#: Further range bands reported beside the groups (the issue's 15-25 m target; bands may overlap the groups).
-EXTRA_GROUPS: tuple[tuple[str, float, float], ...] = (("15-25 m", 15.0, 25.0),)
+#: Range bands reported beside the groups, out to 40 m (issue 26's look-ahead table; bands may overlap the
+#: groups). They ignore ``max_range_m``: a true cone beyond the calibration's range is a miss in its band
+#: (the car does not get it), so a capped range shows as low recall, not as a smaller table.
+EXTRA_GROUPS: tuple[tuple[str, float, float], ...] = (
+    ("0-7 m", 0.0, 7.0), ("7-15 m", 7.0, 15.0), ("15-25 m", 15.0, 25.0), ("25-40 m", 25.0, 40.0),
+)
+#: The farthest band edge (m): true cones up to here are matched even beyond ``max_range_m``.
+BANDS_MAX_M = max(hi for _, _, hi in EXTRA_GROUPS)
+#: ``replay --gt-topic``: the bands count true cones at least this visible (``/cones_gt`` score; issue 26's
+#: "cones at least half visible").
+GT_MIN_VISIBLE = 0.5
 
 
 def distance_group(range_m: np.ndarray) -> np.ndarray:
@@ -64,15 +73,25 @@ def match_cones(
 
 @dataclass
 class LocalisationReport:
-    """Accumulates matches over frames; :meth:`summary` gives the per-group table."""
+    """Accumulates matches over frames; :meth:`summary` gives the per-group table.
+
+    ``max_range_m`` cuts the groups (true cones and detections beyond it are not counted there).
+    The bands (:data:`EXTRA_GROUPS`) go to :data:`BANDS_MAX_M` whatever ``max_range_m``; in them only
+    true cones whose visible fraction (the truth's ``score``, as ``/cones_gt`` of a synthetic bag holds
+    it) is at least ``min_visible`` count for recall; a detection on a less visible cone is matched
+    (not false) but the cone is no miss. False cones per band: unmatched detections by their own range.
+    """
 
     max_range_m: float = np.inf
-    true_range: list = field(default_factory=list)  # per true cone
+    min_visible: float = 0.0
+    true_range: list = field(default_factory=list)  # per true cone (within max(max_range_m, BANDS_MAX_M))
     true_matched: list = field(default_factory=list)
+    true_visible: list = field(default_factory=list)
     err_x: list = field(default_factory=list)  # per matched pair
     err_y: list = field(default_factory=list)
     err_range: list = field(default_factory=list)
     same_class: list = field(default_factory=list)
+    false_range: list = field(default_factory=list)  # per unmatched detection: its own range (m)
     false_positives: int = 0
     frames: int = 0
 
@@ -84,46 +103,61 @@ class LocalisationReport:
         self.frames += 1
         t_xy = np.c_[truth["x"], truth["y"]].astype(np.float64)
         t_r = np.hypot(t_xy[:, 0], t_xy[:, 1])
-        keep = t_r <= self.max_range_m
-        t_index = np.flatnonzero(keep)
-        truth, t_xy, t_r = truth[keep], t_xy[keep], t_r[keep]
         p_xy = np.c_[pred["x"], pred["y"]].astype(np.float64)
+        # matched against every true cone, so that a detection of a cone beyond the counted range is no false cone
         pairs = match_cones(p_xy, t_xy)
+        keep = t_r <= max(self.max_range_m, BANDS_MAX_M)  # the true cones counted (groups and bands)
         matched = np.zeros(len(truth), dtype=bool)
         for i, j, _ in pairs:
             matched[j] = True
+            if not keep[j]:
+                continue
             self.err_x.append(p_xy[i, 0] - t_xy[j, 0])
             self.err_y.append(p_xy[i, 1] - t_xy[j, 1])
             self.err_range.append(t_r[j])
             self.same_class.append(int(pred["class_id"][i]) == int(truth["class_id"][j]))
-        self.true_range.extend(t_r.tolist())
-        self.true_matched.extend(matched.tolist())
+        self.true_range.extend(t_r[keep].tolist())
+        self.true_matched.extend(matched[keep].tolist())
+        self.true_visible.extend(np.asarray(truth["score"][keep], np.float64).tolist() if self.min_visible > 0
+                                 else [1.0] * int(keep.sum()))
         # unmatched detections beyond the range are of cones outside it (ignored like those), not false
         unmatched = np.ones(len(pred), dtype=bool)
         unmatched[[i for i, _, _ in pairs]] = False
-        self.false_positives += int(np.count_nonzero(unmatched & (np.hypot(p_xy[:, 0], p_xy[:, 1]) <= self.max_range_m)))
-        return [(i, int(t_index[j]), d) for i, j, d in pairs]
+        p_r = np.hypot(p_xy[:, 0], p_xy[:, 1])
+        self.false_positives += int(np.count_nonzero(unmatched & (p_r <= self.max_range_m)))
+        self.false_range.extend(p_r[unmatched].tolist())
+        return pairs
 
     def summary(self) -> dict:
-        """Per distance group and overall: n_true, recall, n_matched, median / p90 error (m), class accuracy."""
+        """Per distance group and overall: n_true, recall, n_matched, median / p90 error (m), class accuracy;
+        per band (``extra_groups``) also false cones (count and per frame)."""
         tr, tm = np.asarray(self.true_range), np.asarray(self.true_matched, dtype=bool)
         ex, ey, er = np.asarray(self.err_x), np.asarray(self.err_y), np.asarray(self.err_range)
         e = np.hypot(ex, ey)
         sc = np.asarray(self.same_class, dtype=bool)
+        tin, ein = tr <= self.max_range_m, er <= self.max_range_m  # the groups keep the calibration's range cut
         groups = {}
         tg, mg = distance_group(tr), distance_group(er)
         for k, (name, _, _) in enumerate(DISTANCE_GROUPS):
-            groups[name] = _stats(tm[tg == k], e[mg == k], ex[mg == k], ey[mg == k], sc[mg == k])
+            t, m = tin & (tg == k), ein & (mg == k)
+            groups[name] = _stats(tm[t], e[m], ex[m], ey[m], sc[m])
         extra = {}
+        vis = np.asarray(self.true_visible, np.float64) >= self.min_visible
+        fr = np.asarray(self.false_range, np.float64)
         for name, lo, hi in EXTRA_GROUPS:
-            t_in, m_in = (tr >= lo) & (tr < hi), (er >= lo) & (er < hi)
-            extra[name] = _stats(tm[t_in], e[m_in], ex[m_in], ey[m_in], sc[m_in])
+            t_in, m_in = (tr >= lo) & (tr < hi) & vis, (er >= lo) & (er < hi)
+            n_false = int(np.count_nonzero((fr >= lo) & (fr < hi)))
+            extra[name] = {**_stats(tm[t_in], e[m_in], ex[m_in], ey[m_in], sc[m_in]), "false_cones": n_false,
+                           "false_per_frame": n_false / self.frames if self.frames else float("nan")}
+        n_false = int(np.count_nonzero(fr < BANDS_MAX_M))
         return {
             "frames": self.frames,
             "false_positives": self.false_positives,
             "groups": groups,
             "extra_groups": extra,
-            "all": _stats(tm, e, ex, ey, sc),
+            "bands": {"min_visible": self.min_visible, "max_m": BANDS_MAX_M, "false_cones": n_false,
+                      "false_per_frame": n_false / self.frames if self.frames else float("nan")},
+            "all": _stats(tm[tin], e[ein], ex[ein], ey[ein], sc[ein]),
         }
 
 
@@ -154,6 +188,14 @@ def format_localisation(summary: dict) -> str:
             f"{s['p90_err_m']:>9.3f}{s['median_abs_err_x_m']:>7.3f}{s['median_abs_err_y_m']:>7.3f}{s['class_accuracy']:>7.3f}"
         )
     rows.append(f"frames {summary['frames']}, unmatched predictions (false positives) {summary['false_positives']}; errors in m")
+    if "bands" in summary:
+        b = summary["bands"]
+        rows.append(f"{'band':<16}{'true':>7}{'recall':>8}{'matched':>9}{'med err':>9}{'false':>7}{'/frame':>8}"
+                    f"   (to {b['max_m']:g} m whatever the range cut; true cones >= {b['min_visible']:g} visible)")
+        for name, s in summary["extra_groups"].items():
+            rows.append(f"{name:<16}{s['n_true']:>7}{s['recall']:>8.3f}{s['n_matched']:>9}{s['median_err_m']:>9.3f}"
+                        f"{s['false_cones']:>7}{s['false_per_frame']:>8.2f}")
+        rows.append(f"false cones within {b['max_m']:g} m: {b['false_cones']} ({b['false_per_frame']:.2f} per frame)")
     return "\n".join(rows)
 
 

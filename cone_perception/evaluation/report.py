@@ -28,7 +28,7 @@ from ..geometry.calib import Calibration
 from ..params import DEFAULT_CONF
 from ..records import CONE_DTYPE, boxes_from_arrays
 from .groundtruth import EvalImage
-from .localisation import DISTANCE_GROUPS, LocalisationReport, PairDistanceReport, distance_group
+from .localisation import DISTANCE_GROUPS, EXTRA_GROUPS, LocalisationReport, PairDistanceReport, distance_group
 from .metrics import ImageDetections, coco_map, greedy_match, operating_point
 from .plots import plot_by_distance, plot_confusion, plot_localisation, plot_pairs, plot_pr, plot_worst_frames
 
@@ -83,6 +83,8 @@ def _detections(im: EvalImage, gt_keep: np.ndarray | None = None, pred_keep: np.
 
 
 HEIGHT_BINS = ((0.0, 8.0), (8.0, 12.0), (12.0, 24.0), (24.0, 48.0), (48.0, math.inf))
+#: Box heights in the ground-truth image's own px (issue 26: the small cones of a real clip are counted at its scale).
+IMAGE_HEIGHT_BINS = ((0.0, 6.0), (6.0, 9.0), (9.0, 12.0), (12.0, 20.0), (20.0, math.inf))
 MIN_HEIGHT_PX = 12.0  # the default-model target: recall >= 0.90 for boxes at least this tall at the model input
 
 
@@ -90,16 +92,20 @@ def _height_name(lo: float, hi: float) -> str:
     return f">= {lo:g} px" if math.isinf(hi) else f"{lo:g}-{hi:g} px"
 
 
-def recall_by_box_height(images: list[EvalImage], conf: float, iou: float) -> dict:
+def recall_by_box_height(images: list[EvalImage], conf: float, iou: float, bins=HEIGHT_BINS, image_px: bool = False) -> dict:
     """Recall at the operating point of ground-truth boxes binned by their height at the model input.
 
     Heights are image px times the prediction file's ``input_scale`` (model input px per image
-    px); without it, image px (and ``unit`` says so).
+    px); without it, image px (and ``unit`` says so). ``image_px``: in the ground-truth image's own px
+    (``unit`` names the image sizes), binned by ``bins``.
     """
     scales = [im.input_scale for im in images]
-    known = all(s is not None for s in scales)
+    known = all(s is not None for s in scales) and not image_px
     heights = [(im.gt_boxes[:, 3] - im.gt_boxes[:, 1]) * (im.input_scale if known else 1.0) for im in images]
-    out: dict = {"unit": "model input px" if known else "image px (the prediction file has no input_scale)", "bins": {}}
+    sizes = ", ".join(f"{w}x{h}" for w, h in sorted({(im.width, im.height) for im in images}))
+    unit = ("model input px" if known else f"image px of the {sizes} images" if image_px
+            else "image px (the prediction file has no input_scale)")
+    out: dict = {"unit": unit, "bins": {}}
 
     def block(lo: float, hi: float) -> dict:
         keep = [(h >= lo) & (h < hi) for h in heights]
@@ -108,7 +114,7 @@ def recall_by_box_height(images: list[EvalImage], conf: float, iou: float) -> di
         return {"num_gt": int(sum((k & ~im.gt_ignore).sum() for im, k in zip(images, keep))),
                 "tp": a["tp"], "fn": a["fn"], "recall": a["recall"]}
 
-    for lo, hi in HEIGHT_BINS:
+    for lo, hi in bins:
         out["bins"][_height_name(lo, hi)] = block(lo, hi)
     out["at_least_min_height"] = {"min_height_px": MIN_HEIGHT_PX, **block(MIN_HEIGHT_PX, math.inf)}
     return out
@@ -216,6 +222,7 @@ def evaluate(images: list[EvalImage], calib: Calibration | None, conf: float = D
         "detection": overall,
     }
     metrics["by_box_height"] = recall_by_box_height(images, conf, iou)
+    metrics["by_box_height_image"] = recall_by_box_height(images, conf, iou, IMAGE_HEIGHT_BINS, image_px=True)
     has_dist = any(np.isfinite(r).any() for r in gt_range)
     if has_dist:
         groups = {}
@@ -225,11 +232,21 @@ def evaluate(images: list[EvalImage], calib: Calibration | None, conf: float = D
             block, _ = _detection_block(dets, conf, iou)
             block["range_m"] = [lo, hi if math.isfinite(hi) else None]
             groups[name] = block
+        bands = {}
+        for name, lo, hi in EXTRA_GROUPS:  # the look-ahead bands to 40 m (issue 26), beside the groups
+            dets = [_detections(im, (gr >= lo) & (gr < hi), (pr >= lo) & (pr < hi))
+                    for im, gr, pr in zip(images, gt_range, pred_range)]
+            op = operating_point(dets, conf, iou, CLASS_NAMES).to_dict()["per_class"]["all"]
+            bands[name] = {"range_m": [lo, hi], "num_gt": int(sum(((gr >= lo) & (gr < hi) & ~im.gt_ignore).sum()
+                                                                  for im, gr in zip(images, gt_range))),
+                           "tp": op["tp"], "fp": op["fp"], "fn": op["fn"], "recall": op["recall"],
+                           "precision": op["precision"], "fp_per_image": op["fp"] / len(images) if images else float("nan")}
         metrics["by_distance"] = {
             "distance_from": "ground-truth positions" if has_positions else "foot points through the calibration",
             "gt_boxes_without_distance": int(sum((np.isnan(gr) & ~im.gt_ignore).sum() for im, gr in zip(images, gt_range))),
             "predictions_without_distance": no_pred_range,
             "groups": groups,
+            "bands": bands,
         }
     else:
         notes.append("per-distance metrics skipped: no cone positions in the ground truth and no calibration (--calib)")
@@ -325,6 +342,10 @@ def write_report(res: EvalResult, out: Path, pred_source: str, gt_source: str, w
            "| box height | cones | TP | FN | recall |", "|---|---|---|---|---|"]
     for name, s in list(bh["bins"].items()) + [(f"**>= {bh['at_least_min_height']['min_height_px']:g} px**", bh["at_least_min_height"])]:
         md.append(f"| {name} | {s['num_gt']} | {s['tp']} | {s['fn']} | {_f(s['recall'])} |")
+    bi = m["by_box_height_image"]
+    md += ["", f"The same by ground-truth box height in {bi['unit']}:", "",
+           "| box height | cones | TP | FN | recall |", "|---|---|---|---|---|"]
+    md += [f"| {name} | {s['num_gt']} | {s['tp']} | {s['fn']} | {_f(s['recall'])} |" for name, s in bi["bins"].items()]
     if "by_distance" in m:
         bd = m["by_distance"]
         files["by_distance"] = plot_by_distance(bd["groups"], out / FILES["by_distance"])
@@ -337,7 +358,11 @@ def write_report(res: EvalResult, out: Path, pred_source: str, gt_source: str, w
             s = g["operating_point"]["per_class"]["all"]
             md.append(f"| {name} | {g['num_gt']} | {_f(g['map50'])} | {_f(g['map50_95'])} | {s['tp']} | {s['fp']} | {s['fn']} | "
                       f"{_f(s['precision'])} | {_f(s['recall'])} | {_f(s['f1'])} |")
-        md += ["", f"![detection by distance]({FILES['by_distance']})"]
+        md += ["", f"![detection by distance]({FILES['by_distance']})", "",
+               "Look-ahead bands (to 40 m; a detection's distance as above, false = a detection on no cone):", "",
+               "| band | cones | TP | FP | FN | recall | precision | false per image |", "|---|---|---|---|---|---|---|---|"]
+        md += [f"| {name} | {b['num_gt']} | {b['tp']} | {b['fp']} | {b['fn']} | {_f(b['recall'])} | {_f(b['precision'])} | "
+               f"{_f(b['fp_per_image'], 2)} |" for name, b in bd["bands"].items()]
     if "localisation" in m:
         lo = m["localisation"]
         files["localisation"] = plot_localisation(res.loc, out / FILES["localisation"])
@@ -410,11 +435,17 @@ def format_summary(res: EvalResult) -> str:
              "  (no range cut)"]
     big = m["by_box_height"]["at_least_min_height"]
     lines.append(f"recall of boxes >= {big['min_height_px']:g} px tall ({m['by_box_height']['unit']}): {_f(big['recall'])} of {big['num_gt']}")
+    bi = m["by_box_height_image"]
+    lines.append(f"recall by box height ({bi['unit']}): "
+                 + ", ".join(f"{k} {_f(v['recall'])} ({v['num_gt']})" for k, v in bi["bins"].items()))
     if "by_distance" in m:
         lines.append(f"{'group':<16}{'cones':>7}{'mAP50':>8}{'recall':>8}{'prec':>8}   (no range cut)")
         for name, g in m["by_distance"]["groups"].items():
             s = g["operating_point"]["per_class"]["all"]
             lines.append(f"{name:<16}{g['num_gt']:>7}{_f(g['map50']):>8}{_f(s['recall']):>8}{_f(s['precision']):>8}")
+        lines.append(f"{'band':<16}{'cones':>7}{'recall':>8}{'prec':>8}{'false/img':>10}")
+        for name, b in m["by_distance"]["bands"].items():
+            lines.append(f"{name:<16}{b['num_gt']:>7}{_f(b['recall']):>8}{_f(b['precision']):>8}{_f(b['fp_per_image'], 2):>10}")
     if "localisation" in m:
         r = inp.get("max_range_m")
         lines.append(f"{'localisation':<16}{'true':>7}{'recall':>8}{'med err':>9}{'p90 err':>9}{'pair err':>10}{'1-sigma':>9}   "

@@ -37,7 +37,7 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..tracking import Motion2D
-from . import DISTANCE_GROUPS, LocalisationReport, distance_group, match_cones
+from . import BANDS_MAX_M, DISTANCE_GROUPS, EXTRA_GROUPS, GT_MIN_VISIBLE, LocalisationReport, distance_group, match_cones
 
 EVAL_RANGE_M = 15.0
 
@@ -50,6 +50,7 @@ class DriveFrame:
     xy_m: np.ndarray  # (N, 2) float64
     class_ids: np.ndarray  # (N,) int
     cone_ids: np.ndarray  # (N,) int truth id
+    visible: np.ndarray | None = None  # (N,) visible fraction (None: not in the truth file)
 
 
 @dataclass
@@ -92,6 +93,7 @@ def load_drive_truth(path: str | os.PathLike, cell_m: float = 0.05) -> DriveTrut
                 pose = (float(p["x_m"]), float(p["y_m"]), float(np.radians(p["yaw_deg"])))
                 xy = np.array([[c["x_m"], c["y_m"]] for c in d["cones"]], dtype=np.float64).reshape(-1, 2)
                 cls = np.array([int(c["class_id"]) for c in d["cones"]], dtype=np.int64)
+                vis = np.array([float(c.get("visible_fraction", 1.0)) for c in d["cones"]], dtype=np.float64)
             except (ValueError, KeyError, TypeError) as e:
                 raise ConfigError(str(path), f"line {n}", f"not a synth bag truth line (stamp_ns, pose, cones): {e}") from None
             c, s = np.cos(pose[2]), np.sin(pose[2])
@@ -104,7 +106,7 @@ def load_drive_truth(path: str | os.PathLike, cell_m: float = 0.05) -> DriveTrut
                     world.append((wx, wy))
                     first.append(stamp)
                 ids[i] = keys[k]
-            frames[stamp] = DriveFrame(pose, xy, cls, ids)
+            frames[stamp] = DriveFrame(pose, xy, cls, ids, vis)
     return DriveTruth(frames, np.array(world, dtype=np.float64).reshape(-1, 2), np.array(first, dtype=np.int64))
 
 
@@ -151,6 +153,9 @@ class TrackingReport:
     ego_err_m: list = field(default_factory=list)
     ego_err_frac: list = field(default_factory=list)
     ego_err_yaw: list = field(default_factory=list)
+    # the look-ahead bands (EXTRA_GROUPS, to BANDS_MAX_M whatever range_m): per band [true cones at least
+    # GT_MIN_VISIBLE visible, of them found, tracked cones on no real cone]
+    band_counts: dict = field(default_factory=lambda: {name: [0, 0, 0] for name, _, _ in EXTRA_GROUPS})
     _last_stamp: int | None = None
 
     def add_frame(self, stamp_ns: int, tracked: np.ndarray, motion: Motion2D | None = None) -> None:
@@ -189,6 +194,7 @@ class TrackingReport:
         for i, _, _ in pairs:
             matched_p[i] = True
         self.n_false += int((p_in & ~matched_p).sum())
+        self._add_bands(stamp_ns, p)
         # ids: truth cones within range (in front of the axle), tracked cones within range
         tid = tracked["track_id"] if len(tracked) else np.zeros(0, np.int64)
         in_t = (w_r <= self.range_m) & (w_xy[:, 0] >= 0.0)
@@ -206,6 +212,33 @@ class TrackingReport:
                 self.id_switches_all += 1
                 self.id_switches += g in stayed
             self.last_id[g] = t
+
+    def _add_bands(self, stamp_ns: int, p: np.ndarray) -> None:
+        """The look-ahead bands: recall of the cones the frame shows (at least half visible) by their range,
+        false cones (on no cone of the drive seen so far) by the tracked cone's own range."""
+        fr = self.truth.frames[stamp_ns]
+        r_t = np.hypot(fr.xy_m[:, 0], fr.xy_m[:, 1])
+        vis = fr.visible if fr.visible is not None else np.ones(len(r_t))
+        found = np.zeros(len(r_t), dtype=bool)
+        for _, j, _ in match_cones(p, fr.xy_m):
+            found[j] = True
+        w_xy, _ = self.truth.world_in_frame(stamp_ns)  # every cone seen so far, at any range
+        real = np.zeros(len(p), dtype=bool)
+        for i, _, _ in match_cones(p, w_xy):
+            real[i] = True
+        r_p = np.hypot(p[:, 0], p[:, 1])
+        for name, lo, hi in EXTRA_GROUPS:
+            t = (r_t >= lo) & (r_t < hi) & (vis >= GT_MIN_VISIBLE)
+            c = self.band_counts[name]
+            c[0] += int(t.sum())
+            c[1] += int((t & found).sum())
+            c[2] += int(((r_p >= lo) & (r_p < hi) & ~real).sum())
+
+    def bands_summary(self) -> dict:
+        """Per look-ahead band: true cones, recall, false cones and false cones per frame."""
+        f = self.frames
+        return {name: {"n_true": c[0], "recall": c[1] / c[0] if c[0] else float("nan"), "false_cones": c[2],
+                       "false_per_frame": c[2] / f if f else float("nan")} for name, c in self.band_counts.items()}
 
     def summary(self) -> dict:
         e, er = np.asarray(self.err), np.asarray(self.err_range)
@@ -238,6 +271,7 @@ class TrackingReport:
             "ego_median_err_frac": float(np.median(frac)) if frac.size else nan,
             "ego_p90_err_frac": float(np.percentile(frac, 90)) if frac.size else nan,
             "ego_median_err_yaw_deg": float(np.degrees(np.median(self.ego_err_yaw))) if self.ego_err_yaw else nan,
+            "bands": self.bands_summary(),
         }
 
 
@@ -249,6 +283,10 @@ def format_tracking(s: dict, title: str = "/cones/tracked") -> str:
             f"under a new id), IDF1 {s['idf1']:.3f}"]
     rows.append("  position error (m): " + ", ".join(
         f"{name} median {g['median_err_m']:.3f} p90 {g['p90_err_m']:.3f} (n {g['n']})" for name, g in s["groups"].items()))
+    if s.get("bands"):
+        rows.append(f"  by range (to {BANDS_MAX_M:g} m, cones >= {GT_MIN_VISIBLE:g} visible): " + ", ".join(
+            f"{name} recall {b['recall']:.3f} (n {b['n_true']}) false {b['false_per_frame']:.2f}/frame"
+            for name, b in s["bands"].items()))
     if s["ego_frames"]:
         rows.append(f"  ego-motion per frame ({s['ego_frames']} frames): median translation error {s['ego_median_err_m'] * 100:.2f} cm = "
                     f"{s['ego_median_err_frac'] * 100:.1f} % of the distance travelled (p90 {s['ego_p90_err_frac'] * 100:.1f} %), "
@@ -265,7 +303,7 @@ class DriveEvaluation:
 
     def __init__(self, truth: DriveTruth, range_m: float = EVAL_RANGE_M):
         self.truth = truth
-        self.raw = LocalisationReport(max_range_m=range_m)
+        self.raw = LocalisationReport(max_range_m=range_m, min_visible=GT_MIN_VISIBLE)
         self.tracked = TrackingReport(truth, range_m)
 
     def add_raw(self, stamp_ns: int, cones: np.ndarray) -> None:
@@ -275,6 +313,7 @@ class DriveEvaluation:
         fr = self.truth.frames[stamp_ns]
         gt = np.zeros(len(fr.xy_m), dtype=cones.dtype)
         gt["x"], gt["y"], gt["class_id"] = fr.xy_m[:, 0], fr.xy_m[:, 1], fr.class_ids
+        gt["score"] = fr.visible if fr.visible is not None else 1.0
         self.raw.add_frame(cones, gt)
 
     def add_tracked(self, stamp_ns: int, tracked: np.ndarray, motion: Motion2D | None = None) -> None:
@@ -290,7 +329,9 @@ class DriveEvaluation:
             out["raw"] = {"range_m": self.raw.max_range_m, "frames": r["frames"], "recall": r["all"]["recall"],
                           "false_per_frame": r["false_positives"] / r["frames"],
                           "median_err_0_7_m": float(np.median(near)) if near.size else float("nan"),
-                          "median_err_7_15_m": r["groups"]["far 7-15 m"]["median_err_m"]}
+                          "median_err_7_15_m": r["groups"]["far 7-15 m"]["median_err_m"],
+                          "bands": {k: {"n_true": b["n_true"], "recall": b["recall"], "false_cones": b["false_cones"],
+                                        "false_per_frame": b["false_per_frame"]} for k, b in r["extra_groups"].items()}}
         if self.tracked.frames:
             out["tracked"] = self.tracked.summary()
             if "raw" in out:
@@ -306,6 +347,10 @@ def format_drive_evaluation(s: dict) -> str:
         r = s["raw"]
         rows.append(f"/cones within {r['range_m']:g} m: recall {r['recall']:.3f}, false cones {r['false_per_frame']:.2f}/frame, "
                     f"median error 0-7 m {r['median_err_0_7_m']:.3f}, 7-15 m {r['median_err_7_15_m']:.3f}")
+        if r.get("bands"):
+            rows.append(f"  by range (to {BANDS_MAX_M:g} m, cones >= {GT_MIN_VISIBLE:g} visible): " + ", ".join(
+                f"{name} recall {b['recall']:.3f} (n {b['n_true']}) false {b['false_per_frame']:.2f}/frame"
+                for name, b in r["bands"].items()))
     if "tracked" in s:
         rows.append(format_tracking(s["tracked"]))
         if "err_7_15_ratio_to_raw" in s["tracked"]:

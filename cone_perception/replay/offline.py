@@ -24,7 +24,7 @@ from ..data.bags import (
     read_attitude_truth, read_ground_truth, read_imu,
 )
 from ..errors import FrameError
-from ..evaluation import LocalisationReport
+from ..evaluation import GT_MIN_VISIBLE, LocalisationReport
 from ..evaluation.attitude import AttitudeReport
 from ..pipeline import Pipeline
 from ..records import BOX_DTYPE, to_pointcloud2
@@ -87,7 +87,7 @@ def offline_replay(
             topics[TRACKED_TOPIC] = bagio.POINTCLOUD2
         writer = bagio.BagWriter(Path(out), topics)
     res = ReplayResult()
-    report = LocalisationReport(max_range_m=pipeline.calib.max_range_m) if truth is not None else None
+    report = LocalisationReport(max_range_m=pipeline.calib.max_range_m, min_visible=GT_MIN_VISIBLE) if truth is not None else None
     att_truth = read_attitude_truth(bag) if truth is not None else {}
     att_report = AttitudeReport() if truth is not None else None
     frames = iter_frames(bag, topic)
@@ -114,7 +114,7 @@ def offline_replay(
             res.stats.count_ok()
             tracked = None
             if tracking is not None:
-                r.cones, tracked = tracking.frame(fr.stamp_ns, r.cones, r.attitude)
+                r.cones, tracked = tracking.frame(fr.stamp_ns, r.cones, r.attitude, r.weak_cones)
                 if tracked is not None:
                     res.tracked[fr.stamp_ns] = tracked
             res.boxes[fr.stamp_ns], res.cones[fr.stamp_ns] = r.boxes, r.cones

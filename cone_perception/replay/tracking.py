@@ -52,9 +52,11 @@ class ReplayTracking:
         self.dropped_detections = 0
         self.not_fused = Counter()
 
-    def frame(self, stamp_ns: int, cones: np.ndarray, attitude=None) -> tuple[np.ndarray, np.ndarray | None]:
+    def frame(self, stamp_ns: int, cones: np.ndarray, attitude=None, weak: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
         """One frame's ``/cones`` -> (``/cones`` after the drop, tracked records or None when not fused).
-        ``attitude``: the :class:`~cone_perception.attitude.Attitude` the cones were mapped with."""
+        ``attitude``: the :class:`~cone_perception.attitude.Attitude` the cones were mapped with; ``weak``: the
+        frame's cones below the ``/cones`` threshold (:attr:`FrameResult.weak_cones`), tracked only (not dropped,
+        not scored as ``/cones``)."""
         kept = drop_detections(cones, self.drop_share, self.rng)
         self.dropped_detections += len(cones) - len(kept)
         if self.evaluation is not None:
@@ -65,7 +67,8 @@ class ReplayTracking:
             self.stage.add_twist(*self.twists[self._next_twist])
             self._next_twist += 1
         try:
-            tracked, info = self.stage.process(stamp_ns, kept, attitude)
+            fused = kept if weak is None or len(weak) == 0 else np.concatenate([kept, weak.astype(kept.dtype)])
+            tracked, info = self.stage.process(stamp_ns, fused, attitude)
         except FrameError as e:
             self.not_fused[e.reason] += 1
             return kept, None

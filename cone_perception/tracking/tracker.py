@@ -76,6 +76,9 @@ class TrackerConfig:
     gap_std_m_per_s: float = 0.5
     max_range_m: float = 20.0  # detections farther than this are not used (too uncertain along the ray)
     spawn_chi2: float = 50.0  # an unassigned detection this near (Mahalanobis^2) to a track starts no new one
+    spawn_max_m: float = float("inf")  # ... unless it is farther than this (m) from that track: far cones' covariance
+    # is metres long along the ray, so the next cone of a row 4-5 m behind would otherwise never get a track;
+    # two tracks farther apart than this are not merged either
     merge_chi2: float = 6.0  # two tracks this near (and of one class) are merged into the older one
     # the attitude part of the cones' covariance (given the frame's Attitude) is one error common to the frame,
     # correlated over attitude_tau_s, not independent noise (docs/tracking.md, "Attitude"); False: as before
@@ -84,6 +87,14 @@ class TrackerConfig:
     register_attitude: bool = True  # the registration estimates that error alongside the motion
     robust_chi2: float = 0.0  # > 0: a matched cone farther than this (Mahalanobis^2) from its track is fused with its
     # covariance times d2 / robust_chi2 (an outlier pulls less); off: no gain on the tuning drives (docs/benchmarks.md)
+    # weak detections (docs/tracking.md, "Weak detections"): a detection scored below strong_score (the /cones threshold,
+    # score 0..1) is weak. It is not used for the ego-motion registration; on a track it counts as a hit that multiplies
+    # the certainty odds by weak_likelihood_ratio (whatever its score: a low score is not evidence against the cone);
+    # on no track it starts one (weak_spawn) that is published only once its certainty reaches publish_min_certainty:
+    # from certainty_prior 0.3, ratio 1.35 takes 3 weak hits in a row (a miss in view halves the odds).
+    strong_score: float = 0.0  # 0: every detection is strong (as before weak detections existed)
+    weak_likelihood_ratio: float = 1.35  # odds factor per weak hit (dimensionless, > 1)
+    weak_spawn: bool = True  # a weak detection on no track starts a (yet unpublished) track
 
 
 class FieldOfView:
@@ -208,6 +219,8 @@ class ConeTracker:
             raise FrameError(reason, f"frame stamp {stamp_ns} ns is not after the last fused frame {self.last_stamp_ns} ns")
         cones = _valid_cones(cones, self.events)
         cones = cones[np.hypot(cones["x"], cones["y"]) <= cfg.max_range_m]
+        weak = cones["score"] < cfg.strong_score  # (n_z,) bool: below the /cones threshold, for confirmation only
+        strong = ~weak
         z = np.empty((len(cones), 2))
         z[:, 0], z[:, 1] = cones["x"], cones["y"]
         Rz = np.empty((len(cones), 2, 2))
@@ -235,13 +248,14 @@ class ConeTracker:
             else:
                 prior = self._prior(dt, gap)
                 motion, info.motion_source = prior, "prior"
-                if cfg.register and len(self) and len(z):
+                if cfg.register and len(self) and strong.any():
                     prior_std = None if gap or self.velocity is None else (cfg.prior_std_m, cfg.prior_std_rad)
                     joint = cfg.register_attitude and np.any(Sa)
-                    reg = register_cones(z, zc, self.xy, self._classes(), prior, Rz - Ra if joint else Rz, self.P, prior_std,
+                    reg = register_cones(z[strong], zc[strong], self.xy, self._classes(), prior,
+                                         (Rz - Ra if joint else Rz)[strong], self.P, prior_std,
                                          search_m=cfg.search_gap_m if gap else cfg.search_m,
                                          min_inliers=cfg.register_min_inliers,
-                                         det_att_jac=Jz if joint else None, att_cov_deg2=Sa if joint else None)
+                                         det_att_jac=Jz[strong] if joint else None, att_cov_deg2=Sa if joint else None)
                     info.inliers = reg.inliers
                     if reg.ok:
                         motion, info.motion_source = reg.motion, "registration"
@@ -270,7 +284,11 @@ class ConeTracker:
             else:
                 d2 = _mahalanobis2(z, Rz, self.xy, self.P)  # (n_z, n_t)
             gated = d2 <= cfg.gate_chi2
-            gated_any = (d2 <= cfg.spawn_chi2).any(axis=1)
+            near = d2 <= cfg.spawn_chi2
+            if np.isfinite(cfg.spawn_max_m):  # and within spawn_max_m metres (far cones: wide covariance along the ray)
+                dist = np.hypot(z[:, None, 0] - self.xy[None, :, 0], z[:, None, 1] - self.xy[None, :, 1])
+                near &= dist <= cfg.spawn_max_m
+            gated_any = near.any(axis=1)
             pc = self.class_p[:, zc].T  # (n_z, n_t): p(track is the detected class)
             unknown = zc == UNKNOWN
             pc[unknown] = 1.0
@@ -304,7 +322,12 @@ class ConeTracker:
             self.class_p[cols] = _fuse_class(self.class_p[cols], zc[rows], cones["score"][rows], cfg.class_floor)
             self.hits[cols] += 1
             self.misses[cols] = 0
-            self.certainty[cols] = self._hit(self.certainty[cols], cones["score"][rows])
+            c_new = self._hit(self.certainty[cols], cones["score"][rows])
+            wk = weak[rows]
+            if wk.any():
+                c_new[wk] = np.minimum(_bayes(self.certainty[cols[wk]], cfg.weak_likelihood_ratio), cfg.certainty_max)
+                self.events["weak_hit"] += int(wk.sum())
+            self.certainty[cols] = c_new
 
         # ---- misses: certainty decays only where the cone should have been seen ----
         missed = np.ones(n_t, dtype=bool)
@@ -328,8 +351,12 @@ class ConeTracker:
         assigned = np.zeros(n_z, dtype=bool)
         assigned[rows] = True
         new = np.flatnonzero(~assigned & ~gated_any)
+        if not cfg.weak_spawn:
+            new = new[~weak[new]]
         if len(new):
-            self._spawn(z[new], Rz[new], zc[new], cones["score"][new], Jz[new] @ Sa[None])
+            self._spawn(z[new], Rz[new], zc[new], cones["score"][new], Jz[new] @ Sa[None], weak[new])
+            if weak[new].any():
+                self.events["weak_spawn"] += int(weak[new].sum())
         info.new = len(new)
         return info
 
@@ -339,6 +366,9 @@ class ConeTracker:
         d2 = _mahalanobis2(self.xy, self.P, self.xy, self.P)
         cls = self._classes()
         close = (d2 <= self.config.merge_chi2) & (cls[:, None] == cls[None, :])
+        if np.isfinite(self.config.spawn_max_m):  # farther apart than spawn_max_m: two cones, as at spawning
+            close &= np.hypot(self.xy[:, None, 0] - self.xy[None, :, 0], self.xy[:, None, 1] - self.xy[None, :, 1]) \
+                <= self.config.spawn_max_m
         np.fill_diagonal(close, False)
         dup = np.zeros(len(self), dtype=bool)
         if not close.any():
@@ -353,7 +383,8 @@ class ConeTracker:
         self.events["merged"] += int(dup.sum())
         return dup
 
-    def _spawn(self, z: np.ndarray, Rz: np.ndarray, zc: np.ndarray, score: np.ndarray, C: np.ndarray | None = None) -> None:
+    def _spawn(self, z: np.ndarray, Rz: np.ndarray, zc: np.ndarray, score: np.ndarray, C: np.ndarray | None = None,
+               weak: np.ndarray | None = None) -> None:
         cfg, n = self.config, len(z)
         ids = np.arange(self.next_id, self.next_id + n, dtype=np.uint64)
         if ids[-1] > np.iinfo(np.uint32).max:
@@ -368,7 +399,10 @@ class ConeTracker:
         self.hits = np.concatenate([self.hits, np.ones(n, np.int64)])
         self.misses = np.concatenate([self.misses, np.zeros(n, np.int64)])
         self.age = np.concatenate([self.age, np.ones(n, np.int64)])
-        self.certainty = np.concatenate([self.certainty, self._hit(np.full(n, cfg.certainty_prior), score)])
+        c = self._hit(np.full(n, cfg.certainty_prior), score)
+        if weak is not None and weak.any():
+            c[weak] = _bayes(np.full(int(weak.sum()), cfg.certainty_prior), cfg.weak_likelihood_ratio)
+        self.certainty = np.concatenate([self.certainty, c])
 
     def _hit(self, c: np.ndarray, score: np.ndarray) -> np.ndarray:
         """Certainty after a detection of confidence ``score``: odds times ``odds(score) / odds(score_neutral)``."""
