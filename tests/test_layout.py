@@ -98,10 +98,11 @@ def _cycles(graph: dict[str, set[str]] = GRAPH) -> list[list[str]]:
 LAYERS: list[tuple[str, set[str]]] = [
     ("vocabulary", {"cone_perception", "classes", "errors", "records", "resources", "words", "timing", "stats"}),
     ("runtime", {"adapter", "crop", "imageheader", "geometry", "attitude", "mapping", "tracking", "model", "detector",
-                 "params", "pipeline", "vis", "ros_env", "nodes"}),
+                 "params", "pipeline", "vis", "ros_env", "shm", "nodes"}),
     ("data", {"data"}),
     ("evaluation, calibration, synthesis", {"evaluation", "calibrate", "synth"}),
-    ("training, replay, benchmarks, ROS players", {"train", "replay", "bench", "nodes.live_replay", "nodes.fuzz"}),
+    ("training, replay, benchmarks, ROS players", {"train", "replay", "bench", "soak", "nodes.live_replay", "nodes.fuzz",
+                                                   "nodes.soak"}),
     ("commands", {"commands"}),
     ("cli", {"cli"}),
 ]
@@ -181,7 +182,7 @@ def imports_in_functions(path: Path) -> list[int]:
 
 #: The most import statements inside functions (issue 28: about 220 before, at most 40): each one for an
 #: optional dependency or a heavy tool, with a comment saying which.
-MAX_IMPORTS_IN_FUNCTIONS = 204
+MAX_IMPORTS_IN_FUNCTIONS = 205  # + commands/soak.py's player (rclpy, DDS environment)
 
 
 def test_imports_sit_at_the_top() -> None:
