@@ -33,6 +33,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "eval": ("eval", "evaluate a prediction file against ground truth -> report.md, metrics.json, plots"),
     "params": ("params", "the nodes' parameters from their schema; --write / --check the README tables and docstrings"),
     "fuzz": ("fuzz", "malformed messages through the nodes' callbacks: crashes, counts, time, RSS"),
+    "soak": ("soak", "a drive at a given rate for a given time into a live node: every frame accounted for, RSS, latency"),
 }
 
 

@@ -158,8 +158,9 @@ _COMMON = (  # declared by every node (nodes/_common.py, PerceptionNode)
     _p("max_frame_age_s", 0.0, "a frame whose header stamp is older than this (s) on arrival is counted stale; "
        "0 = off (bag replays carry old stamps; set it on the car, where the camera stamps with the node's clock)",
        min=0.0),
-    _p("input_rate_hz", 0.0, "the camera's rate (Hz), for counting the frames replaced before processing from the "
-       "gaps in their stamps; 0 = learnt from the stamps", min=0.0),
+    _p("input_rate_hz", 0.0, "the camera's nominal rate (Hz), for counting the frames missing from its stamps; "
+       "0 = learnt from the stamps (per frame sent, from the publisher's sequence numbers: right at any load)",
+       min=0.0),
 )
 _CAMERA = (
     _p("calibration", DEFAULT_CAMERA, "the camera's calibration YAML: a path, or a camera name in the package's "

@@ -43,6 +43,8 @@ class Pipeline:
     ``fixed``). ``imu``: an :class:`~cone_perception.attitude.ImuAttitude` the caller feeds; each
     ``process_*`` call takes the frame's capture stamp (``stamp_ns``), at which the IMU is read. ``far``: a :class:`~cone_perception.detector.farband.FarBand`
     (full-resolution rows near the horizon, a second forward; its boxes merge with the band's), or None.
+    ``attitude_config``: the image fit's :class:`~cone_perception.attitude.ImageAttitudeConfig` (e.g. with the
+    detector's measured ``box_model``); None: the defaults (the rendered drives' box table).
     ``cones_conf``: with a detector run at a lower threshold (the tracker's confirmation threshold), the
     score that splits its boxes: those at or above it are the frame's boxes and ``/cones`` (and fit the
     attitude), those below are mapped with the same attitude into :attr:`FrameResult.weak_cones`, for the
@@ -50,14 +52,14 @@ class Pipeline:
     """
 
     def __init__(self, calib: Calibration, detector, attitude: str | None = None, imu=None, far: FarBand | None = None,
-                 cones_conf: float | None = None):
+                 cones_conf: float | None = None, attitude_config=None):
         self.calib = calib
         self.far = far  # the far band (full-resolution rows near the horizon, detector/farband.py), or None
         self.adapter = DriverAdapter(calib.crop, calib.image_width, calib.image_height, far.crop if far else None)
         self.detector = detector
         self.mapper = ConeMapper(calib)
         self.imu = imu  # an ImuAttitude the caller feeds (modes imu, fused), or None
-        self.attitude_mode, self.attitude = attitude_estimator(self.mapper, attitude, imu)
+        self.attitude_mode, self.attitude = attitude_estimator(self.mapper, attitude, imu, attitude_config)
         self.cones_conf = cones_conf
 
     def _run(self, band: np.ndarray, t_adapter_s: float, strip: np.ndarray | None, stamp_ns: int | None) -> FrameResult:

@@ -17,6 +17,7 @@ module imports neither.
 
 from __future__ import annotations
 
+import struct
 from pathlib import Path
 from typing import Any
 
@@ -185,3 +186,35 @@ def read_boxes_csv(path: Path) -> np.ndarray:
     if np.any(a[:, 5] != np.round(a[:, 5])) or np.any(a[:, 5] < 0):
         raise ConfigError(str(path), "class_id", "must be a non-negative integer")
     return boxes_from_arrays(a[:, :4], a[:, 4], a[:, 5].astype(np.int64))
+
+
+# -- the stamp in a serialized message ------------------------------------------------------------
+
+#: the encapsulations of plain CDR (what the ROS 2 middlewares write): big / little endian
+_CDR_ENDIAN = {b"\x00\x00": ">", b"\x00\x01": "<"}
+
+
+def cdr_stamp_ns(raw: bytes | bytearray | memoryview) -> int | None:
+    """The header stamp (ns) of a serialized ROS 2 message whose first field is a ``std_msgs/Header``
+    (Image, CompressedImage, PointCloud2, ...), read from its first 12 bytes (the 4-byte
+    encapsulation, then ``int32 sec``, ``uint32 nanosec``) without deserializing the rest; ``None``
+    for bytes that cannot be one (too short, unknown encapsulation, nanoseconds out of range)."""
+    if len(raw) < 12:
+        return None
+    endian = _CDR_ENDIAN.get(bytes(raw[:2]))
+    if endian is None:
+        return None
+    sec, nsec = struct.unpack_from(endian + "iI", raw, 4)
+    if nsec >= 1_000_000_000:
+        return None
+    return sec * 1_000_000_000 + nsec
+
+
+def with_cdr_stamp(raw: bytes, stamp_ns: int) -> bytes:
+    """``raw`` (a serialized message with a header, as :func:`cdr_stamp_ns`) with its stamp set to
+    ``stamp_ns``: how a publisher re-stamps recorded frames without deserializing them."""
+    endian = _CDR_ENDIAN.get(bytes(raw[:2]))
+    if endian is None or len(raw) < 12:
+        raise ValueError("not a CDR-serialized message with a header")
+    sec, nsec = divmod(int(stamp_ns), 1_000_000_000)
+    return raw[:4] + struct.pack(endian + "iI", sec, nsec) + raw[12:]

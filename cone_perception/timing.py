@@ -62,6 +62,18 @@ def peak_rss_mb() -> float:
     return kb / 1024.0 if sys.platform != "darwin" else kb / 2**20
 
 
+def rss_mb(pid: int | str = "self") -> float:
+    """Resident set size of process ``pid`` (default this one) now, in MiB (Linux /proc; NaN where unreadable)."""
+    try:
+        with open(f"/proc/{pid}/status", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("VmRSS:"):
+                    return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return float("nan")
+
+
 def format_table(summary: dict[str, dict[str, float]]) -> str:
     """Plain-text table of a :meth:`StageTimer.summary`."""
     head = f"{'stage':<16}{'n':>6}{'median':>10}{'p90':>10}{'p99':>10}{'min':>10}{'max':>10}  (ms)"

@@ -204,19 +204,24 @@ def test_too_few_cones_hold_the_last_estimate_decaying_to_zero():
         a = est.update(boxes, CONES_CLS)
     assert a.source == "image" and a.pitch_deg == pytest.approx(1.5, abs=0.15)
     held = [est.update(boxes[:2], CONES_CLS[:2]) for _ in range(30)]
-    assert all(h.source == "hold" for h in held)
+    assert held[0].source == "hold"
     assert held[0].pitch_deg == pytest.approx(a.pitch_deg * est.cfg.decay, rel=1e-9)
-    assert abs(held[-1].pitch_deg) < 0.4
-    assert held[-1].sigma_pitch_deg > a.sigma_pitch_deg  # the uncertainty grows while held
-    assert est.counts.too_few == 30 and est.counts.fitted == 5
+    holds = [h for h in held if h.source == "hold"]
+    assert holds[-1].sigma_pitch_deg > a.sigma_pitch_deg  # the uncertainty grows while held
+    # once the held estimate is no surer than the trust limit, the frames are mapped with the calibration's H
+    n_hold = len(holds)
+    assert 1 <= n_hold < 30 and all(h.source == "calibration" and h.is_zero for h in held[n_hold:])
+    assert holds[-1].sigma_pitch_deg <= est.cfg.trust_max_sigma_deg
+    assert est.counts.too_few == 30 and est.counts.fitted == 5 and est.counts.calibration == 30 - n_hold
 
 
 def test_fits_beyond_five_degrees_are_rejected_and_counted():
     est = _estimator(prior_sigma_deg=100.0)
     boxes = _cone_boxes(_tilted_camera(7.0, 0.0), CONES_XY, CONES_CLS)
     a = est.update(boxes, CONES_CLS)
-    assert a.source == "hold" and a.pitch_deg == 0.0
-    assert est.counts.rejected == 1
+    # nothing folded in; with the prior's 100-degree sigma the frame is mapped with the calibration's H
+    assert a.source == "calibration" and a.pitch_deg == 0.0
+    assert est.counts.rejected == 1 and est.counts.calibration == 1
 
 
 @pytest.mark.parametrize("pitch, roll, rejected", [(4.6, 0.0, False), (5.5, 0.0, True), (0.0, -5.5, True)])
@@ -226,7 +231,7 @@ def test_the_five_degree_limit(pitch, roll, rejected):
     fit = est.fit(boxes, CONES_CLS)
     assert abs(fit[0][0] - pitch) < 0.3 and abs(fit[0][1] - roll) < 0.4  # the fit itself finds it
     a = est.update(boxes, CONES_CLS)
-    assert (a.source == "hold", est.counts.rejected) == ((True, 1) if rejected else (False, 0))
+    assert (a.source == "calibration", est.counts.rejected) == ((True, 1) if rejected else (False, 0))
 
 
 def test_prior_pulls_a_weak_fit_towards_zero():
@@ -362,7 +367,7 @@ def test_map_boxes_of_one_frame_with_the_image_attitude(tmp_path, capsys):
         f"{b[0]},{b[1]},{b[2]},{b[3]},0.9,{c}\n" for b, c in zip(boxes, CONES_CLS[near])))
     errs = {}
     for mode in ("fixed", "image"):
-        assert main(["map", "--calib", str(cal_path), "--boxes", str(csv), "--attitude", mode]) == 0
+        assert main(["map", "--calib", str(cal_path), "--boxes", str(csv), "--attitude", mode, "--box-model", "rendered"]) == 0
         cap = capsys.readouterr()
         xy = np.array([[float(v) for v in line.split(",")[:2]] for line in cap.out.splitlines()])
         assert len(xy) == 12

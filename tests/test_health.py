@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from cone_perception.stats import ERROR, OK, WARN, NodeHealth, StreamMonitor
+import pytest
+
+from cone_perception.stats import ERROR, OK, WARN, NodeHealth, StampGaps, StreamMonitor
 
 MS = 1_000_000
 PERIOD = 33 * MS  # a 30 Hz camera
@@ -15,17 +17,18 @@ def _feed(mon: StreamMonitor, stamps_ms, lag_ms: float = 5.0) -> list[list[str]]
 def test_a_steady_stream_has_no_faults() -> None:
     mon = StreamMonitor("/image_raw")
     faults = _feed(mon, [i * 33 for i in range(100)])
-    assert not any(faults) and mon.counts() == {"received": 100, "ok": 0, "dropped": 0, "skipped": 0, "lost": 0,
+    assert not any(faults) and mon.counts() == {"received": 100, "ok": 0, "dropped": 0, "replaced": 0, "queued": 0,
+                                                "missing": 0, "lost": 0,
                                                 "backwards": 0, "repeated": 0, "stale": 0, "silences": 0}
 
 
-def test_frames_replaced_in_the_queue_are_counted_from_stamp_gaps() -> None:
+def test_without_a_counting_path_frames_replaced_in_the_queue_are_missing_from_the_stamps() -> None:
     """A depth-1 queue of a busy node keeps only the newest frame: the publisher's stamps jump."""
     mon = StreamMonitor("/image_raw")
     stamps = [i * 33 for i in range(10)]  # learn the period
     stamps += [33 * 12, 33 * 13, 33 * 18]  # 2 frames replaced, then 0, then 4
     faults = _feed(mon, stamps)
-    assert mon.skipped == 2 + 4 and faults[10] == ["skipped"] and faults[11] == [] and faults[12] == ["skipped"]
+    assert mon.missing == 2 + 4 and faults[10] == ["missing"] and faults[11] == [] and faults[12] == ["missing"]
 
 
 def test_a_nominal_rate_counts_skips_of_a_node_that_is_always_late() -> None:
@@ -33,20 +36,20 @@ def test_a_nominal_rate_counts_skips_of_a_node_that_is_always_late() -> None:
     learnt, nominal = StreamMonitor("/image_raw"), StreamMonitor("/image_raw", period_s=0.033)
     for mon in (learnt, nominal):
         _feed(mon, [i * 66 for i in range(20)])
-    assert learnt.skipped == 0 and nominal.skipped == 19
+    assert learnt.missing == 0 and nominal.missing == 19
 
 
 def test_jitter_is_not_a_gap() -> None:
     mon = StreamMonitor("/image_raw")
     _feed(mon, [i * 33 + (4 if i % 2 else -4) for i in range(50)])
-    assert mon.skipped == 0
+    assert mon.missing == 0
 
 
 def test_stamps_backwards_and_repeated() -> None:
     mon = StreamMonitor("/image_raw")
     faults = _feed(mon, [0, 33, 66, 66, 40, 99])
     assert faults[3] == ["repeated"] and faults[4] == ["backwards"]
-    assert (mon.repeated, mon.backwards, mon.skipped) == (1, 1, 0)
+    assert (mon.repeated, mon.backwards, mon.missing) == (1, 1, 0)
 
 
 def test_stale_frames_only_when_asked() -> None:
@@ -77,18 +80,18 @@ def test_silence_and_missing_publisher_are_errors_with_the_cause() -> None:
 def test_drops_and_faults_warn_for_the_period_they_happened_in() -> None:
     h = NodeHealth(timeout_s=0)
     mon = h.stream("/image_raw", now_ns=0)
-    _feed(mon, [i * 33 for i in range(10)] + [33 * 12])  # 2 skipped
+    _feed(mon, [i * 33 for i in range(10)] + [33 * 12])  # 2 missing
     h.stats.count_drop("too_large")
     h.stats.count_drop("exception_KeyError")
     rep = h.assess(10**9)
     assert rep.level == WARN
-    for words in ("1 dropped (too_large)", "1 dropped (exception_KeyError)", "2 skipped before processing"):
+    for words in ("1 dropped (too_large)", "1 dropped (exception_KeyError)", "2 missing (stamp gaps"):
         assert words in rep.message
     values = dict(rep.values)
-    assert values["dropped_too_large"] == "1" and values["/image_raw:skipped"] == "2"
+    assert values["dropped_too_large"] == "1" and values["/image_raw:missing"] == "2"
     assert h.assess(2 * 10**9).level == OK  # nothing new: OK again, the counts stay
-    assert dict(h.assess(3 * 10**9).values)["/image_raw:skipped"] == "2"
-    assert "skipped=2" in h.summary() and "2 dropped" in h.summary()
+    assert dict(h.assess(3 * 10**9).values)["/image_raw:missing"] == "2"
+    assert "missing=2" in h.summary() and "2 dropped" in h.summary()
 
 
 def test_a_watched_stage_reports_its_counts_and_warns_on_the_listed_ones() -> None:
@@ -120,7 +123,8 @@ def test_the_node_publishes_its_health(ros) -> None:  # noqa: F811
     st = sent[-1].status[0]
     assert st.level == bytes([ERROR]) and "no publisher on /image_raw" in st.message
     assert "no message on /image_raw since start" in st.message
-    assert {kv.key for kv in st.values} >= {"frames_ok", "/image_raw:skipped", "/image_raw:silences"}
+    assert {kv.key for kv in st.values} >= {"frames_ok", "/image_raw:replaced", "/image_raw:missing",
+                                            "/image_raw:silences"}
 
 
 from rosutil import ros  # noqa: E402,F401 (a fixture)
@@ -141,34 +145,291 @@ def test_middleware_lost_messages_are_counted_and_warned(ros) -> None:  # noqa: 
     assert rep.level == WARN and "3 lost in transport" in rep.message
 
 
-def test_frames_replaced_in_the_depth1_queue_add_up_through_dds(ros) -> None:  # noqa: F811
+@pytest.fixture(params=["sequence numbers", "counting path"])
+def accounting(request, monkeypatch):
+    """Both ways a node accounts for the frames it never took: the publisher's sequence numbers in
+    the message info (rclpy >= Iron), and the counting path (Humble's rclpy, forced here)."""
+    from cone_perception.nodes import _common
+
+    counting = request.param == "counting path"
+    monkeypatch.setattr(_common, "COUNTING_PATH", counting)
+    if not counting and not _common.MESSAGE_INFO:
+        pytest.skip("this rclpy passes no message info")  # Humble: the counting path is the one used
+    return request.param
+
+
+def test_frames_replaced_in_the_depth1_queue_add_up_through_dds(ros, accounting) -> None:  # noqa: F811
     """A burst through DDS into the best-effort depth-1 queue: the node takes only the newest, and
-    received + skipped (stamp gaps at the camera's 30 Hz) + lost is every frame sent."""
+    taken + replaced + missing is every frame sent (the period learnt, no camera rate given); the
+    3 frames the camera never published are missing."""
     import time as _time
 
-    from rclpy.parameter import Parameter
     from sensor_msgs.msg import Image
 
     from cone_perception.nodes.driver_adapter import DriverAdapterNode
 
-    node = ros.add(DriverAdapterNode(context=ros.context, parameter_overrides=[Parameter("input_rate_hz", value=30.0)]))
+    node = ros.add(DriverAdapterNode(context=ros.context))
     pub = ros.node("camera").create_publisher(Image, "image_raw", 10)
-    assert ros.spin_until(lambda: pub.get_subscription_count() > 0)
+    subs = 2 if accounting == "counting path" else 1
+    assert ros.spin_until(lambda: pub.get_subscription_count() >= subs)
     stream = node.health.streams["/image_raw"]
+    sent = 0
 
     def frame(i: int) -> Image:
+        nonlocal sent
         m = Image()
         m.header.stamp.sec, m.header.stamp.nanosec = divmod(1_000_000_000 + i * 33_333_333, 10**9)
         m.encoding = "bogus"  # dropped at once: only the counting matters here
+        sent += 1
         return m
 
-    assert ros.spin_until(lambda: (pub.publish(frame(0)) or True) and stream.received > 0)
-    sent = 1 + 40
-    for i in range(1, sent):  # a burst, nothing spun: the queue keeps the newest
+    ros.spin_until(lambda: False, 0.5)  # matched on both sides: the first frame is delivered
+    for i in range(6):  # frame by frame: each one taken
         pub.publish(frame(i))
+        assert ros.spin_until(lambda: stream.received > i, 5)
+    for i in range(6, 41):  # a burst, nothing spun: the depth-1 queue keeps the newest
+        if i not in (12, 13, 20):  # never published (a camera dropping frames)
+            pub.publish(frame(i))
     _time.sleep(0.2)
-    assert ros.spin_until(lambda: stream.last_stamp_ns == 1_000_000_000 + 40 * 33_333_333, 5)
-    taken = stream.received - stream.repeated  # frame 0 may have been sent more than once
-    assert taken < sent  # frames were replaced before the node took them ...
-    assert taken + stream.skipped + stream.lost == sent  # ... and every one is accounted for
+    last = 1_000_000_000 + 40 * 33_333_333
+    assert ros.spin_until(lambda: stream.last_stamp_ns == last and stream.queued == 0, 5)
+    assert stream.received < sent  # frames were replaced before the node took them ...
+    assert stream.replaced > 30 and stream.missing == 3  # ... counted as replaced, the 3 never sent as missing
+    assert stream.received + stream.replaced + stream.missing == sent + 3  # ... and every frame is accounted for
     assert stream.ok + stream.dropped == stream.received
+
+
+# -- the counting path's ledger (ROS-free) ---------------------------------------------------------
+
+def _simulate(ratio: int, n: int = 600, lost=lambda i: False, counter_lag: int = 0, counter_misses=frozenset(),
+              silence_after: int | None = None, period_s: float = 0.0, drop_every: int = 7) -> tuple[StreamMonitor, dict]:
+    """A publisher at 30 Hz, a node that takes one frame for every ``ratio`` that reach it (depth-1
+    queue: the newest), a counting path that sees every frame that reaches the node, ``counter_lag``
+    frames behind the processing path (negative: ahead), except ``counter_misses`` (its own queue
+    overflowed). ``lost(i)``: frame i never reaches the node. ``silence_after``: the publisher stops
+    for 3 s after that frame and starts again."""
+    from collections import deque
+
+    mon = StreamMonitor("/image_raw", timeout_s=1.0, period_s=period_s)
+    mon.counted = True
+    stamps, t = [], 0
+    for i in range(n):
+        stamps.append(t)
+        t += PERIOD + (3000 * MS if silence_after is not None and i == silence_after else 0)
+    arrivals = [s for i, s in enumerate(stamps) if not lost(i)]
+    queue, backlog, taken = None, deque(), []
+
+    def take(s):
+        mon.observe(s, s + 5 * MS)
+        taken.append(s)
+        if len(taken) % drop_every == 0:
+            mon.dropped += 1
+        else:
+            mon.ok += 1
+
+    def count(s):
+        if s not in counter_misses:
+            mon.arrive(s, s + 1 * MS)
+
+    for k, s in enumerate(arrivals):
+        if counter_lag < 0:
+            count(s)
+        queue = s
+        if counter_lag >= 0:
+            backlog.append(s)
+            while len(backlog) > counter_lag:
+                count(backlog.popleft())
+        if k % ratio == ratio - 1:
+            take(queue)
+            queue = None
+    if queue is not None:
+        take(queue)
+    while backlog:
+        count(backlog.popleft())
+    truth = {"sent": n, "lost": n - len(arrivals), "replaced": len(arrivals) - len(taken)}
+    return mon, truth
+
+
+def _accounted(mon: StreamMonitor) -> int:
+    return mon.ok + mon.dropped + mon.replaced + mon.missing + mon.queued
+
+
+def test_every_frame_is_accounted_for_at_any_overload() -> None:
+    for ratio in (1, 2, 3, 5, 10):
+        for lag in (0, 3, -1):
+            mon, truth = _simulate(ratio, lost=lambda i: i % 41 == 17, counter_lag=lag)
+            assert _accounted(mon) == truth["sent"], (ratio, lag)
+            assert (mon.replaced, mon.missing, mon.queued) == (truth["replaced"], truth["lost"], 0), (ratio, lag)
+            assert mon.period_ns == PERIOD  # learnt from the counting path: the camera's, whatever the ratio
+
+
+def test_a_silence_between_two_streams_is_no_missing_frame() -> None:
+    mon, truth = _simulate(5, silence_after=299)
+    assert _accounted(mon) == truth["sent"] and mon.missing == 0 and mon.gaps.silences == 1
+
+
+def test_frames_the_counting_path_missed_are_not_counted_twice() -> None:
+    """The counting path's own queue overflowed: frames it never saw but the node processed are in its
+    stamp gaps; they count as processed, not as missing too."""
+    for ratio in (1, 2, 5):
+        mon, truth = _simulate(ratio, counter_misses=frozenset(range(40 * PERIOD, 60 * PERIOD, PERIOD)))
+        assert _accounted(mon) == truth["sent"], ratio
+        assert mon.ok + mon.dropped == 600 - truth["replaced"]
+
+
+def test_gaps_before_the_period_is_known_are_counted_once_it_is() -> None:
+    g = StampGaps()
+    for s in (0, 33, 99, 132, 165, 198, 231):  # 66 ms: one missing, seen before 4 steps were
+        g.step(s * MS)
+    assert g.missing == 1 and g.period_ns == 33 * MS
+
+
+def test_the_node_warns_with_the_share_it_keeps_up_with() -> None:
+    h = NodeHealth(timeout_s=1.0)
+    mon = h.stream("/image_raw", now_ns=0)
+    mon.counted = True
+    h.assess(0)
+    taken = 0
+    for i in range(30):  # one second at 30 Hz; 16 processed
+        s = i * PERIOD
+        mon.arrive(s, s)
+        if i * 16 // 30 != (i + 1) * 16 // 30:
+            mon.observe(s, s)
+            mon.ok += 1
+            h.stats.count_ok()
+            taken += 1
+    rep = h.assess(10**9)
+    assert rep.level == WARN and "processing 16 of 30 frames/s on /image_raw" in rep.message
+    assert "replaced in the queue" in rep.message
+    assert "none dropped" not in h.summary() and "replaced=" in h.summary()
+    values = dict(rep.values)
+    assert int(values["/image_raw:ok"]) + int(values["/image_raw:replaced"]) + int(values["/image_raw:queued"]) == 30
+
+
+def test_the_stamp_is_read_from_the_serialized_message() -> None:
+    from rclpy.serialization import serialize_message
+    from sensor_msgs.msg import CompressedImage, Image
+
+    from cone_perception.records import cdr_stamp_ns, with_cdr_stamp
+
+    for msg in (Image(), CompressedImage()):
+        msg.header.stamp.sec, msg.header.stamp.nanosec = 1_700_000_123, 456_789
+        msg.header.frame_id = "camera_optical_frame"
+        raw = serialize_message(msg)
+        assert cdr_stamp_ns(raw) == 1_700_000_123_000_456_789
+        assert cdr_stamp_ns(with_cdr_stamp(raw, 42_000_000_007)) == 42_000_000_007
+    assert cdr_stamp_ns(b"\x00\x01\x00\x00") is None and cdr_stamp_ns(b"\x07" * 16) is None
+
+
+@pytest.mark.parametrize("ratio", [2, 5])
+def test_every_frame_is_accounted_for_under_overload_through_dds(ros, accounting, ratio: int) -> None:  # noqa: F811
+    """A node that needs ``ratio`` frame periods per frame, spun as run_node spins it (two threads),
+    fed at 60 Hz through DDS: sent = processed + dropped + replaced + missing, and replaced > 0."""
+    import threading
+    import time as _time
+
+    import rclpy
+    from rclpy.executors import MultiThreadedExecutor
+    from sensor_msgs.msg import Image
+
+    from cone_perception.nodes.driver_adapter import DriverAdapterNode
+
+    period_s = 1 / 60
+
+    class SlowAdapter(DriverAdapterNode):
+        def on_raw(self, msg):
+            _time.sleep(ratio * period_s)
+            return super().on_raw(msg)  # "bogus" encoding: dropped, counted
+
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    node = SlowAdapter(context=ctx)
+    ex = MultiThreadedExecutor(num_threads=2, context=ctx)
+    ex.add_node(node)
+    spinner = threading.Thread(target=ex.spin, daemon=True)
+    spinner.start()
+    try:
+        pub = ros.node("camera").create_publisher(Image, "image_raw", 10)
+        subs = 2 if accounting == "counting path" else 1  # the processing (and the counting) path matched
+        assert ros.spin_until(lambda: pub.get_subscription_count() >= subs)
+        _time.sleep(0.3)
+        stream = node.health.streams["/image_raw"]
+        n, t0 = 90, _time.monotonic()
+        for i in range(n):
+            m = Image()
+            m.header.stamp.sec, m.header.stamp.nanosec = divmod(10**9 + i * int(period_s * 1e9), 10**9)
+            m.encoding = "bogus"
+            while _time.monotonic() < t0 + i * period_s:
+                _time.sleep(0.001)
+            pub.publish(m)
+        last = 10**9 + (n - 1) * int(period_s * 1e9)
+        end = _time.monotonic() + 5
+        while _time.monotonic() < end and not (stream.last_stamp_ns == last and stream.queued == 0
+                                               and stream.received and node.stats.received == stream.received):
+            _time.sleep(0.05)
+        assert stream.received + stream.replaced + stream.missing + stream.queued == n
+        assert stream.replaced >= n // 3 and stream.queued == 0
+        assert stream.ok + stream.dropped == stream.received == node.stats.dropped["unknown_encoding"]
+    finally:
+        ex.shutdown(timeout_sec=2)
+        node.destroy_node()
+        rclpy.shutdown(context=ctx)
+
+
+# -- sequence numbers (ROS-free) ------------------------------------------------------------------
+
+def _simulate_seq(ratio: int, n: int = 600, never_sent=lambda i: False, lost_in_transport=lambda i: False,
+                  silence_after: int | None = None) -> tuple[StreamMonitor, dict]:
+    """A camera at 30 Hz (``never_sent(i)``: frame i dropped by the driver, no sequence number); each
+    frame published gets the next sequence number; ``lost_in_transport(i)``: it never reaches the node
+    (the middleware's lost event counts it); the node takes one of every ``ratio`` that reach it."""
+    mon = StreamMonitor("/image_raw", timeout_s=1.0)
+    t, seq, queue, arrived, taken, published, first = 0, 0, None, 0, 0, 0, None
+    for i in range(n):
+        stamp = t
+        t += PERIOD + (3000 * MS if silence_after is not None and i == silence_after else 0)
+        if never_sent(i):
+            continue
+        seq += 1
+        published += 1
+        if lost_in_transport(i):
+            mon.lost += 1
+            continue
+        queue = (stamp, seq)
+        arrived += 1
+        if arrived % ratio == 0:
+            first = i if first is None else first
+            mon.observe(queue[0], queue[0], queue[1])
+            mon.ok += 1
+            taken += 1
+            queue = None
+    if queue is not None:
+        mon.observe(queue[0], queue[0], queue[1])
+        mon.ok += 1
+        taken += 1
+    # the node knows of the frames from the first it took on: those before are not its to count
+    return mon, {"published": published, "taken": taken, "replaced": arrived - taken - (ratio - 1), "first": first}
+
+
+def test_sequence_numbers_account_for_every_frame_at_any_overload() -> None:
+    for ratio in (1, 2, 3, 5, 10):
+        mon, truth = _simulate_seq(ratio, never_sent=lambda i: i % 53 == 20, lost_in_transport=lambda i: i % 61 == 30)
+        never = sum(1 for i in range(600) if i % 53 == 20)
+        assert mon.received + mon.replaced + mon.missing == 600 - truth["first"], ratio  # every frame since
+        assert mon.replaced == truth["replaced"] and mon.missing == never + mon.lost, ratio
+        assert mon.period_ns == PERIOD, ratio  # the camera's period, learnt at any ratio
+
+
+def test_sequence_numbers_a_silence_is_no_missing_frame() -> None:
+    for ratio in (1, 5):
+        mon, truth = _simulate_seq(ratio, silence_after=299)
+        assert mon.received + mon.replaced == 600 - truth["first"] and mon.missing == 0 and mon.gaps.silences == 1, ratio
+
+
+def test_a_restarted_publisher_starts_a_new_sequence() -> None:
+    mon = StreamMonitor("/image_raw")
+    for i in range(10):
+        mon.observe(i * PERIOD, i * PERIOD, 100 + i)
+    for i in range(10, 20):  # restarted: its sequence numbers begin at 1 again
+        mon.observe(i * PERIOD, i * PERIOD, i - 9)
+    assert mon.seq_resets == 1 and mon.replaced == 0 and mon.missing == 0 and mon.received == 20

@@ -101,7 +101,8 @@ LAYERS: list[tuple[str, set[str]]] = [
                  "params", "pipeline", "vis", "ros_env", "nodes"}),
     ("data", {"data"}),
     ("evaluation, calibration, synthesis", {"evaluation", "calibrate", "synth"}),
-    ("training, replay, benchmarks, ROS players", {"train", "replay", "bench", "nodes.live_replay", "nodes.fuzz"}),
+    ("training, replay, benchmarks, ROS players", {"train", "replay", "bench", "nodes.live_replay", "nodes.fuzz",
+                                                   "nodes.soak"}),
     ("commands", {"commands"}),
     ("cli", {"cli"}),
 ]

@@ -25,9 +25,9 @@ GOOD = dict(width=W, height=H, roi_x=0, roi_y=CALIB.crop.v0, roi_w=1920, roi_h=5
 
 def callback(node, msgtype):
     """The (guarded) callback the node subscribed for ``msgtype``: called directly, no DDS."""
-    subs = [s for s in node.subscriptions if s.msg_type is msgtype]
+    subs = [s for s in node.subscriptions if s.msg_type is msgtype and not s.raw]  # not the counting path
     assert len(subs) == 1
-    return subs[0].callback
+    return getattr(subs[0].callback, "message_only", subs[0].callback)
 
 
 def test_a_good_camera_info_gives_the_calibration_crop() -> None:
@@ -140,3 +140,24 @@ def test_detection_node_validates_camera_info_and_builds_at_most_a_few_networks(
     assert node.stats.ok == 0  # camera_info is not a frame, but every one is counted on its topic
     st = node.health.streams["/image_cropped/camera_info"]
     assert st.received == st.ok + st.dropped == 1 + 4 + 8 + 1 and st.dropped == 4 + 2
+
+
+def test_the_counting_path_counts_every_frame_and_survives_any_bytes(ros, monkeypatch) -> None:  # noqa: F811
+    """Where callbacks get no sequence numbers (Humble), the image input's second subscription (raw
+    bytes, own callback group) reads only the stamp of every frame."""
+    from rclpy.serialization import serialize_message
+
+    from cone_perception.nodes import _common
+    from cone_perception.nodes.driver_adapter import DriverAdapterNode
+
+    monkeypatch.setattr(_common, "COUNTING_PATH", True)
+
+    node = ros.add(DriverAdapterNode(context=ros.context))
+    counting = [s for s in node.subscriptions if s.msg_type is Image and s.raw]
+    assert len(counting) == 1 and counting[0].callback_group is not node.default_callback_group
+    st = node.health.streams["/image_raw"]
+    m = Image()
+    m.header.stamp.sec = 5
+    for raw in (b"", b"\xff" * 3, b"\x00\x01" + b"\xff" * 40, serialize_message(m)):
+        counting[0].callback(raw)
+    assert st.arrived == 4 and st.counted and st.last_stamp_ns == 5 * 10**9

@@ -154,9 +154,13 @@ def test_car_launch_builds_with_tf_and_rviz(monkeypatch):
     assert {"camera", "image_topic", "fused", "tf", "rviz", "camera_frame"} <= set(names)
     monkeypatch.setattr(mod, "get_package_share_directory", lambda pkg: str(ROOT))
     ctx = LaunchContext()
+    assert {"respawn", "respawn_delay"} <= set(names)
     for k, v in {"camera": "example_mainhoop", "image_topic": "/camera/image_raw", "fused": "false", "tf": "true",
-                 "rviz": "true", "camera_frame": ""}.items():
+                 "rviz": "true", "camera_frame": "", "respawn": "true", "respawn_delay": "1.0"}.items():
         ctx.launch_configurations[k] = v
     nodes = mod._nodes(ctx)
     execs = [n.node_executable for n in nodes]
     assert execs[:2] == ["static_transform_publisher", "rviz2"] and "detection" in execs
+    ctx.launch_configurations["respawn_delay"] = "soon"
+    with pytest.raises(RuntimeError, match="respawn_delay"):
+        mod._nodes(ctx)

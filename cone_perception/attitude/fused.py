@@ -16,11 +16,12 @@ from .imu import ImuAttitude
 from .model import ATTITUDE_MODES, FIXED, Attitude, default_attitude_mode
 
 
-def attitude_estimator(mapper, mode: str | None, imu: "ImuAttitude | None" = None):
+def attitude_estimator(mapper, mode: str | None, imu: "ImuAttitude | None" = None, config=None):
     """``(mode, estimator)`` for a :class:`~cone_perception.mapping.ConeMapper`, a requested mode
     (None or "" = the default of :func:`default_attitude_mode`) and an IMU source (or None); the
     estimator is None for ``fixed``, an :class:`ImageAttitude` for ``image``, a :class:`FusedAttitude`
-    for ``imu`` and ``fused``.
+    for ``imu`` and ``fused``. ``config``: the image fit's :class:`~cone_perception.attitude.ImageAttitudeConfig`
+    (None: the defaults; e.g. with the detector's ``box_model``).
 
     Raises :class:`ConfigError` for an unknown mode, ``image``/``fused`` without a mount pose, or
     ``imu``/``fused`` without an IMU source.
@@ -35,10 +36,10 @@ def attitude_estimator(mapper, mode: str | None, imu: "ImuAttitude | None" = Non
         raise ConfigError(calib.source, "mount_pose" if calib.mount_pose is None else "camera_matrix",
                           f"attitude {mode!r} needs mount_pose and camera_matrix in the calibration")
     if mode == "image":
-        return mode, mapper.image_attitude()
+        return mode, mapper.image_attitude(config)
     if imu is None:
         raise ConfigError("attitude", None, f"{mode!r} needs an IMU (none given: no /imu topic in the bag?)")
-    return mode, FusedAttitude(mapper.image_attitude(), imu, use_image=(mode == "fused"))
+    return mode, FusedAttitude(mapper.image_attitude(config), imu, use_image=(mode == "fused"))
 
 
 def attitude_for_boxes(estimator, records: np.ndarray, stamp_ns: int | None = None) -> Attitude:

@@ -7,7 +7,10 @@ placed above it and projected; the residual is predicted minus observed top row 
 robust (Cauchy) weighted least-squares fit of (pitch, roll) with a weak prior around zero, started
 from the weighted median of single-cone pitch estimates, then a Kalman filter across frames (random
 walk decaying to zero): frames with too few usable cones hold the last estimate, decaying to zero; a
-fit beyond :data:`~cone_perception.attitude.model.MAX_ABS_DEG` is rejected and counted. ROS-free.
+fit beyond :data:`~cone_perception.attitude.model.MAX_ABS_DEG`, or whose residuals are larger than
+its cone model explains, is rejected and counted; a frame whose estimate is too uncertain to beat the
+calibrated H is mapped with the calibration (counted). With a measured box model of the detector
+(:mod:`.boxes`) the boxes are first corrected to the labelled cones'. ROS-free.
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ from ..classes import CONE_SIZE_M, NUM_CLASSES
 from ..geometry.camera import MountPose
 from ..geometry.homography import undistort_pixels
 from ..geometry.linalg import inv2
+from .boxes import BoxModel
 from .model import MAX_ABS_DEG, Attitude, attitude_rotation
 
 
@@ -73,6 +77,17 @@ class ImageAttitudeConfig:
     #: ... and only while the fits' mean stays within this (degrees, pitch and roll; ramp of half of it):
     #: a body standing still on a slope keeps its estimate
     still_max_mean_deg: float = 0.5
+    #: the detector's boxes against the labelled cones (:class:`~cone_perception.attitude.boxes.BoxModel`,
+    #: measured on real frames, stored beside the model file): boxes are corrected to the labels' before the
+    #: fit, and ``top_bias_extra_px`` (the rendered drives' table) is not applied. None: the synthetic case
+    box_model: BoxModel | None = None
+    #: per frame, the image attitude is used only where it beats the calibrated H (:meth:`ImageAttitude.trusted`):
+    #: at least ``trust_min_cones`` cones in the fit, the fit's residuals no more than ``trust_max_scale``
+    #: times their expected size (1.4826 times the median absolute normalised residual), and the estimate's
+    #: 1-sigma below ``trust_max_sigma_deg``; otherwise the frame is mapped with the calibration's H (counted)
+    trust_min_cones: int = 3
+    trust_max_scale: float = 2.5
+    trust_max_sigma_deg: float = 1.0
 
 
 @dataclass
@@ -82,9 +97,12 @@ class AttitudeCounts:
     fitted: int = 0
     too_few: int = 0
     rejected: int = 0
+    #: frames mapped with the calibration's H because the image attitude did not beat it (any outcome above)
+    calibration: int = 0
 
     def as_dict(self) -> dict[str, int]:
-        return {"fitted": self.fitted, "too_few_cones": self.too_few, "rejected_beyond_limit": self.rejected}
+        return {"fitted": self.fitted, "too_few_cones": self.too_few, "rejected_beyond_limit": self.rejected,
+                "used_calibration": self.calibration}
 
 
 class ImageAttitude:
@@ -186,8 +204,9 @@ class ImageAttitude:
     def _prepare(self, boxes: np.ndarray, class_ids: np.ndarray):
         u = 0.5 * (boxes[:, 0] + boxes[:, 2]) - 0.5  # pixel-edge -> pixel-centre coordinates
         foot = np.column_stack([u, boxes[:, 3] - 0.5])
+        table = self.cfg.top_bias_extra_px if self.cfg.box_model is None else ()
         top = np.column_stack([u, boxes[:, 1] - 0.5 + self.cfg.top_bias_px
-                               + box_top_extra_px(boxes[:, 3] - boxes[:, 1], self.cfg.top_bias_extra_px)])
+                               + box_top_extra_px(boxes[:, 3] - boxes[:, 1], table)])
         if self.dist is not None:
             foot = undistort_pixels(foot, self.K, self.dist)
             top = undistort_pixels(top, self.K, self.dist)
@@ -227,13 +246,17 @@ class ImageAttitude:
         ``start_deg``: where to linearise first (the filter's prediction; default zero)."""
         c = self.cfg
         boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
+        if c.box_model is not None:
+            boxes = c.box_model.correct(boxes)
         class_ids = np.asarray(class_ids, dtype=np.intp).ravel()
+        self.last_scale = np.inf
         sel = self._select(boxes, class_ids)
         if int(sel.sum()) < c.min_cones:
             return None
         rays, v_top, cls = self._prepare(boxes[sel], class_ids[sel])
         h = boxes[sel, 3] - boxes[sel, 1]
-        sigma = np.sqrt(2.0 * c.sigma_px**2 + (c.sigma_rel * h) ** 2)
+        rel = c.sigma_rel if c.box_model is None else max(c.sigma_rel, c.box_model.sigma_rel)
+        sigma = np.sqrt(2.0 * c.sigma_px**2 + (rel * h) ** 2)
         theta = np.zeros(2) if start_deg is None else np.clip(np.asarray(start_deg, dtype=np.float64), -2.0, 2.0)
         eps = 0.05
         lam = np.eye(2) / c.prior_sigma_deg**2
@@ -268,25 +291,47 @@ class ImageAttitude:
             return None
         A = Jo.T @ ((w / so**2)[:, None] * Jo) + lam
         scale = max(1.0, float(np.sum(w[inl] * e[inl] ** 2) / max(n_used - 2, 1)))
+        # the residuals' robust spread in sigmas (1: as the cone model expects; all cones, outliers too): trusted()
+        self.last_scale = 1.4826 * float(np.median(np.abs(e)))
         return theta, inv2(A) * scale, n_used
 
-    def single_frame(self, boxes: np.ndarray, class_ids: np.ndarray) -> Attitude:
-        """The attitude of one frame on its own (no history): the fit with its covariance, or zero with
-        the prior's uncertainty when the fit has too few cones or is rejected (both counted)."""
-        res = self.fit(boxes, class_ids)
+    def trusted(self, n_cones: int, sd_deg: np.ndarray) -> bool:
+        """Whether this frame's image attitude (from a fit of ``n_cones`` cones whose residual scale is
+        :attr:`last_scale`; estimate 1-sigma ``sd_deg``) beats the calibrated H (config ``trust_*``)."""
+        c = self.cfg
+        return (n_cones >= c.trust_min_cones and self.last_scale <= c.trust_max_scale
+                and float(np.max(sd_deg)) <= c.trust_max_sigma_deg)
+
+    def calibration_fallback(self, n_cones: int = 0) -> Attitude:
+        """The calibration's H for a frame whose image attitude is not trusted (counted); its 1-sigma the
+        prior's (the body's attitude is unknown that frame)."""
+        self.counts.calibration += 1
         s0 = self.cfg.prior_sigma_deg
+        return Attitude(0.0, 0.0, s0, s0, "calibration", n_cones)
+
+    def single_frame(self, boxes: np.ndarray, class_ids: np.ndarray) -> Attitude:
+        """The attitude of one frame on its own (no history): the fit with its covariance, or the
+        calibration's H (zero, the prior's uncertainty) when the fit has too few cones, is rejected or
+        is not trusted (:meth:`trusted`; all counted)."""
+        res = self.fit(boxes, class_ids)
         if res is None:
             self.counts.too_few += 1
-            return Attitude(0.0, 0.0, s0, s0, "hold", 0)
+            return self.calibration_fallback()
         if np.any(np.abs(res[0]) > self.cfg.max_abs_deg):
             self.counts.rejected += 1
-            return Attitude(0.0, 0.0, s0, s0, "hold", 0)
+            return self.calibration_fallback()
         self.counts.fitted += 1
         sd = np.sqrt(np.diag(res[1]))
+        if not self.trusted(res[2], sd):
+            return self.calibration_fallback(res[2])
         return Attitude(float(res[0][0]), float(res[0][1]), float(sd[0]), float(sd[1]), "image", res[2])
 
     def update(self, boxes: np.ndarray, class_ids: np.ndarray) -> Attitude:
-        """Fit this frame, fold it into the filter, return the attitude to map this frame with."""
+        """Fit this frame, fold it into the filter, return the attitude to map this frame with.
+
+        A fit whose residuals or cones fail :meth:`trusted` (its own 1-sigma aside: the filter averages
+        fits) is not folded in (counted as ``rejected``); a frame whose filtered estimate's 1-sigma exceeds
+        ``trust_max_sigma_deg`` is mapped with the calibration's H (counted as ``used_calibration``)."""
         c = self.cfg
         self.x = self.x * c.decay  # predict: random walk decaying to zero
         self.P = self.P * c.decay**2 + np.eye(2) * c.process_sigma_deg**2
@@ -295,7 +340,7 @@ class ImageAttitude:
         if res is None:
             self.counts.too_few += 1
             wm = self.motion_weight(None, None)
-        elif np.any(np.abs(res[0]) > c.max_abs_deg):
+        elif np.any(np.abs(res[0]) > c.max_abs_deg) or not self.trusted(res[2], np.zeros(2)):
             self.counts.rejected += 1
             wm = self.motion_weight(None, None)
         else:
@@ -308,6 +353,8 @@ class ImageAttitude:
             self.counts.fitted += 1
             source = "image"
         sd = self.still_sigma(np.sqrt(np.diag(self.P)), wm)
+        if float(np.max(sd)) > c.trust_max_sigma_deg:
+            return self.calibration_fallback(n)
         x = self.x * wm
         return Attitude(float(x[0]), float(x[1]), float(sd[0]), float(sd[1]), source, n)
 

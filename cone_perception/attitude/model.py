@@ -58,7 +58,8 @@ class Attitude:
     """The attitude offset used for one frame (degrees) with its 1-sigma, and where it came from.
 
     ``source``: ``fixed``, ``image`` (this frame's fit), ``hold`` (no usable fit this frame: the
-    filter's prediction, decaying to zero), ``imu``, ``fused``. ``n_cones``: cones the fit used.
+    filter's prediction, decaying to zero), ``calibration`` (the image attitude did not beat the calibrated
+    H this frame: mapped with zero offset, the prior's 1-sigma), ``imu``, ``fused``. ``n_cones``: cones the fit used.
     """
 
     pitch_deg: float = 0.0

@@ -80,6 +80,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="localisation: fixed (the calibration's H, default) or image (each image's camera pitch/roll fitted "
                         "from its own detections first, as `map --boxes --attitude image`; needs mount_pose and "
                         "camera_matrix in the calibration); the table gives each group's median predicted 1-sigma")
+    p.add_argument("--box-model-out", type=Path, default=None, metavar="FILE.yaml",
+                   help="also measure the detector's box model (issue 27: median detected/labelled height and top/bottom "
+                        "offsets per box height at the model input, and per class; whole labelled cones inside --band, "
+                        "matched at --iou and --conf) and write it to FILE.yaml; beside the model as "
+                        "MODEL.pt.box_model.yaml the image attitude uses it")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 

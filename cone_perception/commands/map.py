@@ -7,7 +7,13 @@
          ``u1,v1,u2,v2,score,class_id``, full-image px, optional header line)
   cone-perception map --calib CAL --boxes boxes.csv --attitude image
       -> the same, the boxes taken as ONE frame whose camera attitude is fitted from them first
-         (default with a mount pose in the calibration; the attitude used goes to stderr)
+         (default with a mount pose in the calibration; the attitude used goes to stderr), read through
+         the box model of the detector that drew them (--model, default the shipped model;
+         --box-model rendered for boxes of a synthetic drive)
+  cone-perception map --calib CAL --boxes preds.jsonl [--model MODEL.pt] [--conf 0.25]
+      -> the frames of a prediction file of `detect` (JSON lines), mapped IN ORDER with one attitude
+         filter as the node runs it: one line ``image,x,y,class_id,score,cov_xx,cov_xy,cov_yy`` per
+         kept cone; the attitude per frame and the fit's outcome counts go to stderr
 """
 
 from __future__ import annotations
@@ -16,6 +22,7 @@ import argparse
 from pathlib import Path
 
 from ..geometry.calib import DEFAULT_CAMERA
+from ..params import DEFAULT_CONF
 from ..replay.map import run_map
 
 
@@ -37,10 +44,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--calib", default=DEFAULT_CAMERA, help="calibration YAML or shipped camera name (default: %(default)s)")
     g = p.add_mutually_exclusive_group(required=True)
     g.add_argument("--pixel", type=_pixel, action="append", metavar="U,V", help="a full-image pixel; repeatable")
-    g.add_argument("--boxes", type=Path, metavar="FILE.csv", help="CSV of boxes u1,v1,u2,v2,score,class_id")
+    g.add_argument("--boxes", type=Path, metavar="FILE",
+                   help="CSV of boxes u1,v1,u2,v2,score,class_id (one frame), or a prediction file of `detect` "
+                        "(.jsonl: many frames, mapped in order with one attitude filter)")
     p.add_argument("--attitude", choices=("fixed", "image"), default=None,
                    help="--boxes: fixed (the calibration's H) or image (the boxes are one frame: fit its pitch/roll "
                         "first; needs mount_pose and camera_matrix). Default: image when the calibration has both, else fixed")
+    p.add_argument("--model", type=Path, default=None, metavar="MODEL",
+                   help="--attitude image: the detector that drew the boxes; the fit reads them through its box model "
+                        "(MODEL.box_model.yaml, measured on real frames by `eval --box-model-out`; a model without one "
+                        "gets a conservative default and a warning). Default: the shipped default model")
+    p.add_argument("--box-model", choices=("model", "rendered"), default="model",
+                   help="--attitude image: model (the --model's box model, for real frames; default) or rendered (the "
+                        "rendered drives' box table, for boxes of a synthetic drive)")
+    p.add_argument("--conf", type=float, default=DEFAULT_CONF,
+                   help="a .jsonl prediction file: map only boxes of at least this score (default %(default)s)")
 
 
 def run(args: argparse.Namespace) -> int:

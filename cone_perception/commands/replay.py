@@ -75,6 +75,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="camera attitude per frame: fixed (the calibration's H), image (from the cone boxes), imu (the "
                         "bag's IMU), fused (IMU + image); all but fixed need mount_pose in the calibration. Default: "
                         "fused when the bag has the IMU topic, else image, fixed without a mount pose")
+    p.add_argument("--box-model", choices=("auto", "model", "rendered"), default="auto",
+                   help="offline, attitude image/fused: which box model the image fit reads the detector's boxes with: "
+                        "model (measured on real frames, MODEL.box_model.yaml beside the model file; a model without one "
+                        "gets a conservative default and a warning), rendered (the rendered drives' table, for synthetic "
+                        "bags), auto (rendered with --gt-topic, i.e. a synthetic drive with truth; else model; "
+                        "default %(default)s)")
     p.add_argument("--imu-topic", default="/imu", help="offline: the bag's sensor_msgs/Imu topic (default %(default)s)")
     p.add_argument("--imu-rest", default="0,0", metavar="PITCH,ROLL",
                    help="the IMU's pitch and roll (degrees) with the car at rest on the level calibration ground "

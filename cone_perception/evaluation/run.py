@@ -1,5 +1,5 @@
 """The ``cone-perception eval`` run: a prediction file against ground truth -> report.md, metrics.json and
-plots; or a tracked bag against its drive's truth.
+plots (and the detector's box model with ``--box-model-out``); or a tracked bag against its drive's truth.
 """
 
 from __future__ import annotations
@@ -8,7 +8,9 @@ import argparse
 import logging
 import sys
 
+from ..detector.model_files import write_box_model
 from ..errors import ConfigError
+from ..evaluation.boxfit import format_box_model, measure_box_model
 from ..evaluation.report import evaluate_predictions, format_summary, lowest_score_note, write_report
 from ..evaluation.tracking import (
     evaluate_tracking_bag, format_drive_evaluation, load_drive_truth, write_tracking_report,
@@ -36,7 +38,25 @@ def run_eval(args: argparse.Namespace) -> int:
         raise ConfigError(str(args.out), None, f"cannot write: {e.strerror}") from None
     print(format_summary(res))
     print(f"wrote {', '.join(p.name for p in files.values())} to {args.out}")
+    if args.box_model_out is not None:
+        _write_box_model(args, res)
     return 0
+
+
+def _write_box_model(args: argparse.Namespace, res) -> None:
+    cmd = "cone-perception eval " + " ".join(sys.argv[2:]) if len(sys.argv) > 2 else ""
+    try:
+        bm = measure_box_model(res.images, args.conf, args.iou, args.band,
+                               note=f"{args.pred.name} against {args.gt}, band {args.band}, conf {args.conf}, IoU {args.iou}")
+    except ValueError as e:
+        raise ConfigError(str(args.pred), None, f"--box-model-out: {e}") from None
+    try:
+        write_box_model(args.box_model_out, bm, cmd)
+    except OSError as e:
+        raise ConfigError(str(args.box_model_out), None, f"cannot write: {e.strerror}") from None
+    print("box model (detected box against the labelled cone):")
+    print(format_box_model(bm))
+    print(f"wrote {args.box_model_out}")
 
 
 def _run_tracked(args: argparse.Namespace) -> int:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 import traceback
@@ -9,7 +10,9 @@ from typing import Callable
 
 from .. import ros_env
 from ..errors import ConePerceptionError, ConfigError, FrameError
+from ..records import cdr_stamp_ns
 from ..stats import ERROR, NodeHealth, StreamMonitor
+from . import _shm as shm
 
 try:
     ros_env.apply()  # before rclpy loads the middleware
@@ -30,18 +33,33 @@ try:  # noqa: E402 - Jazzy; Humble has the same classes in rclpy.qos_event
     from rclpy.event_handler import SubscriptionEventCallbacks, UnsupportedEventTypeError
 except ImportError:  # pragma: no cover - Humble
     from rclpy.qos_event import SubscriptionEventCallbacks, UnsupportedEventTypeError
-from rclpy.executors import ExternalShutdownException  # noqa: E402
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup  # noqa: E402
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
+from rclpy.subscription import Subscription  # noqa: E402
+
+#: rclpy passes a callback of two arguments the message info, with the publisher's sequence number
+#: (Iron and later; Humble's rclpy passes the message only).
+MESSAGE_INFO = hasattr(Subscription, "CallbackType")
+#: Image inputs get a counting path (a second, raw subscription) where the callbacks get no sequence numbers.
+COUNTING_PATH = not MESSAGE_INFO
+#: The message info's value when the middleware has no sequence numbers (RMW_MESSAGE_INFO_SEQUENCE_NUMBER_UNSUPPORTED).
+_SEQ_UNSUPPORTED = 2**64 - 1
 
 #: Images in: best effort, newest frame only (a slow frame never builds a queue of stale ones).
 QOS_IMAGE_IN = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.BEST_EFFORT)
 #: Images out: reliable, so both reliable and best-effort subscribers match.
 QOS_IMAGE_OUT = QoSProfile(depth=2, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
+#: The counting path of an image input (:meth:`PerceptionNode.subscribe_frames`): every frame, as bytes,
+#: with a queue deep enough for the counting thread's hiccups (0.25 s at 200 Hz); only the stamp is read.
+QOS_IMAGE_COUNT = QoSProfile(depth=50, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.BEST_EFFORT)
 #: Small messages (boxes, cones, markers): reliable, short queue.
 QOS_DATA = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
 
 WARN_THROTTLE_S = 2.0
+#: ``CONE_PERCEPTION_SHM_CLEAN=0``: a node's start does not remove stale shared-memory files (:func:`clean_stale_shm`).
+SHM_CLEAN_VAR = "CONE_PERCEPTION_SHM_CLEAN"
 
 
 class PerceptionNode(Node):
@@ -54,6 +72,14 @@ class PerceptionNode(Node):
     (:data:`cone_perception.params.COMMON_PARAMS`). ``name`` is the node executable's name
     (:data:`cone_perception.params.NODES`): its parameter table (:attr:`param_specs`), which
     :func:`~cone_perception.nodes._params.declare` declares from.
+
+    Every frame sent on an image input (best effort, depth 1: newest frame only) is accounted for
+    (:mod:`cone_perception.stats`): the publisher's sequence number of each frame taken (in the
+    message info, :data:`MESSAGE_INFO`) says how many were sent in between, replaced in the queue or
+    lost in transport (the middleware's lost-message event). Where the callbacks get no sequence
+    numbers (Humble), a counting path beside each image input sees every frame that reaches the node
+    (:meth:`subscribe_frames`), on its own thread: :func:`run_node` then spins the node with a
+    two-thread executor, every other callback in the node's default (mutually exclusive) group.
     """
 
     def __init__(self, name: str, **kwargs):
@@ -67,6 +93,7 @@ class PerceptionNode(Node):
         self._last_warn: dict[str, float] = {}
         self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._diag_timer = self.create_timer(1.0, self._publish_diagnostics)
+        self._counting_group = MutuallyExclusiveCallbackGroup()
 
     def _now_ns(self) -> int:
         return self.get_clock().now().nanoseconds
@@ -88,13 +115,20 @@ class PerceptionNode(Node):
         if optional:
             stream.timeout_s, stream.optional = 0.0, True
 
-        def callback(msg):
+        def on_message(msg, info=None):
             try:
-                stream.observe(_stamp_ns(msg), self._now_ns())
+                stream.observe(_stamp_ns(msg), self._now_ns(), _seq(info))
             except Exception:  # noqa: BLE001 - a header that is not one: the handler's guard counts the message
                 pass
             self.run_guarded(handler, msg, stream, frames)
 
+        if not MESSAGE_INFO:
+            return on_message
+
+        def callback(msg, info):  # two arguments: rclpy passes the message info
+            on_message(msg, info)
+
+        callback.message_only = on_message  # for calling it directly (tests, fuzz)
         return callback
 
     def _may_warn(self, reason: str) -> bool:
@@ -145,18 +179,45 @@ class PerceptionNode(Node):
         self, msgtype, topic: str, handler: Callable, qos: QoSProfile = QOS_IMAGE_IN, frames: bool = True
     ):
         """A guarded subscription (:meth:`guarded`) whose middleware-lost messages are counted too
-        (``lost`` on the topic's monitor; where the middleware has no such event, stamp gaps only)."""
+        (``lost`` on the topic's monitor, where the middleware has such an event).
+
+        Where the callbacks get no sequence numbers (:data:`COUNTING_PATH`), an image input (best
+        effort, depth 1) also gets a counting path: a second
+        subscription (depth :data:`QOS_IMAGE_COUNT`, raw bytes, its own callback group) whose callback
+        reads only the header stamp of every frame (:func:`~cone_perception.records.cdr_stamp_ns`) for
+        the topic's :class:`~cone_perception.stats.StreamMonitor`: frames replaced before processing
+        and frames lost upstream are counted from it."""
         callback = self.guarded(handler, topic, frames)
         stream = self.health.streams[self.resolve_topic_name(topic)]
+        counting = COUNTING_PATH and frames and qos == QOS_IMAGE_IN
+        if counting:
+            stream.counted = True
+
+            def on_arrival(raw: bytes) -> None:
+                try:
+                    stream.arrive(cdr_stamp_ns(raw), self._now_ns())
+                except Exception as e:  # noqa: BLE001 - counting must never stop the node
+                    if self._may_warn("counting"):
+                        self.get_logger().warning(f"counting path of {stream.topic}: {type(e).__name__}: {e}")
+
+            self._subscribe_with_lost(msgtype, topic, on_arrival, QOS_IMAGE_COUNT, stream,
+                                          callback_group=self._counting_group, raw=True)
+        return self._subscribe_with_lost(msgtype, topic, callback, qos, None if counting else stream)
+
+    def _subscribe_with_lost(self, msgtype, topic: str, callback: Callable, qos: QoSProfile,
+                                 stream: StreamMonitor | None, **kwargs):
+        """``create_subscription`` that adds the middleware's lost messages to ``stream.lost`` (if a stream)."""
+        if stream is None:
+            return self.create_subscription(msgtype, topic, callback, qos, **kwargs)
 
         def on_lost(info) -> None:
             stream.lost += int(info.total_count_change)
 
         try:
-            return self.create_subscription(msgtype, topic, callback, qos,
+            return self.create_subscription(msgtype, topic, callback, qos, **kwargs,
                                             event_callbacks=SubscriptionEventCallbacks(message_lost=on_lost))
         except (UnsupportedEventTypeError, TypeError):  # no such event in this middleware / rclpy
-            return self.create_subscription(msgtype, topic, callback, qos)
+            return self.create_subscription(msgtype, topic, callback, qos, **kwargs)
 
     def advertise_cones(self, frame_id: str, markers: bool) -> None:
         """Publishers of ``/cones``, ``/cones/markers`` (published if ``markers``) and ``cones/attitude``
@@ -203,9 +264,34 @@ class PerceptionNode(Node):
             self.get_logger().warning(f"{what}: {rep.message}", throttle_duration_sec=5.0)
 
 
+def _seq(info) -> int | None:
+    """The publisher's sequence number in a message info, or None where there is none."""
+    try:
+        seq = info["publication_sequence_number"] if info is not None else None
+    except (KeyError, TypeError):
+        return None
+    return int(seq) if isinstance(seq, int) and 0 < seq < _SEQ_UNSUPPORTED else None
+
+
 def _stamp_ns(msg) -> int | None:
     header = getattr(msg, "header", None)
     return None if header is None else _msgs.stamp_ns(header)
+
+
+def clean_stale_shm(name: str) -> None:
+    """Before the participant starts: remove the shared-memory files of dead processes (a node killed
+    with ``kill -9``, its predecessor under launch's respawn), never a live one's
+    (:func:`cone_perception.nodes._shm.clean_stale`). Not in the ``system`` DDS mode (the car's own set-up
+    is left alone) nor with ``CONE_PERCEPTION_SHM_CLEAN=0``."""
+    if ros_env.mode_of() == "system" or os.environ.get(SHM_CLEAN_VAR, "1").strip() == "0":
+        return
+    try:
+        rep = shm.clean_stale()
+    except Exception as e:  # noqa: BLE001 - a failed clean-up must not keep the node from starting
+        print(f"[{name}] shared-memory clean-up failed: {type(e).__name__}: {e}", file=sys.stderr)
+        return
+    if rep.removed:
+        print(f"[{name}] {rep.line()}", file=sys.stderr)
 
 
 def run_node(factory: Callable[[], Node], args: list[str] | None = None, name: str = "cone_perception") -> int:
@@ -215,11 +301,15 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None, name: s
     if name in NODES and wants_help(list(args[1:])):
         sys.stdout.write(help_text(name))
         return 0
+    clean_stale_shm(name)
     rclpy.init(args=args)
-    node = None
+    node = executor = None
     try:
         node = factory()
-        rclpy.spin(node)
+        # with counting paths (Humble) they run on a second thread beside the processing
+        executor = MultiThreadedExecutor(num_threads=2) if COUNTING_PATH else SingleThreadedExecutor()
+        executor.add_node(node)
+        executor.spin()
     except ConePerceptionError as e:
         print(f"[{name}] error: {e}", file=sys.stderr)
         return 1
@@ -228,6 +318,8 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None, name: s
     except ExternalShutdownException:
         pass
     finally:
+        if executor is not None:
+            executor.shutdown(timeout_sec=1.0)
         if node is not None:
             if hasattr(node, "stats"):
                 print(f"[{name}] stopping: {node.health.summary() if hasattr(node, 'health') else node.stats.summary()}",

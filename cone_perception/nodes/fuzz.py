@@ -30,6 +30,7 @@ from ..errors import FrameError
 from ..geometry.calib import DEFAULT_CAMERA, load_calibration
 from ..imageheader import declared_size
 from ..records import BOX_DTYPE, boxes_from_arrays
+from ..timing import rss_mb
 from . import _msgs
 from .detection import DetectionNode
 from .driver_adapter import DriverAdapterNode
@@ -43,15 +44,6 @@ TARGETS = ("driver_adapter_raw", "driver_adapter_compressed", "detection", "mapp
 BOMB_KINDS = ("bomb",)
 
 
-def rss_mb() -> float:
-    """Resident set size of this process now (MB; Linux /proc)."""
-    try:
-        for line in open("/proc/self/status", encoding="ascii"):
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) / 1024
-    except OSError:
-        pass
-    return float("nan")
 
 
 @dataclass
@@ -262,10 +254,10 @@ class Generators:
 # -- targets -----------------------------------------------------------------------------------------
 
 def _callback(node, msgtype) -> Callable:
-    subs = [s for s in node.subscriptions if s.msg_type is msgtype]
+    subs = [s for s in node.subscriptions if s.msg_type is msgtype and not s.raw]  # not the counting path
     if len(subs) != 1:
         raise RuntimeError(f"{node.get_name()}: expected one {msgtype.__name__} subscription, found {len(subs)}")
-    return subs[0].callback
+    return getattr(subs[0].callback, "message_only", subs[0].callback)
 
 
 def build_target(name: str, context, gen: Generators, params: dict | None = None):

@@ -1,5 +1,5 @@
-"""The ``cone-perception map`` run: pixels or a boxes CSV through a calibration's mapper -> rear_axle metres
-(and the attitude a single frame's boxes give) on stdout.
+"""The ``cone-perception map`` run: pixels, a boxes CSV or a prediction file through a calibration's mapper ->
+rear_axle metres (and the attitude the boxes give) on stdout.
 """
 
 from __future__ import annotations
@@ -9,11 +9,13 @@ import sys
 
 import numpy as np
 
-from ..attitude import attitude_estimator
+from ..attitude import ImageAttitudeConfig, attitude_estimator, attitude_for_boxes
+from ..data.predictions import read_predictions
+from ..detector.model_files import box_model_or_default, default_model_path
 from ..errors import ConfigError, FrameError
 from ..geometry.calib import load_calibration
 from ..mapping import ConeMapper, validate_boxes
-from ..records import read_boxes_csv
+from ..records import BOX_DTYPE, read_boxes_csv
 
 
 def run_map(args: argparse.Namespace) -> int:
@@ -26,12 +28,17 @@ def run_map(args: argparse.Namespace) -> int:
         for (u, v), (x, y) in zip(uv, xy):
             out.write(f"{u:g},{v:g},{x:.4f},{y:.4f}\n")
         return 0
+    config = None
+    if args.box_model == "model" and (args.attitude == "image" or args.attitude is None and calib.has_attitude_model):
+        config = ImageAttitudeConfig(box_model=box_model_or_default(args.model or default_model_path()))
+    mode, est = attitude_estimator(mapper, args.attitude, None, config)
+    if args.boxes.suffix == ".jsonl":
+        return _run_sequence(args, calib, mapper, mode, est)
     boxes = read_boxes_csv(args.boxes)
     try:
         validate_boxes(boxes)
     except FrameError as e:
         raise ConfigError(str(args.boxes), None, str(e)) from None
-    mode, est = attitude_estimator(mapper, args.attitude)
     att = None
     if est is not None:
         b = np.column_stack([boxes["u1"], boxes["v1"], boxes["u2"], boxes["v2"]]).astype(np.float64)
@@ -44,4 +51,30 @@ def run_map(args: argparse.Namespace) -> int:
             f"{c['x']:.4f},{c['y']:.4f},{int(c['class_id'])},{c['score']:.4f},"
             f"{c['cov_xx']:.6g},{c['cov_xy']:.6g},{c['cov_yy']:.6g}\n"
         )
+    return 0
+
+
+def _run_sequence(args: argparse.Namespace, calib, mapper: ConeMapper, mode: str, est) -> int:
+    """The frames of a prediction file in order, one attitude filter across them (as the node sees a stream)."""
+    out = sys.stdout
+    n_frames = 0
+    for pred in read_predictions(args.boxes):
+        b = pred.boxes[pred.boxes["score"] >= args.conf].astype(BOX_DTYPE)
+        sx, sy = calib.image_width / pred.width, calib.image_height / pred.height  # image px -> the calibration's px
+        b["u1"] *= sx
+        b["u2"] *= sx
+        b["v1"] *= sy
+        b["v2"] *= sy
+        att = attitude_for_boxes(est, b)
+        n_frames += 1
+        if est is not None:
+            print(f"{pred.image}: attitude ({mode}, {att.source}, {att.n_cones} cones): pitch {att.pitch_deg:+.3f} +- "
+                  f"{att.sigma_pitch_deg:.3f} deg, roll {att.roll_deg:+.3f} +- {att.sigma_roll_deg:.3f} deg", file=sys.stderr)
+        for c in mapper.map_boxes(b, att):
+            out.write(f"{pred.image},{c['x']:.4f},{c['y']:.4f},{int(c['class_id'])},{c['score']:.4f},"
+                      f"{c['cov_xx']:.6g},{c['cov_xy']:.6g},{c['cov_yy']:.6g}\n")
+    summary = f"{n_frames} frames of {args.boxes}"
+    if est is not None:
+        summary += ", attitude fits: " + ", ".join(f"{k} {v}" for k, v in est.counts.as_dict().items())
+    print(summary, file=sys.stderr)
     return 0

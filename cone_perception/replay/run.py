@@ -16,12 +16,13 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from ..attitude import ImuAttitude
+from ..attitude import ImageAttitudeConfig, ImuAttitude
 from ..data.bagio import bag_topics, check_new_output
 from ..data.bags import read_attitude_truth, read_ground_truth, read_twists
 from ..data.outfiles import print_written, refuse_existing, remove_bag
 from ..detector import Detector, default_model_path
 from ..detector.farband import FarBand, far_band_crop
+from ..detector.model_files import box_model_or_default
 from ..errors import ConfigError
 from ..evaluation import GT_MIN_VISIBLE, LocalisationReport, format_localisation
 from ..evaluation.attitude import attitude_plot, format_attitude_report
@@ -100,7 +101,11 @@ def _run_offline(args, calib) -> dict:
         far = FarBand.load(det.source, args.far_rows, calib.image_width, calib.image_height, calib.crop, "--far-rows",
                            backend=args.backend, conf=conf, threads=args.threads or None, bf16=args.bf16)
     imu = _imu_source(args, calib)
-    pipeline = Pipeline(calib, det, args.attitude, imu, far, cones_conf=args.conf if args.track_conf is not None else None)
+    att_cfg = None
+    if args.box_model == "model" or (args.box_model == "auto" and not args.gt_topic):
+        att_cfg = ImageAttitudeConfig(box_model=box_model_or_default(det.source))
+    pipeline = Pipeline(calib, det, args.attitude, imu, far, cones_conf=args.conf if args.track_conf is not None else None,
+                        attitude_config=att_cfg)
     res = offline_replay(args.bag, pipeline, args.topic, args.out, args.gt_topic,
                          _progress(args.no_progress), imu_topic=args.imu_topic, tracking=tracking)
     stages = res.timer.summary()
@@ -125,7 +130,8 @@ def _run_offline(args, calib) -> dict:
                       f"{args.bag.name}: attitude {res.attitude_mode}")
         print_written([args.attitude_png], "replay")
     return {"mode": "offline", "frames": n, "dropped": dict(res.stats.dropped), "wall_s": res.wall_s,
-            "stages": stages, "localisation": res.localisation, "tracking": res.tracking}
+            "stages": stages, "localisation": res.localisation, "tracking": res.tracking,
+            "attitude_fits": res.pipeline_attitude}
 
 
 def tracker_config(settings: list[str]) -> TrackerConfig:

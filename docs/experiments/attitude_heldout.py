@@ -30,9 +30,9 @@ def rest(bag: str) -> str:
     return f"{p},{r}"
 
 
-def replay(bag: str, mode: str, imu_rest: str, far_rows: str | None) -> dict:
-    js = Path(f"{bag}_{mode}{'_far' if far_rows else ''}.json")
-    extra = ["--far-rows", far_rows] if far_rows else []
+def replay(bag: str, mode: str, imu_rest: str, far_rows: str | None, box_model: str = "auto") -> dict:
+    js = Path(f"{bag}_{mode}{'_far' if far_rows else ''}{'' if box_model == 'auto' else '_' + box_model}.json")
+    extra = (["--far-rows", far_rows] if far_rows else []) + (["--box-model", box_model] if box_model != "auto" else [])
     subprocess.run(CLI + ["replay", bag, "--calib", f"{bag}_calib.yaml", "--gt-topic", "/cones_gt", "--attitude", mode,
                           f"--imu-rest={imu_rest}", "--json", str(js), "--force", "--no-progress", *extra],
                    check=True, capture_output=True, text=True)
@@ -44,15 +44,17 @@ def main() -> None:
     ap.add_argument("bags", nargs="+")
     ap.add_argument("--modes", default=",".join(MODES), help="comma-separated attitude modes (default all four)")
     ap.add_argument("--far-rows", default=None, metavar="V0,V1", help="replay with the far band on these rows")
+    ap.add_argument("--box-model", default="auto", choices=("auto", "model", "rendered"),
+                    help="replay --box-model (default auto: the rendered table, these bags having /cones_gt)")
     args = ap.parse_args()
     modes = [m for m in args.modes.split(",") if m]
-    label = " + far band" if args.far_rows else ""
+    label = (" + far band" if args.far_rows else "") + ("" if args.box_model == "auto" else f", {args.box_model} box model")
     print("| bag | `--imu-rest` | mode | recall < 15 m | 0-4 m | 4-7 m | 7-15 m | 15-25 m | pitch / roll err (deg) | attitude ms | end to end ms |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for bag in (b.rstrip("/") for b in args.bags):
         r = rest(bag)
         for mode in modes:
-            s = replay(bag, mode, r, args.far_rows)
+            s = replay(bag, mode, r, args.far_rows, args.box_model)
             loc = s["localisation"]
             g = [loc["groups"][k] for k in ("near 0-4 m", "mid 4-7 m", "far 7-15 m")]
             recall = sum(x["n_matched"] for x in g) / max(sum(x["n_true"] for x in g), 1)
@@ -63,6 +65,8 @@ def main() -> None:
             print(f"| {Path(bag).name} | {r} | {mode}{label} | {recall:.3f} | " + " | ".join(f"{x['median_err_m']:.3f}" for x in g)
                   + f" | {loc['extra_groups']['15-25 m']['median_err_m']:.3f} | {err} | " + (f"{ms:.2f}" if ms else "-")
                   + f" | {s['stages']['end_to_end']['median_ms']:.1f} |", flush=True)
+            if s.get("attitude_fits"):
+                print(f"<!-- {Path(bag).name} {mode}: {s['attitude_fits']} -->", flush=True)
 
 
 if __name__ == "__main__":

@@ -1,0 +1,128 @@
+"""How a detector's boxes relate to the labelled cones (:class:`BoxModel`), so the image fit reads its
+box tops and bottoms as the cones' (issue 27).
+
+A detector's box is not the labelled cone's: on real frames the shipped detector's boxes are shorter
+than the labels (tops low, bottoms high), while on rendered drives they are within tenths of a pixel
+(:data:`~cone_perception.attitude.image.ImageAttitudeConfig.top_bias_extra_px`, the synthetic case). A
+box model holds, per box height bucket (px at the model input), the median of
+
+- ``height_ratio``: detected height / labelled height,
+- ``top_low``: (detected top - labelled top) / labelled height (positive: the box top lies below the label's),
+- ``bottom_high``: (labelled bottom - detected bottom) / labelled height (positive: the box bottom lies above),
+
+measured on labelled frames (``cone-perception eval --box-model-out``,
+:func:`cone_perception.evaluation.boxfit.measure_box_model`) and stored beside the model file
+(:func:`cone_perception.detector.model_files.read_box_model`). :meth:`BoxModel.correct` turns detected
+boxes into the label-like boxes the fit's cone model expects. :data:`DEFAULT_BOX_MODEL` (no shift, a wide
+per-cone spread) is the conservative stand-in for a model without one. ROS-free, no I/O.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+#: Lower edges of the height buckets (px at the model input); the last is open.
+BOX_MODEL_BUCKETS_PX = (8.0, 12.0, 24.0, 48.0)
+
+
+@dataclass(frozen=True)
+class BoxModel:
+    """Per height bucket (lower edges ``buckets_px`` at the model input, the last open): the medians of
+    ``height_ratio``, ``top_low`` and ``bottom_high`` (module doc), the matched cones ``counts``;
+    ``sigma_rel``: the spread (1.4826 MAD) of the top offset, the fit's per-cone uncertainty as a
+    fraction of the box height (labelling noise included); ``input_scale``: model input px per full-image px the detector ran at (buckets are
+    looked up at ``box height * input_scale``); ``source``: ``measured`` (with ``note`` saying on what)
+    or ``default``."""
+
+    buckets_px: tuple = BOX_MODEL_BUCKETS_PX
+    height_ratio: tuple = (1.0, 1.0, 1.0, 1.0)
+    top_low: tuple = (0.0, 0.0, 0.0, 0.0)
+    bottom_high: tuple = (0.0, 0.0, 0.0, 0.0)
+    counts: tuple = (0, 0, 0, 0)
+    sigma_rel: float = 0.08
+    input_scale: float = 0.5
+    source: str = "default"
+    note: str = ""
+    by_class: dict | None = None  # class name -> {"height_ratio", "top_low", "bottom_high", "count"} (report only)
+
+    def _table(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Bucket centres (px at the model input) and values of the buckets with cones (all when none has)."""
+        edges = np.asarray(self.buckets_px, dtype=np.float64)
+        centres = np.append(0.5 * (edges[:-1] + edges[1:]), 1.5 * edges[-1])
+        have = np.asarray(self.counts) > 0
+        if not have.any():
+            have[:] = True
+        return (centres[have], np.asarray(self.height_ratio, np.float64)[have], np.asarray(self.top_low, np.float64)[have],
+                np.asarray(self.bottom_high, np.float64)[have])
+
+    def at(self, height_px: np.ndarray, input_scale: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(height_ratio, top_low, bottom_high)`` (N,) for detected boxes (N,) full-image px high,
+        interpolated between bucket centres, ends held."""
+        s = self.input_scale if input_scale is None else float(input_scale)
+        h = np.asarray(height_px, dtype=np.float64) * s
+        c, r, t, b = self._table()
+        return np.interp(h, c, r), np.interp(h, c, t), np.interp(h, c, b)
+
+    def correct(self, boxes: np.ndarray, input_scale: float | None = None) -> np.ndarray:
+        """(N, 4) detected boxes (u1, v1, u2, v2 full-image px) -> the labelled boxes they stand for: the
+        labelled height is the detected one over the ratio; the top moves up by ``top_low``, the bottom
+        down by ``bottom_high`` of it. Columns u unchanged."""
+        b = np.array(boxes, dtype=np.float64).reshape(-1, 4)
+        if len(b) == 0:
+            return b
+        r, t, bo = self.at(b[:, 3] - b[:, 1], input_scale)
+        label_h = (b[:, 3] - b[:, 1]) / np.maximum(r, 1e-3)
+        b[:, 1] -= t * label_h
+        b[:, 3] += bo * label_h
+        return b
+
+    def median_row(self, i: int) -> str:
+        """One bucket as text (cards, warnings)."""
+        lo = self.buckets_px[i]
+        hi = self.buckets_px[i + 1] if i + 1 < len(self.buckets_px) else None
+        name = f"{lo:g}-{hi:g} px" if hi is not None else f">= {lo:g} px"
+        return (f"{name}: {self.counts[i]} cones, height x{self.height_ratio[i]:.3f}, top {100 * self.top_low[i]:+.1f} % low, "
+                f"bottom {100 * self.bottom_high[i]:+.1f} % high")
+
+    def to_dict(self) -> dict:
+        """Plain types (the sidecar's ``box_model`` mapping)."""
+        d = {"source": self.source, "note": self.note, "input_scale": float(self.input_scale),
+             "sigma_rel": round(float(self.sigma_rel), 4), "buckets_px": [float(x) for x in self.buckets_px],
+             "height_ratio": [round(float(x), 4) for x in self.height_ratio],
+             "top_low": [round(float(x), 4) for x in self.top_low],
+             "bottom_high": [round(float(x), 4) for x in self.bottom_high], "counts": [int(x) for x in self.counts]}
+        if self.by_class:
+            d["by_class"] = self.by_class
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict, where: str = "box_model") -> "BoxModel":
+        """The inverse of :meth:`to_dict`; ValueError naming ``where`` and the field for a bad mapping."""
+        if not isinstance(d, dict):
+            raise ValueError(f"{where}: must be a mapping")
+        buckets = d.get("buckets_px")
+        if not isinstance(buckets, list) or not buckets or sorted(buckets) != buckets:
+            raise ValueError(f"{where}.buckets_px: must be a non-empty increasing list of px")
+        n = len(buckets)
+        vals = {}
+        for k in ("height_ratio", "top_low", "bottom_high", "counts"):
+            v = d.get(k)
+            if not isinstance(v, list) or len(v) != n or not all(isinstance(x, (int, float)) and np.isfinite(x) for x in v):
+                raise ValueError(f"{where}.{k}: must be a list of {n} finite numbers (one per bucket)")
+            vals[k] = tuple(v)
+        if not all(0.3 <= r <= 3.0 for r in vals["height_ratio"]):
+            raise ValueError(f"{where}.height_ratio: values must lie within 0.3..3")
+        for k in ("sigma_rel", "input_scale"):
+            if not isinstance(d.get(k), (int, float)) or not d[k] > 0:
+                raise ValueError(f"{where}.{k}: must be a positive number")
+        return cls(tuple(float(x) for x in buckets), vals["height_ratio"], vals["top_low"], vals["bottom_high"],
+                   tuple(int(x) for x in vals["counts"]), float(d["sigma_rel"]), float(d["input_scale"]),
+                   str(d.get("source", "measured")), str(d.get("note", "")), d.get("by_class"))
+
+
+#: A model without a measured box model: no shift (the boxes taken as the labels) and a per-cone spread of
+#: 8 % of the box height (above the shipped models' measured 6.6-6.8 %, the fit's own 3 %), so its fits count
+#: for less and fall back to the calibration sooner.
+DEFAULT_BOX_MODEL = BoxModel()

@@ -1,0 +1,108 @@
+"""``cone-perception soak``: a drive published at a given rate for a given time into a live node; every
+frame accounted for, memory and latency over time.
+
+  cone-perception soak [--rate 30] [--seconds 600] [--bag BAG] [--json FILE] [--plot FILE.png]
+
+Starts the fused ``pipeline`` node as a process (localhost DDS, a ROS domain of its own), publishes
+a synthetic drive (rendered once, ``--drive-seconds`` at 20 Hz, YUYV 1920x1080; or ``--bag``'s camera
+frames) looped and re-stamped at ``--rate`` for ``--seconds``, and reports from the node's own
+``/diagnostics`` counts: sent, processed, dropped by cause, replaced in the queue, missing (lost
+upstream), queued and **uncounted** (sent minus all of those), then per window the rates, the node's
+RSS and the latency publish -> ``/cones`` (p50, p99). Exit 1 when a target is missed: uncounted 0,
+RSS of the last minute within 5 % of the first, latency p99 of the last minute no higher than the
+first, the node alive. Figures: docs/robustness.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import sys
+import tempfile
+from pathlib import Path
+
+from tqdm import tqdm
+
+from ..bench import soak as core
+from ..data.outfiles import print_written, refuse_existing
+from ..errors import ConfigError
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--rate", type=float, default=30.0, help="frames per second published (default %(default)s)")
+    p.add_argument("--seconds", type=float, default=60.0, help="how long to publish, in s (default %(default)s)")
+    p.add_argument("--bag", type=Path, default=None,
+                   help="play this rosbag's camera frames (default: render a synthetic drive, see --drive-seconds)")
+    p.add_argument("--topic", default=None, help="--bag's camera topic (default: its only image topic)")
+    p.add_argument("--drive-seconds", type=float, default=3.0,
+                   help="length of the synthetic drive rendered and looped, at 20 Hz (default %(default)s: 60 frames, "
+                        "240 MB of YUYV in memory)")
+    p.add_argument("--seed", type=int, default=2026, help="synthetic drive's seed (default %(default)s)")
+    p.add_argument("--calib", default=None,
+                   help="calibration of the node (default: the synthetic drive's, or the node's default with --bag)")
+    p.add_argument("--model", default=None, help="model file of the node (default: the shipped one)")
+    p.add_argument("--param", action="append", default=[], metavar="NAME:=VALUE",
+                   help="another node parameter (repeatable), e.g. --param threads:=1")
+    p.add_argument("--window", type=float, default=10.0, help="seconds per row of the time table (default %(default)s)")
+    p.add_argument("--domain-id", type=int, default=None,
+                   help="ROS_DOMAIN_ID of the soak (default: one from this process id, 150-229)")
+    p.add_argument("--json", type=Path, default=None, help="also write the result as JSON")
+    p.add_argument("--plot", type=Path, default=None, help="also draw rates, RSS and latency over time (PNG)")
+    p.add_argument("--force", action="store_true", help="overwrite existing --json / --plot")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def run(args: argparse.Namespace) -> int:
+    if not args.rate > 0 or not args.seconds > 0 or not args.window > 0:
+        raise ConfigError("soak", None, "--rate, --seconds and --window must be > 0")
+    if args.domain_id is not None and not 0 <= args.domain_id <= 232:
+        raise ConfigError("--domain-id", None, f"must be within 0-232, got {args.domain_id}")
+    outs = [p for p in (args.json, args.plot) if p]
+    refuse_existing(outs, args.force, "soak")
+    for p in args.param:
+        if ":=" not in p:
+            raise ConfigError("--param", None, f"expected NAME:=VALUE, got {p!r}")
+    os.environ["ROS_DOMAIN_ID"] = str(args.domain_id if args.domain_id is not None else 150 + os.getpid() % 80)
+
+    from ..nodes import soak as player  # rclpy and the localhost DDS environment: on use only
+
+    tmp = Path(tempfile.mkdtemp(prefix="cone_perception_soak_"))
+    try:
+        frames, compressed, topic, calib = player.drive_frames(args.bag, args.topic, tmp, args.drive_seconds, args.seed,
+                                                               args.calib, not args.no_progress)
+        node_args = []
+        for k, v in (("calibration", calib), ("model", args.model)):
+            if v:
+                node_args += ["-p", f"{k}:={Path(v).resolve() if Path(v).exists() else v}"]
+        for p in args.param:
+            node_args += ["-p", p]
+        if compressed:
+            node_args += ["-p", "input_transport:=compressed", "-r", f"image_raw/compressed:={topic}"]
+        else:
+            node_args += ["-r", f"image_raw:={topic}"]
+        print(f"soak: {len(frames)} frames looped at {args.rate:g} Hz for {args.seconds:g} s into a pipeline node "
+              f"(ROS_DOMAIN_ID {os.environ['ROS_DOMAIN_ID']}, localhost)", file=sys.stderr)
+        bar = tqdm(total=round(args.seconds), unit="s", desc="soak", file=sys.stderr, disable=args.no_progress)
+
+        def progress(t: float) -> None:
+            bar.update(max(0, round(t) - bar.n))
+
+        res = player.soak(frames, compressed, topic, args.rate, args.seconds, node_args, window_s=args.window,
+                   progress=progress)
+        bar.close()
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    r = core.summarize(res.sent, res.base, res.final, topic, res.windows, args.window, args.rate, args.seconds,
+                       res.wall_s, res.cones, res.died)
+    print(core.format_report(r))
+    if res.died is not None:
+        print(f"soak: the node exited with code {res.died}:\n{res.node_output[-3000:]}", file=sys.stderr)
+    if args.json:
+        args.json.write_text(json.dumps(core.to_json(r), indent=1))
+    if args.plot:
+        core.plot(r, args.plot)
+    if outs:
+        print_written(outs, "soak")
+    return 0 if r["passed"] else 1
