@@ -149,6 +149,7 @@ class _Recorder:
     def __init__(self, res: LiveResult, primer_stamp: int | None):
         self.res, self.primer_stamp = res, primer_stamp
         self.primer_seen: list[int] = []
+        self.primer_boxes: list[int] = []
         self.primer_tracked: list[int] = []
         self.sent_at: dict[int, float] = {}
 
@@ -159,7 +160,9 @@ class _Recorder:
             node.create_subscription(PointCloud2, TRACKED_TOPIC, self.on_tracked, QOS_DATA, raw=True)
 
     def primed(self, track: bool) -> bool:
-        return bool(self.primer_seen) and (not track or bool(self.primer_tracked))
+        """The primer came back on every recorded topic: each publisher has matched this node's subscription
+        (``/cones`` alone would not prove it for ``cone_boxes``, whose other subscriber is the mapping node)."""
+        return bool(self.primer_seen) and bool(self.primer_boxes) and (not track or bool(self.primer_tracked))
 
     def on_cones(self, raw: bytes) -> None:
         stamp, msg = _stamp_of(raw)
@@ -176,6 +179,7 @@ class _Recorder:
     def on_boxes(self, raw: bytes) -> None:
         stamp, msg = _stamp_of(raw)
         if stamp == self.primer_stamp:
+            self.primer_boxes.append(stamp)
             return
         self.res.boxes[stamp] = _msgs.boxes_from_msg(msg)
         self.res.raw.append((BOXES_TOPIC, stamp, raw))
@@ -254,7 +258,7 @@ def live_replay(
     node with ``-p``. Node processes are always stopped at the end.
 
     Before the first recorded frame, a primer (the first frame under another stamp) is sent until
-    its ``/cones`` comes back: that proves every link of the chain is matched (the graph can list
+    its ``/cones`` and ``cone_boxes`` come back: that proves every link of the chain is matched (the graph can list
     an endpoint before its publisher delivers to it) and warms the model up. The primer is not
     part of the result (with ``track`` the tracker starts from it: its tracks are predicted over the
     1 s gap to the first frame).
@@ -279,7 +283,8 @@ def live_replay(
         end = _wait_ready(node, executor, pub, procs, mode, track, ready_timeout_s)
         while frames and not rec.primed(track):
             if time.monotonic() > end:
-                raise ConfigError("live replay", None, f"no /cones for the primer frame after {ready_timeout_s:.0f} s")
+                raise ConfigError("live replay", None, "the primer frame did not come back on /cones and cone_boxes "
+                                  f"after {ready_timeout_s:.0f} s")
             pub.publish(primer_raw)
             resend = time.monotonic() + 2.0
             while not rec.primed(track) and time.monotonic() < resend:
