@@ -31,7 +31,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "data": ("data", "dataset converters: fsoco-to-yolo, restore-aspect"),
     "speed": ("speed", "forward micro-benchmark of detector sizes and backends"),
     "eval": ("eval", "evaluate a prediction file against ground truth -> report.md, metrics.json, plots"),
-    "params": ("params", "the nodes' parameters from their schema; --write / --check the README tables and docstrings"),
+    "params": ("params", "the nodes' parameters from their schema; --write / --check the tables of docs/nodes.md and the docstrings"),
     "fuzz": ("fuzz", "malformed messages through the nodes' callbacks: crashes, counts, time, RSS"),
     "soak": ("soak", "a drive at a given rate for a given time into a live node: every frame accounted for, RSS, latency"),
 }

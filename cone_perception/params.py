@@ -3,9 +3,9 @@ changed at run time; which node declares which, and each node's topics. ROS-free
 
 The nodes declare their parameters from here (``nodes/_params.py`` turns a :class:`ParamSpec` into an
 rclpy ``ParameterDescriptor``: description, range, ``read_only`` unless ``dynamic``), so ``ros2 param
-describe`` shows the same text and range as the README's tables, the node modules' docstrings and each
+describe`` shows the same text and range as the tables of docs/nodes.md, the node modules' docstrings and each
 node executable's ``--help``, which are all generated from :data:`NODES` (``cone-perception params
---write`` rewrites the README's tables and the docstrings; a test fails when they drift). Parameters
+--write`` rewrites those tables and the docstrings; a test fails when they drift). Parameters
 marked ``dynamic`` can be changed at run time (``ros2 param set``): :meth:`ParamSpec.check` says why a
 value is refused, and the node keeps its old value then.
 """
@@ -51,7 +51,7 @@ class ParamSpec:
 
     name: str
     default: Value
-    description: str  # plain text: ros2 param describe, --help, docstrings and the README
+    description: str  # plain text: ros2 param describe, --help, docstrings and docs/nodes.md
     min: float | None = None
     max: float | None = None
     choices: tuple[str, ...] | None = None
@@ -242,7 +242,7 @@ def _by_name(*names: str) -> tuple[ParamSpec, ...]:
 
 _DIAG = "`/diagnostics` (diagnostic_msgs/DiagnosticArray, once a second)"
 
-#: Every node executable (``ros2 run cone_perception <name>``), in the README's order.
+#: Every node executable (``ros2 run cone_perception <name>``), in the order of docs/nodes.md.
 NODES: dict[str, NodeSpec] = {n.name: n for n in (
     NodeSpec(
         "driver_adapter", "camera frames -> the calibration's band (image_cropped, bgr8) + image_cropped/camera_info",
@@ -345,12 +345,12 @@ def help_text(node: str, width: int = 100) -> str:
             out += [f" {title}:"]
         for p in group:
             out += wrap(param_line(p))
-    out += ["", "Every node: the README, \"Nodes and parameters\"; docs/robustness.md for the counts on /diagnostics."]
+    out += ["", "Every node: docs/nodes.md; docs/robustness.md for the counts on /diagnostics."]
     return "\n".join(out) + "\n"
 
 
 # -- the docs generated from the schema (cone-perception params --write writes them into the files) --------
-#: What regenerates the README's tables and the node docstrings.
+#: What regenerates the tables of docs/nodes.md and the node docstrings.
 REGENERATE = "cone-perception params --write"
 #: The README's and docs' marker of the table of the parameters every node has.
 EVERY_NODE = "every_node"

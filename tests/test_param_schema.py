@@ -1,4 +1,4 @@
-"""Issue 28/30: one schema for every node parameter (cone_perception/params.py). The README's tables and
+"""Issue 28/30: one schema for every node parameter (cone_perception/params.py). The tables of docs/nodes.md and
 the node docstrings are generated from it and checked here; launch parameter files name only its
 parameters; every node executable answers --help from it without importing rclpy. No ROS here (the
 nodes' declarations against the schema: tests/test_params.py)."""
@@ -41,29 +41,31 @@ def _copy_checkout(dst: Path) -> Path:
 
 def test_a_drifted_table_or_docstring_fails_the_check_and_write_repairs_it(tmp_path, capsys):
     root = _copy_checkout(tmp_path)
-    readme = (root / "README.md").read_text()
+    tables = root / "docs" / "nodes.md"
+    readme = tables.read_text()
     row = "| `conf` | double | `0.25` |"
     assert row in readme
-    (root / "README.md").write_text(readme.replace(row, "| `conf` | double | `0.3` |"))
+    tables.write_text(readme.replace(row, "| `conf` | double | `0.3` |"))
     node = root / "cone_perception" / "nodes" / "cone_tracker.py"
     node.write_text(node.read_text().replace("odom_max_age_s (double, default 0.1", "odom_max_age_s (double, default 0.2"))
     capsys.readouterr()
     assert main(["params", "--check", "--root", str(root)]) == 1
     err = capsys.readouterr().err
-    assert "README.md" in err and "cone_perception/nodes/cone_tracker.py" in err and REGENERATE in err
+    assert "docs/nodes.md" in err and "cone_perception/nodes/cone_tracker.py" in err and REGENERATE in err
     assert "detection.py" not in err  # only what drifted is named
 
     assert main(["params", "--write", "--root", str(root)]) == 0
-    assert (root / "README.md").read_text() == readme
+    assert tables.read_text() == readme
     assert main(["params", "--check", "--root", str(root)]) == 0
 
 
-def test_a_readme_without_a_node_block_is_refused(tmp_path, capsys):
+def test_a_tables_file_without_a_node_block_is_refused(tmp_path, capsys):
     root = _copy_checkout(tmp_path)
-    text = (root / "README.md").read_text()
+    tables = root / "docs" / "nodes.md"
+    text = tables.read_text()
     start = text.index("<!-- params:mapping ")
     end = text.index("<!-- /params -->", start) + len("<!-- /params -->")
-    (root / "README.md").write_text(text[:start] + text[end:])
+    tables.write_text(text[:start] + text[end:])
     assert main(["params", "--check", "--root", str(root)]) == 2
     assert "no <!-- params:NODE --> block for mapping" in capsys.readouterr().err
 

@@ -2,12 +2,12 @@
 
   cone-perception params                 # every node's usage, topics and parameters (as NODE --help)
   cone-perception params pipeline        # one node
-  cone-perception params --write         # rewrite the README's tables and the node docstrings
+  cone-perception params --write         # rewrite the tables of docs/nodes.md and the node docstrings
   cone-perception params --check         # exit 1, naming the files, when they differ from the schema
 
 One home: cone_perception/params.py (name, type, default, range, description, set at run time or
-not, per node). Generated from it, in a source checkout: the README's topic lists and tables (and any
-in docs/*.md) between <!-- params:NODE --> and <!-- /params --> (NODE every_node: the parameters every
+not, per node). Generated from it, in a source checkout: the topic lists and tables of docs/nodes.md (and any
+in README.md or another docs/*.md) between <!-- params:NODE --> and <!-- /params --> (NODE every_node: the parameters every
 node has), and the "Parameters (generated ...)" block of each node module's docstring. A test runs
 --check (tests/test_param_schema.py).
 """
@@ -40,11 +40,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def regenerate(root: Path) -> dict[Path, tuple[str, str]]:
     """``file -> (text now, text generated)`` for every file with generated parts under ``root``."""
-    readme = root / "README.md"
-    if not readme.is_file():
-        raise ConfigError(str(root), None, "no README.md: not a source checkout of cone_perception (--root)")
+    tables = root / "docs" / "nodes.md"  # the home of the tables; README.md and other docs may hold blocks too
+    if not tables.is_file():
+        raise ConfigError(str(root), None, "no docs/nodes.md: not a source checkout of cone_perception (--root)")
     out = {}
-    for f in [readme, *sorted((root / "docs").glob("*.md"))]:
+    for f in [root / "README.md", *sorted((root / "docs").glob("*.md"))]:
+        if not f.is_file():
+            continue
         text = f.read_text(encoding="utf-8")
 
         def block(m: re.Match, f=f) -> str:
@@ -55,9 +57,9 @@ def regenerate(root: Path) -> dict[Path, tuple[str, str]]:
                     f"{markdown_block(key)}<!-- /params -->")
 
         out[f] = (text, _BLOCK.sub(block, text))
-    missing = [k for k in (*NODES, EVERY_NODE) if f"<!-- params:{k} " not in out[readme][0]]
+    missing = [k for k in (*NODES, EVERY_NODE) if f"<!-- params:{k} " not in out[tables][0]]
     if missing:
-        raise ConfigError(str(readme), None, f"no <!-- params:NODE --> block for {', '.join(missing)}")
+        raise ConfigError(str(tables), None, f"no <!-- params:NODE --> block for {', '.join(missing)}")
     for node in NODES:
         f = root / "cone_perception" / "nodes" / f"{node}.py"
         text = f.read_text(encoding="utf-8")
@@ -83,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"out of date with cone_perception/params.py: {', '.join(str(f.relative_to(root)) for f in bad)}; "
                   f"run `{REGENERATE}`", file=sys.stderr)
             return 1
-        print("README tables and node docstrings match cone_perception/params.py")
+        print("the parameter tables (docs/nodes.md) and node docstrings match cone_perception/params.py")
         return 0
     if args.write:
         for f, (now, new) in regenerate(root).items():
