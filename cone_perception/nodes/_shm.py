@@ -93,17 +93,23 @@ def mapped(shm_dir: Path = SHM_DIR) -> set[str]:
     return out
 
 
-def stale(shm_dir: Path = SHM_DIR) -> list[str]:
-    """Names of the segments and ports (``fastrtps_...``) whose every lock file is free: their owners are dead."""
+def _locks(shm_dir: Path) -> dict[str, list[str]]:
+    """``segment or port -> its lock file names`` in ``shm_dir`` (empty where it cannot be listed)."""
     try:
         names = os.listdir(shm_dir)
     except OSError:
-        return []
+        return {}
     locks: dict[str, list[str]] = {}
     for n in names:
         m = _LOCK.match(n)
         if m:
             locks.setdefault(m.group(1), []).append(n)
+    return locks
+
+
+def stale(shm_dir: Path = SHM_DIR) -> list[str]:
+    """Names of the segments and ports (``fastrtps_...``) whose every lock file is free: their owners are dead."""
+    locks = _locks(shm_dir)
     used = mapped(shm_dir)
     return sorted(b for b, ls in locks.items() if not any(held(shm_dir / x) for x in ls) and not _port_in_use(b, used))
 
@@ -111,15 +117,7 @@ def stale(shm_dir: Path = SHM_DIR) -> list[str]:
 def clean_stale(shm_dir: Path = SHM_DIR) -> CleanReport:
     """Remove the files of every segment and port no live process holds (see the module's doc)."""
     rep = CleanReport()
-    try:
-        names = os.listdir(shm_dir)
-    except OSError:
-        return rep
-    locks: dict[str, list[str]] = {}
-    for n in names:
-        m = _LOCK.match(n)
-        if m:
-            locks.setdefault(m.group(1), []).append(n)
+    locks = _locks(shm_dir)
     used = mapped(shm_dir)
     for base, lock_names in sorted(locks.items()):
         if _port_in_use(base, used):  # a live writer still maps this port (see the module's doc)
