@@ -148,9 +148,7 @@ class _Recorder:
 
     def __init__(self, res: LiveResult, primer_stamp: int | None):
         self.res, self.primer_stamp = res, primer_stamp
-        self.primer_seen: list[int] = []
-        self.primer_boxes: list[int] = []
-        self.primer_tracked: list[int] = []
+        self.primer_back: set[str] = set()  # the topics the primer has come back on
         self.sent_at: dict[int, float] = {}
 
     def subscribe(self, node, track: bool) -> None:
@@ -162,12 +160,12 @@ class _Recorder:
     def primed(self, track: bool) -> bool:
         """The primer came back on every recorded topic: each publisher has matched this node's subscription
         (``/cones`` alone would not prove it for ``cone_boxes``, whose other subscriber is the mapping node)."""
-        return bool(self.primer_seen) and bool(self.primer_boxes) and (not track or bool(self.primer_tracked))
+        return ({CONES_TOPIC, BOXES_TOPIC} | ({TRACKED_TOPIC} if track else set())) <= self.primer_back
 
     def on_cones(self, raw: bytes) -> None:
         stamp, msg = _stamp_of(raw)
         if stamp == self.primer_stamp:
-            self.primer_seen.append(stamp)
+            self.primer_back.add(CONES_TOPIC)
             return
         res = self.res
         if stamp in self.sent_at and stamp not in res.cones:
@@ -179,7 +177,7 @@ class _Recorder:
     def on_boxes(self, raw: bytes) -> None:
         stamp, msg = _stamp_of(raw)
         if stamp == self.primer_stamp:
-            self.primer_boxes.append(stamp)
+            self.primer_back.add(BOXES_TOPIC)
             return
         self.res.boxes[stamp] = _msgs.boxes_from_msg(msg)
         self.res.raw.append((BOXES_TOPIC, stamp, raw))
@@ -187,7 +185,7 @@ class _Recorder:
     def on_tracked(self, raw: bytes) -> None:
         stamp, msg = _stamp_of(raw)
         if stamp == self.primer_stamp:
-            self.primer_tracked.append(stamp)
+            self.primer_back.add(TRACKED_TOPIC)
             return
         self.res.tracked[stamp] = _msgs.tracked_from_msg(msg)
         self.res.raw.append((TRACKED_TOPIC, stamp, raw))
