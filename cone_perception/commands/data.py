@@ -1,4 +1,4 @@
-"""``cone-perception data``: dataset converters (FSOCO -> YOLO, 16:9 restore)."""
+"""``cone-perception data``: dataset converters (FSOCO -> YOLO, 16:9 restore, far-strip crops)."""
 
 from __future__ import annotations
 
@@ -15,6 +15,14 @@ def _aspect(text: str) -> tuple[float, float]:
     if a <= 0 or b <= 0:
         raise argparse.ArgumentTypeError(f"expected positive W:H, got {text!r}")
     return a, b
+
+
+def _wh(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(f"expected WxH like 960x128, got {text!r}") from e
+    return w, h
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -35,7 +43,22 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the dataset's class names in id order, comma-separated, for the data.yaml written to OUT "
                         "(default: from SRC/data.yaml or SRC/classes.txt; bgracing-real: "
                         "blue_cone,large_orange_cone,orange_cone,yellow_cone)")
-    for q in (f, r):
+    c = sub.add_parser("far-crops", help="windows around small cones at the frames' native scale (training data of the far strip)",
+                       description="Cut windows of --size px, not resized, around labelled cones of --min-height.."
+                                   "--max-height px from one split of a data YAML (restore_aspect applied, clips "
+                                   "filtered as the YAML says), with their clipped labels, into a YOLO dataset: "
+                                   "the far strip's model trains on them (models/cone_detector_far.md).")
+    c.add_argument("data", help="data YAML (Ultralytics form, e.g. synth dataset's data.yaml, or our mixing form)")
+    c.add_argument("out", help="output folder, new or empty (images/, labels/, data.yaml)")
+    c.add_argument("--split", choices=("train", "val"), default="train", help="which split of the YAML to cut (default train)")
+    c.add_argument("--size", type=_wh, default=(960, 128),
+                   help="window WxH px at the image's own scale; narrower or lower frames give their whole width or "
+                        "height (default 960x128)")
+    c.add_argument("--min-height", type=float, default=4.0, help="smallest cone box (px) a window is cut around (default 4)")
+    c.add_argument("--max-height", type=float, default=24.0, help="largest cone box (px) a window is cut around (default 24)")
+    c.add_argument("--per-image", type=int, default=2, help="windows per image at most (default 2)")
+    c.add_argument("--seed", type=int, default=0, help="random seed of the choice and placement (default 0)")
+    for q in (f, r, c):
         q.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 

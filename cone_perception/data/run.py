@@ -8,10 +8,16 @@ import logging
 
 from ..words import plural
 from . import convert
+from .farcrops import far_crops
 
 
 def run_data(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(message)s")
+    if args.action == "far-crops":
+        rep = far_crops(args.data, args.out, args.split, args.size, args.min_height, args.max_height, args.per_image,
+                        args.seed, progress=not args.no_progress)
+        print(f"wrote {rep.line()} to {args.out}")
+        return 0
     if args.action == "fsoco-to-yolo":
         rep = convert.fsoco_to_yolo(args.src, args.out, args.val_fraction, args.seed, args.border,
                                     progress=not args.no_progress)

@@ -1,0 +1,159 @@
+"""Training crops for the far strip: windows around small cones, cut at the frames' native scale.
+
+The far strip (``detector/farband.py``) runs a model on full-resolution rows near the horizon,
+where cones 15-40 m ahead are 8-21 px tall. The trainer fits every image to the input width
+(``train/augment.py``, ``fit_width``), so a 1920x1080 frame trained at a 960-px input is halved
+and its far cones shrink below what the strip shows. ``far_crops`` cuts windows of ``W x H`` px
+(no resize) around cones of ``min_height..max_height`` px from the images of one split of a data
+YAML, with their labels, into a YOLO dataset the trainer reads at the strip's scale:
+
+* each labelled cone in the height range is a candidate centre; up to ``per_image`` of them per
+  image are drawn at random (a crop that already holds a drawn cone is not cut twice);
+* the window is placed at random so the cone lies inside it; frames narrower or lower than the
+  window give their whole width or height;
+* labels: boxes clipped to the window; a box kept when at least ``MIN_VISIBLE`` of its area and
+  2 px of its width and height remain (as the trainer's own window does);
+* images are read as the trainer reads them (``restore_aspect`` of the YAML entry applied), so the
+  real bgracing frames come out at their 640x360 source scale and the rendered ones at 1920x1080.
+
+Images with no cone in the range are counted and give no crop.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+import yaml
+from tqdm import tqdm
+
+from ..classes import CLASS_NAMES
+from ..crop import MIN_VISIBLE
+from ..errors import ConfigError
+from .datasets import labels_to_xyxy, load_data_yaml, read_image
+
+#: Box-height bins (px at the crop's scale) of the report.
+HEIGHT_BINS = (0, 8, 12, 24, 48)
+
+
+@dataclass
+class FarCropReport:
+    images: int = 0  # images read
+    without_candidate: int = 0  # images with no cone in the height range (no crop)
+    crops: int = 0
+    boxes: int = 0
+    by_height: dict = field(default_factory=dict)  # "0-8" -> boxes in the crops
+
+    def line(self) -> str:
+        bins = ", ".join(f"{k} px: {v}" for k, v in self.by_height.items())
+        return (f"{self.crops} crops with {self.boxes} boxes ({bins}) from {self.images} images; "
+                f"{self.without_candidate} images without a cone in the height range")
+
+
+def _bin_name(i: int) -> str:
+    lo = HEIGHT_BINS[i]
+    return f"{lo}-{HEIGHT_BINS[i + 1]}" if i + 1 < len(HEIGHT_BINS) else f">={lo}"
+
+
+def window_around(box: np.ndarray, img_wh: tuple[int, int], win_wh: tuple[int, int],
+                  rng: np.random.Generator) -> tuple[int, int, int, int]:
+    """(x0, y0, x1, y1) of a window of ``win_wh`` (shrunk to the image) holding ``box`` (x1 y1 x2 y2), at random."""
+    w, h = img_wh
+    cw, ch = min(win_wh[0], w), min(win_wh[1], h)
+
+    def start(lo_edge: float, hi_edge: float, size: int, total: int) -> int:
+        lo = int(np.ceil(hi_edge)) - size  # the window's start that still holds the box's far edge
+        hi = int(np.floor(lo_edge))  # ... and its near edge
+        lo, hi = max(0, lo), min(total - size, hi)
+        if lo > hi:  # box larger than the window: centre it
+            return int(np.clip(round((lo_edge + hi_edge - size) / 2), 0, total - size))
+        return int(rng.integers(lo, hi + 1))
+
+    x0 = start(float(box[0]), float(box[2]), cw, w)
+    y0 = start(float(box[1]), float(box[3]), ch, h)
+    return x0, y0, x0 + cw, y0 + ch
+
+
+def boxes_in_window(boxes: np.ndarray, cls: np.ndarray, win: tuple[int, int, int, int],
+                    min_visible: float = MIN_VISIBLE, min_px: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
+    """Boxes (x1 y1 x2 y2, image px) -> those the window shows, clipped and in window px."""
+    x0, y0, x1, y1 = win
+    b = boxes.astype(np.float32).copy()
+    area0 = np.maximum((b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1]), 1e-6)
+    b[:, 0::2] = b[:, 0::2].clip(x0, x1) - x0
+    b[:, 1::2] = b[:, 1::2].clip(y0, y1) - y0
+    bw, bh = b[:, 2] - b[:, 0], b[:, 3] - b[:, 1]
+    keep = (bw >= min_px) & (bh >= min_px) & (bw * bh >= min_visible * area0)
+    return b[keep], cls[keep]
+
+
+def far_crops(data_yaml: str | Path, out: str | Path, split: str = "train", size: tuple[int, int] = (960, 128),
+              min_height: float = 4.0, max_height: float = 24.0, per_image: int = 2, seed: int = 0,
+              progress: bool = True) -> FarCropReport:
+    """Cut the far-strip crops of ``split`` (train or val) of ``data_yaml`` into the YOLO dataset ``out``
+    (``images/``, ``labels/``, ``data.yaml`` with the project's class names, ``train: images``)."""
+    if split not in ("train", "val"):
+        raise ConfigError("--split", None, f"must be train or val, got {split!r}")
+    if size[0] < 32 or size[1] < 32:
+        raise ConfigError("--size", None, f"crops need at least 32x32 px, got {size[0]}x{size[1]}")
+    if not 0 <= min_height < max_height:
+        raise ConfigError("--min-height", None, f"needs 0 <= min-height < max-height, got {min_height}, {max_height}")
+    if per_image < 1:
+        raise ConfigError("--per-image", None, f"must be at least 1, got {per_image}")
+    out = Path(out)
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        raise ConfigError(str(out), None, "output must be a new or empty folder")
+    train, val, _ = load_data_yaml(data_yaml)
+    entries = train if split == "train" else val
+    if not entries:
+        raise ConfigError(str(data_yaml), split, f"no {split} split in this data YAML")
+    (out / "images").mkdir(parents=True, exist_ok=True)
+    (out / "labels").mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(seed)
+    rep = FarCropReport(by_height={_bin_name(i): 0 for i in range(len(HEIGHT_BINS))})
+    total = sum(len(e.image_paths) for e in entries)
+    with tqdm(total=total, desc="far-crops", unit="image", disable=not progress) as bar:
+        for ei, e in enumerate(entries):
+            for path, lab in zip(e.image_paths, e.labels):
+                bar.update(1)
+                rep.images += 1
+                img = read_image(path, e.restore_aspect)
+                h, w = img.shape[:2]
+                boxes, cls = labels_to_xyxy(lab, w, h)
+                heights = boxes[:, 3] - boxes[:, 1]
+                cand = np.flatnonzero((heights >= min_height) & (heights <= max_height))
+                if cand.size == 0:
+                    rep.without_candidate += 1
+                    continue
+                taken: list[tuple[int, int, int, int]] = []
+                for j in rng.permutation(cand):
+                    if len(taken) == per_image:
+                        break
+                    bx = boxes[j]
+                    if any(x0 <= bx[0] and bx[2] <= x1 and y0 <= bx[1] and bx[3] <= y1 for x0, y0, x1, y1 in taken):
+                        continue
+                    win = window_around(bx, (w, h), size, rng)
+                    taken.append(win)
+                    b, c = boxes_in_window(boxes, cls, win)
+                    cw, ch = win[2] - win[0], win[3] - win[1]
+                    name = f"{path.stem}_e{ei}f{len(taken) - 1}"
+                    cv2.imwrite(str(out / "images" / f"{name}.jpg"), img[win[1]:win[3], win[0]:win[2]],
+                                [cv2.IMWRITE_JPEG_QUALITY, 95])
+                    lines = [f"{int(k)} {(q[0] + q[2]) / 2 / cw:.6f} {(q[1] + q[3]) / 2 / ch:.6f} "
+                             f"{(q[2] - q[0]) / cw:.6f} {(q[3] - q[1]) / ch:.6f}\n" for q, k in zip(b, c)]
+                    (out / "labels" / f"{name}.txt").write_text("".join(lines), encoding="utf-8")
+                    rep.crops += 1
+                    rep.boxes += len(b)
+                    idx = np.searchsorted(HEIGHT_BINS, b[:, 3] - b[:, 1], side="right") - 1
+                    for i in idx:
+                        rep.by_height[_bin_name(int(i))] += 1
+    (out / "data.yaml").write_text(
+        f"# written by cone-perception data far-crops from {data_yaml} ({split} split), windows of "
+        f"{size[0]}x{size[1]} px at native scale around cones {min_height:g}-{max_height:g} px tall\n"
+        + yaml.safe_dump({"train": "images", "names": list(CLASS_NAMES)}, sort_keys=False), encoding="utf-8")
+    return rep
+
+
+__all__ = ["FarCropReport", "HEIGHT_BINS", "boxes_in_window", "far_crops", "window_around"]
