@@ -203,6 +203,8 @@ _PIPELINE = (
     _p("far_rows", "", "image rows V0,V1 also run at full resolution, the whole width (the far band for small, far "
        "cones; a second forward, about a third of the frames/s; docs/detector.md, Far band); empty = off",
        values="V0,V1 or empty"),
+    _p("far_model", "", "the far band's own model file (one trained for its full-resolution scale); empty = the band's "
+       "model. Its classes must be the band model's (refused at start-up otherwise)"),
     _p("track", False, "also the tracker stage: /cones/tracked out (the parameters of cone_tracker); it gets each "
        "frame's attitude, which a separate cone_tracker does not"),
 )

@@ -54,6 +54,8 @@ class Pipeline:
     def __init__(self, calib: Calibration, detector, attitude: str | None = None, imu=None, far: FarBand | None = None,
                  cones_conf: float | None = None, attitude_config=None):
         self.calib = calib
+        if far is not None:
+            far.check_classes(detector)  # a far model of other classes: refused before the first frame
         self.far = far  # the far band (full-resolution rows near the horizon, detector/farband.py), or None
         self.adapter = DriverAdapter(calib.crop, calib.image_width, calib.image_height, far.crop if far else None)
         self.detector = detector

@@ -23,15 +23,18 @@ from ..words import plural
 
 
 def _bench_pipeline(args: argparse.Namespace, calib) -> dict:
+    if args.far_model and not args.far_rows:
+        raise ConfigError("--far-model", None, "needs --far-rows: the far band it runs on")
     if args.input:
         calib = replace(calib, crop=crop_for_setting(calib.crop, args.input, calib.image_width, calib.image_height))
     det = load_for_crop(args.model, args.backend, calib.crop, args.threads, bf16=args.bf16)
     far = None
     if args.far_rows:
-        far = FarBand.load(det.source, args.far_rows, calib.image_width, calib.image_height, calib.crop, "--far-rows",
-                           backend=args.backend, threads=args.threads, bf16=args.bf16)
+        far = FarBand.load(args.far_model or det.source, args.far_rows, calib.image_width, calib.image_height,
+                           calib.crop, "--far-rows", "--far-model", backend=args.backend, threads=args.threads, bf16=args.bf16)
     result = bench_pipeline(calib, det, rendered_frames(calib, max(1, args.scenes)), args.frames, args.warmup, far)
     result["far_rows"] = args.far_rows or ""
+    result["far_model"] = far.detector.source if far is not None and args.far_model else ""
     result["setting"] = args.input or "calibration"
     result["threads"] = args.threads
     return result
@@ -44,6 +47,7 @@ def _repeat_pipeline(args: argparse.Namespace) -> int:
            "--threads", str(args.threads), "--backend", args.backend, "--scenes", str(args.scenes)]
     cmd += (["--model", str(args.model)] if args.model else []) + (["--bf16"] if args.bf16 else [])
     cmd += ["--input", args.input] if args.input else []
+    cmd += (["--far-rows", args.far_rows] if args.far_rows else []) + (["--far-model", args.far_model] if args.far_model else [])
     runs = []
     for i in tqdm(range(args.repeat), unit="run", desc="bench pipeline", file=sys.stderr,
                   disable=args.json or args.no_progress):

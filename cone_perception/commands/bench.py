@@ -56,6 +56,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--bf16", action="store_true", help="pipeline, table: backend torch with bfloat16 autocast on the CPU")
     p.add_argument("--far-rows", default=None, metavar="V0,V1",
                    help="pipeline: add the far band, these image rows at full resolution (docs/detector.md 'Far band')")
+    p.add_argument("--far-model", default=None, metavar="PATH",
+                   help="pipeline: the far band's own model file (e.g. one trained for its full"
+                        "-resolution scale; default: the band's model); its classes must be the band model's")
     p.add_argument("--scenes", type=int, default=16, help="pipeline, table: distinct rendered scenes, cycled (default %(default)s)")
     p.add_argument("--input", default=None, choices=INPUT_SETTINGS,
                    help="pipeline: override the calibration's crop: full = all rows, downscale 1; half = all rows, "

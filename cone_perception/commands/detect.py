@@ -37,6 +37,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--far-rows", default=None, metavar="V0,V1",
                    help="with --crop: also run image rows V0-V1 at full resolution, the whole width (the far band: "
                         "small, far cones), and merge its boxes (docs/detector.md 'Far band')")
+    p.add_argument("--far-model", default=None, metavar="PATH",
+                   help="the far band's own model file (e.g. one trained for its full"
+                        "-resolution scale; default: the band's model); its classes must be the band model's")
     p.add_argument("--conf", type=float, default=DEFAULT_CONF, help="confidence threshold (default %(default)s)")
     p.add_argument("--iou", type=float, default=DEFAULT_IOU, help="NMS IoU threshold (default %(default)s)")
     p.add_argument("--topic", default=None, help="rosbag: camera topic (default: the only image topic)")

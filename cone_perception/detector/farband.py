@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..classes import CLASS_NAMES
 from ..crop import CropSpec
 from ..errors import ConfigError
 from ..model.decode import nms_per_class
@@ -70,21 +71,47 @@ def merge_boxes(band_boxes: np.ndarray, far_boxes: np.ndarray, iou: float = DEFA
     return both[keep]
 
 
+def check_far_classes(band_detector, far_detector, source: str = "far_model") -> None:
+    """ConfigError naming ``source`` (the far model's option) unless the far band's model finds the same
+    cone classes as the band's: their boxes merge into one set, and a class only one of them knows would
+    come and go with the cone's distance. Detectors without a ``class_map`` (test doubles) are not checked."""
+    band, far = getattr(band_detector, "class_map", None), getattr(far_detector, "class_map", None)
+    if band is None or far is None:
+        return
+    band, far = {int(c) for c in band}, {int(c) for c in far}
+    if band != far:
+        def names(ids):
+            return ", ".join(CLASS_NAMES[i] for i in sorted(ids)) or "none"
+        raise ConfigError(source, getattr(far_detector, "source", None),
+                          f"the far band's model has the classes [{names(far)}], the band's model [{names(band)}]: "
+                          f"only in the far model: [{names(far - band)}], only in the band's: [{names(band - far)}]")
+
+
 @dataclass
 class FarBand:
-    """The far band of one camera: its crop and the detector built for its size (``Detector.load_for_band``)."""
+    """The far band of one camera: its crop and the detector built for its size (``Detector.load_for_band``).
+
+    ``model_source``: the option the far band's model came from (``far_model``, ``--far-model``), named by
+    :meth:`check_classes`'s error."""
 
     crop: CropSpec
     detector: object  # a Detector (anything with detect(bgr, crop) -> BOX_DTYPE and a timing dict)
+    model_source: str = "far_model"
+
+    def check_classes(self, band_detector) -> None:
+        """ConfigError naming :attr:`model_source` unless this band's model has the band model's classes
+        (:func:`check_far_classes`); the Pipeline calls it before the first frame."""
+        check_far_classes(band_detector, self.detector, self.model_source)
 
     @classmethod
     def load(cls, model, rows: str | tuple[int, int], image_width: int, image_height: int, band: CropSpec,
-             source: str = "far_rows", **detector_kw) -> "FarBand":
-        """The far band of ``rows`` with ``model`` built for its strip (``Detector.load_for_band``)."""
+             source: str = "far_rows", model_source: str = "far_model", **detector_kw) -> "FarBand":
+        """The far band of ``rows`` with ``model`` (the band's own, or a far model: ``model_source`` names
+        its option in errors) built for its strip (``Detector.load_for_band``)."""
         crop = far_band_crop(rows, image_width, image_height, band, source)
         det = Detector.load_for_band(model, (crop.out_width, crop.out_height), **detector_kw)
         det.warmup()
-        return cls(crop, det)
+        return cls(crop, det, model_source)
 
     def detect(self, strip_bgr: np.ndarray) -> np.ndarray:
         """Full-resolution strip ``(V1 - V0, W, 3)`` BGR -> its boxes, cut cones dropped (full-image px)."""
@@ -95,4 +122,4 @@ class FarBand:
         return merge_boxes(band_boxes, self.detect(strip_bgr), iou)
 
 
-__all__ = ["EDGE_PX", "FarBand", "drop_cut_boxes", "far_band_crop", "merge_boxes"]
+__all__ = ["EDGE_PX", "FarBand", "check_far_classes", "drop_cut_boxes", "far_band_crop", "merge_boxes"]

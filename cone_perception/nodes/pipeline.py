@@ -9,6 +9,9 @@ Parameters (generated from cone_perception/params.py by ``cone-perception params
   far_rows (string, default ""; V0,V1 or empty): image rows V0,V1 also run at full resolution, the
     whole width (the far band for small, far cones; a second forward, about a third of the frames/s;
     docs/detector.md, Far band); empty = off
+  far_model (string, default ""): the far band's own model file (one trained for its full-resolution
+    scale); empty = the band's model. Its classes must be the band model's (refused at start-up
+    otherwise)
   track (bool, default false): also the tracker stage: /cones/tracked out (the parameters of
     cone_tracker); it gets each frame's attitude, which a separate cone_tracker does not
   Also those of driver_adapter (calibration, input_transport); those of detection (model, backend,
@@ -45,7 +48,9 @@ class PipelineNode(PerceptionNode):
         from ..detector.farband import FarBand, far_band_crop
 
         crop = far_band_crop(rows, calib.image_width, calib.image_height, calib.crop, "parameter far_rows")
-        return FarBand(crop, self.loader.load((crop.out_width, crop.out_height)))  # warmed like the band's
+        model = declare(self, "far_model") or None  # None: the band's model
+        # warmed like the band's; the Pipeline refuses a far model of other classes before the first frame
+        return FarBand(crop, self.loader.load((crop.out_width, crop.out_height), model), "parameter far_model")
 
     def _set_threshold(self, name: str, value) -> None:
         self.loader.set_threshold(self.pipeline.detector, name, value)

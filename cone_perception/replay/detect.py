@@ -24,6 +24,8 @@ from ..words import plural
 def run_detect(args: argparse.Namespace) -> int:
     if args.far_rows and not args.crop:
         raise ConfigError("--far-rows", None, "needs --crop: the far band adds to the car's band")
+    if args.far_model and not args.far_rows:
+        raise ConfigError("--far-model", None, "needs --far-rows: the far band it runs on")
     model = args.model or default_model_path()
     backend = resolve_backend(args.backend, model, bf16=args.bf16)
     det = Detector.load(model, backend=backend, conf=args.conf, iou=args.iou,
@@ -45,8 +47,12 @@ def run_detect(args: argparse.Namespace) -> int:
         if not args.far_rows:
             return None
         if (w, h) not in far_by_size:
-            far_by_size[(w, h)] = FarBand.load(model, args.far_rows, w, h, band_for(w), "--far-rows", backend=backend,
-                                               conf=args.conf, iou=args.iou, bf16=args.bf16)
+            far_model = args.far_model or model
+            far = FarBand.load(far_model, args.far_rows, w, h, band_for(w), "--far-rows", "--far-model",
+                               backend=resolve_backend(args.backend, far_model, bf16=args.bf16), conf=args.conf,
+                               iou=args.iou, bf16=args.bf16)
+            far.check_classes(det)  # a far model of other classes: refused before its first image
+            far_by_size[(w, h)] = far
         return far_by_size[(w, h)]
 
     def detector_for_size(band):

@@ -58,6 +58,8 @@ def run_replay(args: argparse.Namespace) -> int:
         far_band_crop(args.far_rows, calib.image_width, calib.image_height, calib.crop, "--far-rows")
         if args.live == "separate":
             raise ConfigError("--far-rows", None, "needs the fused pipeline node (--live fused or offline)")
+    if args.far_model and not args.far_rows:
+        raise ConfigError("--far-model", None, "needs --far-rows: the far band it runs on")
     refuse_existing([p for p in (args.out, args.json) if p is not None], args.force, "replay")
     if args.out is not None:
         if args.force and args.out.exists():
@@ -98,8 +100,8 @@ def _run_offline(args, calib) -> dict:
     det.warmup()
     far = None
     if args.far_rows:
-        far = FarBand.load(det.source, args.far_rows, calib.image_width, calib.image_height, calib.crop, "--far-rows",
-                           backend=args.backend, conf=conf, threads=args.threads or None, bf16=args.bf16)
+        far = FarBand.load(args.far_model or det.source, args.far_rows, calib.image_width, calib.image_height,
+                           calib.crop, "--far-rows", "--far-model", backend=args.backend, conf=conf, threads=args.threads or None, bf16=args.bf16)
     imu = _imu_source(args, calib)
     att_cfg = None
     if args.box_model == "model" or (args.box_model == "auto" and not args.gt_topic):
@@ -179,6 +181,8 @@ def _run_live(args, calib) -> dict:
     params["threads"] = args.threads
     if args.far_rows:
         params["far_rows"] = args.far_rows
+    if args.far_model:
+        params["far_model"] = str(Path(args.far_model).resolve())
     if args.bf16:
         params["bf16"] = True
     res = live_replay(args.bag, mode=args.live, topic=args.topic, params=params, pace=args.pace,
