@@ -145,9 +145,10 @@ def test_pipeline_node_with_far_rows_publishes_the_merged_boxes(ros, tmp_path): 
                                                                Parameter("far_model", value=str(_other_classes_model(tmp_path)))])
 
 
-def test_replay_far_rows_offline_and_its_bad_values(tmp_path, capsys):
-    """``replay --far-rows``: on a synthetic drive the far band finds at least the cones beyond 15 m the band
-    finds (here more), nearer ones as before; a bad value or the separate live nodes stop before anything runs."""
+def test_replay_far_strip_by_default_offline_and_its_bad_values(tmp_path, capsys):
+    """``replay``: by default the calibration's far strip runs (``--far-rows auto``); on a synthetic drive it
+    finds more of the cones beyond 15 m than ``--far-rows off`` (the band alone), nearer ones as before, and
+    the summary says its rows and frames; a bad value or the separate live nodes stop before anything runs."""
     import json
 
     from cone_perception.cli import main
@@ -156,16 +157,19 @@ def test_replay_far_rows_offline_and_its_bad_values(tmp_path, capsys):
     assert main(["synth", "bag", "--seconds", "1", "--fps", "10", "--seed", "9", "--no-jitter", "--out", str(bag),
                  "--no-progress"]) == 0
     calib = str(tmp_path / "drive_calib.yaml")
-    summary = {}
-    for name, extra in (("band", []), ("far", ["--far-rows", "384,576"])):
+    summary, strip = {}, {}
+    for name, extra in (("band", ["--far-rows", "off"]), ("strip", [])):
         out = tmp_path / f"{name}.json"
         assert main(["replay", str(bag), "--calib", calib, "--gt-topic", "/cones_gt", "--attitude", "fixed",
                      "--no-progress", "--json", str(out), *extra]) == 0
-        summary[name] = json.loads(out.read_text())["localisation"]["groups"]
+        js = json.loads(out.read_text())
+        summary[name], strip[name] = js["localisation"]["groups"], js["far_strip"]
+    assert strip["band"] is None
+    assert strip["strip"] == {"rows": [370, 466], "moves": True, "frames": 10, "clamped": 0}
     far_recall = {k: v["very far >15 m"]["recall"] for k, v in summary.items()}
-    assert far_recall["far"] > far_recall["band"], far_recall
+    assert far_recall["strip"] > far_recall["band"], far_recall
     for group in ("near 0-4 m", "mid 4-7 m", "far 7-15 m"):
-        assert summary["far"][group]["recall"] >= summary["band"][group]["recall"] - 0.02, group
+        assert summary["strip"][group]["recall"] >= summary["band"][group]["recall"] - 0.02, group
     capsys.readouterr()
     assert main(["replay", str(bag), "--calib", calib, "--far-rows", "0,100", "--no-progress"]) == 2
     assert "--far-rows" in capsys.readouterr().err
