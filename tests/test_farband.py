@@ -239,7 +239,25 @@ def test_far_model_on_the_command_lines(tmp_path, capsys):
     assert "--far-model" in capsys.readouterr().err
     assert main(["detect", str(tmp_path / "f.png"), "--crop", "384,960", "--downscale", "2", "--far-model", str(other),
                  "--out", str(tmp_path / "d.jsonl")]) == 2
-    assert "needs --far-rows" in capsys.readouterr().err
+    assert "--far-model: needs a far band" in capsys.readouterr().err
     assert main(["bench", "pipeline", "--frames", "1", "--warmup", "0", "--scenes", "1", "--far-rows", "384,576",
                  "--far-model", str(other), "--json"]) == 2
     assert "--far-model" in capsys.readouterr().err
+
+    # --calib: the car's band and its far strip by default (rows 370-466 of example_mainhoop), as --crop with
+    # the strip's rows; --far-rows off: the band alone; auto without a calibration is refused
+    car = ["detect", str(tmp_path / "f.png"), "--calib", "example_mainhoop", "--no-progress"]
+    assert main([*car, "--out", str(tmp_path / "e.jsonl")]) == 0
+    assert "far strip rows 370-466" in capsys.readouterr().err
+    assert main([*base[:-2], "370,466", "--no-progress", "--out", str(tmp_path / "g.jsonl")]) == 0
+    e, g = (json.loads((tmp_path / f"{n}.jsonl").read_text()) for n in "eg")
+    assert e["boxes"] == g["boxes"]
+    assert main([*car, "--far-rows", "off", "--out", str(tmp_path / "h.jsonl")]) == 0
+    assert main(["detect", str(tmp_path / "f.png"), "--crop", "384,960", "--downscale", "2", "--no-progress",
+                 "--out", str(tmp_path / "i.jsonl")]) == 0
+    h, i = (json.loads((tmp_path / f"{n}.jsonl").read_text()) for n in "hi")
+    assert h["boxes"] == i["boxes"]
+    capsys.readouterr()
+    assert main(["detect", str(tmp_path / "f.png"), "--crop", "384,960", "--far-rows", "auto",
+                 "--out", str(tmp_path / "j.jsonl")]) == 2
+    assert "auto needs --calib" in capsys.readouterr().err
