@@ -180,18 +180,21 @@ class DriverAdapter:
         size than the calibration's is refused before decoding."""
         return self.bands_from_compressed(data)[0]
 
-    def bands_from_raw(self, encoding: str, width: int, height: int, step: int, data
+    def bands_from_raw(self, encoding: str, width: int, height: int, step: int, data, far: CropSpec | None = None
                        ) -> tuple[np.ndarray, np.ndarray | None]:
         """sensor_msgs/Image fields -> (the band as :meth:`from_raw`, the far band's full-resolution
-        strip ``(V1 - V0, W, 3)`` BGR or None without one); the frame is validated once."""
+        strip ``(V1 - V0, W, 3)`` BGR or None without one); the frame is validated once. ``far``: this
+        frame's strip rows (the strip moved with the attitude, inside the image), else :attr:`far`'s."""
         name, view = self._raw_view(encoding, width, height, step, data)
-        far = crop_raw_to_bgr(name, view, self.far) if self.far is not None else None
-        return crop_raw_to_bgr(name, view, self.crop), far
+        far = far or self.far
+        strip = crop_raw_to_bgr(name, view, far) if far is not None else None
+        return crop_raw_to_bgr(name, view, self.crop), strip
 
-    def bands_from_compressed(self, data) -> tuple[np.ndarray, np.ndarray | None]:
-        """Compressed image -> (band, far band's strip or None), decoded once."""
+    def bands_from_compressed(self, data, far: CropSpec | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+        """Compressed image -> (band, far band's strip or None), decoded once; ``far`` as :meth:`bands_from_raw`."""
         img = decode_compressed(data, expect_wh=(self.image_width, self.image_height))
-        return crop_bgr(img, self.crop), (crop_bgr(img, self.far) if self.far is not None else None)
+        far = far or self.far
+        return crop_bgr(img, self.crop), (crop_bgr(img, far) if far is not None else None)
 
     def camera_info_fields(self) -> dict:
         """Fields of the ``image_cropped/camera_info`` that goes with each output."""

@@ -41,8 +41,10 @@ class Pipeline:
     ``attitude``: ``fixed``, ``image``, ``imu`` or ``fused`` (see :mod:`cone_perception.attitude`);
     None picks the default (``fused`` with ``imu`` and a mount pose, ``image`` with a mount pose, else
     ``fixed``). ``imu``: an :class:`~cone_perception.attitude.ImuAttitude` the caller feeds; each
-    ``process_*`` call takes the frame's capture stamp (``stamp_ns``), at which the IMU is read. ``far``: a :class:`~cone_perception.detector.farband.FarBand`
-    (full-resolution rows near the horizon, a second forward; its boxes merge with the band's), or None.
+    ``process_*`` call takes the frame's capture stamp (``stamp_ns``), at which the IMU is read. ``far``: a
+    :class:`~cone_perception.detector.farband.FarBand` (full-resolution rows near the horizon, a second
+    forward; its boxes merge with the band's), or None; a calibrated strip moves each frame with the
+    attitude of the frame before (:attr:`strip_counts` counts the frames where it was clamped to the image).
     ``attitude_config``: the image fit's :class:`~cone_perception.attitude.ImageAttitudeConfig` (e.g. with the
     detector's measured ``box_model``); None: the defaults (the rendered drives' box table).
     ``cones_conf``: with a detector run at a lower threshold (the tracker's confirmation threshold), the
@@ -54,6 +56,8 @@ class Pipeline:
     def __init__(self, calib: Calibration, detector, attitude: str | None = None, imu=None, far: FarBand | None = None,
                  cones_conf: float | None = None, attitude_config=None):
         self.calib = calib
+        if far is not None:
+            far.check_classes(detector)  # a far model of other classes: refused before the first frame
         self.far = far  # the far band (full-resolution rows near the horizon, detector/farband.py), or None
         self.adapter = DriverAdapter(calib.crop, calib.image_width, calib.image_height, far.crop if far else None)
         self.detector = detector
@@ -61,15 +65,30 @@ class Pipeline:
         self.imu = imu  # an ImuAttitude the caller feeds (modes imu, fused), or None
         self.attitude_mode, self.attitude = attitude_estimator(self.mapper, attitude, imu, attitude_config)
         self.cones_conf = cones_conf
+        #: frames with the far strip, and those where the attitude would have moved it out of the image
+        #: (clamped to it): the replay summary and the node's /diagnostics report them
+        self.strip_counts = {"frames": 0, "clamped": 0}
+        self.strip_rows: tuple[int, int] | None = None  # the last frame's strip rows (V0, V1)
+        self._strip_attitude = (0.0, 0.0)  # the attitude the strip follows: the previous frame's
 
-    def _run(self, band: np.ndarray, t_adapter_s: float, strip: np.ndarray | None, stamp_ns: int | None) -> FrameResult:
+    def _far_crop(self):
+        """(this frame's strip crop, clamped): moved with the previous frame's attitude; (None, False) without."""
+        if self.far is None:
+            return None, False
+        return self.far.crop_for(*self._strip_attitude)
+
+    def _run(self, band: np.ndarray, t_adapter_s: float, strip: np.ndarray | None, stamp_ns: int | None,
+             far_crop=None, clamped: bool = False) -> FrameResult:
         boxes = self.detector.detect(band, self.calib.crop)
         timing = {"adapter": t_adapter_s * 1e3}
         timing.update({k.removesuffix("_ms"): v for k, v in self.detector.timing.items()})
         if self.far is not None and strip is not None:
             t0 = time.perf_counter()
-            boxes = self.far.merged(boxes, strip)
+            boxes = self.far.merged(boxes, strip, far_crop)
             timing["far_band"] = (time.perf_counter() - t0) * 1e3
+            self.strip_counts["frames"] += 1
+            self.strip_counts["clamped"] += int(clamped)
+            self.strip_rows = (far_crop.v0, far_crop.v1) if far_crop is not None else None
         weak = None
         if self.cones_conf is not None:
             strong = boxes["score"] >= self.cones_conf
@@ -80,6 +99,7 @@ class Pipeline:
             att = attitude_for_boxes(self.attitude, boxes, stamp_ns)
             timing["attitude"] = (time.perf_counter() - t0) * 1e3
         t0 = time.perf_counter()
+        self._strip_attitude = (att.pitch_deg, att.roll_deg)
         cones = self.mapper.map_boxes(boxes, att)
         weak_cones = self.mapper.map_boxes(weak, att) if weak is not None else None
         timing["mapping"] = (time.perf_counter() - t0) * 1e3
@@ -97,13 +117,15 @@ class Pipeline:
         ``FrameError`` for a bad frame."""
         self._check_stamp(stamp_ns)
         t0 = time.perf_counter()
-        band, strip = self.adapter.bands_from_raw(encoding, width, height, step, data)
-        return self._run(band, time.perf_counter() - t0, strip, stamp_ns)
+        far, clamped = self._far_crop()
+        band, strip = self.adapter.bands_from_raw(encoding, width, height, step, data, far)
+        return self._run(band, time.perf_counter() - t0, strip, stamp_ns, far, clamped)
 
     def process_compressed(self, data, stamp_ns: int | None = None) -> FrameResult:
         """sensor_msgs/CompressedImage data (JPEG/PNG) -> :class:`FrameResult`; ``stamp_ns`` as
         :meth:`process_raw`."""
         self._check_stamp(stamp_ns)
         t0 = time.perf_counter()
-        band, strip = self.adapter.bands_from_compressed(data)
-        return self._run(band, time.perf_counter() - t0, strip, stamp_ns)
+        far, clamped = self._far_crop()
+        band, strip = self.adapter.bands_from_compressed(data, far)
+        return self._run(band, time.perf_counter() - t0, strip, stamp_ns, far, clamped)

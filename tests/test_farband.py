@@ -101,9 +101,9 @@ def test_far_band_finds_far_cones_the_halved_band_misses():
     assert both["near"] >= alone["near"] - 0.02, (alone, both)
 
 
-def test_pipeline_node_with_far_rows_publishes_the_merged_boxes(ros):  # noqa: F811 (ros is a fixture)
+def test_pipeline_node_with_far_rows_publishes_the_merged_boxes(ros, tmp_path):  # noqa: F811 (ros is a fixture)
     """The node's ``far_rows`` parameter: its boxes are those of the core pipeline with the same far band;
-    a bad value stops the node naming the parameter."""
+    a bad value stops the node naming the parameter, and so does a ``far_model`` of other classes."""
     from rclpy.parameter import Parameter
     from sensor_msgs.msg import Image, PointCloud2
 
@@ -140,11 +140,15 @@ def test_pipeline_node_with_far_rows_publishes_the_merged_boxes(ros):  # noqa: F
     np.testing.assert_allclose(np.sort(got["v1"]), np.sort(want["v1"]), atol=0.05)
     with pytest.raises(ConfigError, match="far_rows"):
         PipelineNode(context=ros.context, parameter_overrides=[Parameter("far_rows", value="10,20")])
+    with pytest.raises(ConfigError, match="parameter far_model.*only in the band's: \\[unknown\\]"):
+        PipelineNode(context=ros.context, parameter_overrides=[Parameter("far_rows", value="384,576"),
+                                                               Parameter("far_model", value=str(_other_classes_model(tmp_path)))])
 
 
-def test_replay_far_rows_offline_and_its_bad_values(tmp_path, capsys):
-    """``replay --far-rows``: on a synthetic drive the far band finds at least the cones beyond 15 m the band
-    finds (here more), nearer ones as before; a bad value or the separate live nodes stop before anything runs."""
+def test_replay_far_strip_by_default_offline_and_its_bad_values(tmp_path, capsys):
+    """``replay``: by default the calibration's far strip runs (``--far-rows auto``); on a synthetic drive it
+    finds more of the cones beyond 15 m than ``--far-rows off`` (the band alone), nearer ones as before, and
+    the summary says its rows and frames; a bad value or the separate live nodes stop before anything runs."""
     import json
 
     from cone_perception.cli import main
@@ -153,18 +157,107 @@ def test_replay_far_rows_offline_and_its_bad_values(tmp_path, capsys):
     assert main(["synth", "bag", "--seconds", "1", "--fps", "10", "--seed", "9", "--no-jitter", "--out", str(bag),
                  "--no-progress"]) == 0
     calib = str(tmp_path / "drive_calib.yaml")
-    summary = {}
-    for name, extra in (("band", []), ("far", ["--far-rows", "384,576"])):
+    summary, strip = {}, {}
+    for name, extra in (("band", ["--far-rows", "off"]), ("strip", [])):
         out = tmp_path / f"{name}.json"
         assert main(["replay", str(bag), "--calib", calib, "--gt-topic", "/cones_gt", "--attitude", "fixed",
                      "--no-progress", "--json", str(out), *extra]) == 0
-        summary[name] = json.loads(out.read_text())["localisation"]["groups"]
+        js = json.loads(out.read_text())
+        summary[name], strip[name] = js["localisation"]["groups"], js["far_strip"]
+    assert strip["band"] is None
+    assert strip["strip"] == {"rows": [370, 466], "moves": True, "frames": 10, "clamped": 0}
     far_recall = {k: v["very far >15 m"]["recall"] for k, v in summary.items()}
-    assert far_recall["far"] > far_recall["band"], far_recall
+    assert far_recall["strip"] > far_recall["band"], far_recall
     for group in ("near 0-4 m", "mid 4-7 m", "far 7-15 m"):
-        assert summary["far"][group]["recall"] >= summary["band"][group]["recall"] - 0.02, group
+        assert summary["strip"][group]["recall"] >= summary["band"][group]["recall"] - 0.02, group
     capsys.readouterr()
     assert main(["replay", str(bag), "--calib", calib, "--far-rows", "0,100", "--no-progress"]) == 2
     assert "--far-rows" in capsys.readouterr().err
     assert main(["replay", str(bag), "--calib", calib, "--far-rows", "384,576", "--live", "separate"]) == 2
     assert "fused pipeline node" in capsys.readouterr().err
+
+
+def _other_classes_model(tmp_path):
+    """The shipped model's weights with its fifth class named orange: a model that knows no unknown cones."""
+    import torch
+
+    from cone_perception.detector import default_model_path
+
+    obj = torch.load(default_model_path(), weights_only=False)
+    path = tmp_path / "four_classes.pt"
+    torch.save(dict(obj, class_names=["blue", "yellow", "orange", "large_orange", "orange"]), path)
+    return path
+
+
+def test_far_model_of_other_classes_is_refused_before_the_first_frame(tmp_path):
+    """``far_model``: the far band may run its own model; one whose classes differ from the band model's is
+    refused when the Pipeline is built, naming the option and both class lists; the same model passes."""
+    from cone_perception.detector import Detector, default_model_path
+    from cone_perception.detector.farband import check_far_classes
+    from cone_perception.geometry.calib import load_calibration
+    from cone_perception.pipeline import Pipeline
+
+    calib = load_calibration("example_mainhoop")
+    det = Detector.load_for_band(default_model_path(), (BAND.out_width, BAND.out_height))
+    other = _other_classes_model(tmp_path)
+    far = FarBand.load(other, "384,576", 1920, 1080, BAND, model_source="--far-model")
+    with pytest.raises(ConfigError, match=r"--far-model: .*four_classes.pt: .*only in the band's: \[unknown\]"):
+        Pipeline(calib, det, far=far)
+    same = FarBand.load(default_model_path(), "384,576", 1920, 1080, BAND)
+    assert Pipeline(calib, det, far=same).far is same
+    check_far_classes(det, same.detector)  # no error
+    check_far_classes(det, object())  # a test double without classes is not checked
+
+
+def test_far_model_on_the_command_lines(tmp_path, capsys):
+    """``detect`` / ``replay`` / ``bench pipeline --far-model``: a model of other classes stops the command
+    with exit 2 naming --far-model; without --far-rows it is refused too; the shipped model as the far
+    model gives the very boxes of the default far band."""
+    import json
+
+    import cv2
+
+    from cone_perception.cli import main
+    from cone_perception.detector import default_model_path
+    from cone_perception.synth.config import SynthConfig
+    from cone_perception.synth.scene import random_pose
+
+    cfg = SynthConfig(width=1920, height=1080, seed=3, jitter=False)
+    renderer, rng = cfg.renderer(), np.random.default_rng(3)
+    track = cfg.track(0, rng)
+    img, _ = renderer.render(track, random_pose(track, rng, False), renderer.new_look(rng), rng)
+    cv2.imwrite(str(tmp_path / "f.png"), img)
+    other = _other_classes_model(tmp_path)
+    base = ["detect", str(tmp_path / "f.png"), "--crop", "384,960", "--downscale", "2", "--far-rows", "384,576",
+            "--no-progress"]
+    assert main([*base, "--out", str(tmp_path / "a.jsonl")]) == 0
+    assert main([*base, "--out", str(tmp_path / "b.jsonl"), "--far-model", str(default_model_path())]) == 0
+    a, b = (json.loads((tmp_path / f"{n}.jsonl").read_text()) for n in "ab")
+    assert a["boxes"] == b["boxes"] and len(a["boxes"]) > 0
+    capsys.readouterr()
+    assert main([*base, "--out", str(tmp_path / "c.jsonl"), "--far-model", str(other)]) == 2
+    assert "--far-model" in capsys.readouterr().err
+    assert main(["detect", str(tmp_path / "f.png"), "--crop", "384,960", "--downscale", "2", "--far-model", str(other),
+                 "--out", str(tmp_path / "d.jsonl")]) == 2
+    assert "--far-model: needs a far band" in capsys.readouterr().err
+    assert main(["bench", "pipeline", "--frames", "1", "--warmup", "0", "--scenes", "1", "--far-rows", "384,576",
+                 "--far-model", str(other), "--json"]) == 2
+    assert "--far-model" in capsys.readouterr().err
+
+    # --calib: the car's band and its far strip by default (rows 370-466 of example_mainhoop), as --crop with
+    # the strip's rows; --far-rows off: the band alone; auto without a calibration is refused
+    car = ["detect", str(tmp_path / "f.png"), "--calib", "example_mainhoop", "--no-progress"]
+    assert main([*car, "--out", str(tmp_path / "e.jsonl")]) == 0
+    assert "far strip rows 370-466" in capsys.readouterr().err
+    assert main([*base[:-2], "370,466", "--no-progress", "--out", str(tmp_path / "g.jsonl")]) == 0
+    e, g = (json.loads((tmp_path / f"{n}.jsonl").read_text()) for n in "eg")
+    assert e["boxes"] == g["boxes"]
+    assert main([*car, "--far-rows", "off", "--out", str(tmp_path / "h.jsonl")]) == 0
+    assert main(["detect", str(tmp_path / "f.png"), "--crop", "384,960", "--downscale", "2", "--no-progress",
+                 "--out", str(tmp_path / "i.jsonl")]) == 0
+    h, i = (json.loads((tmp_path / f"{n}.jsonl").read_text()) for n in "hi")
+    assert h["boxes"] == i["boxes"]
+    capsys.readouterr()
+    assert main(["detect", str(tmp_path / "f.png"), "--crop", "384,960", "--far-rows", "auto",
+                 "--out", str(tmp_path / "j.jsonl")]) == 2
+    assert "auto needs --calib" in capsys.readouterr().err

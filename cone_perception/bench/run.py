@@ -15,7 +15,7 @@ from tqdm import tqdm
 from ..bench.frames import rendered_frames
 from ..bench.pipeline import bench_adapter, bench_pipeline, bench_tracker, load_for_crop
 from ..bench.table import crop_for_setting, run_table
-from ..detector.farband import FarBand
+from ..detector.farband import FarBand, far_rows_for
 from ..errors import ConfigError
 from ..geometry.calib import load_calibration
 from ..timing import format_runs, format_table, summarize_runs
@@ -25,13 +25,16 @@ from ..words import plural
 def _bench_pipeline(args: argparse.Namespace, calib) -> dict:
     if args.input:
         calib = replace(calib, crop=crop_for_setting(calib.crop, args.input, calib.image_width, calib.image_height))
+    far_rows = far_rows_for(args.far_rows, calib, "--far-rows")  # a bad value fails before any model loads
+    if args.far_model and far_rows.crop is None:
+        raise ConfigError("--far-model", None, f"needs a far band ({far_rows.what})")
     det = load_for_crop(args.model, args.backend, calib.crop, args.threads, bf16=args.bf16)
-    far = None
-    if args.far_rows:
-        far = FarBand.load(det.source, args.far_rows, calib.image_width, calib.image_height, calib.crop, "--far-rows",
-                           backend=args.backend, threads=args.threads, bf16=args.bf16)
+    far = FarBand.for_calibration(args.far_model or det.source, args.far_rows, calib, "--far-rows", "--far-model",
+                                  backend=args.backend, threads=args.threads, bf16=args.bf16)
     result = bench_pipeline(calib, det, rendered_frames(calib, max(1, args.scenes)), args.frames, args.warmup, far)
-    result["far_rows"] = args.far_rows or ""
+    result["far_rows"] = f"{far.crop.v0},{far.crop.v1}" if far is not None else "off"
+    result["far_band"] = far_rows.what
+    result["far_model"] = far.detector.source if far is not None and args.far_model else ""
     result["setting"] = args.input or "calibration"
     result["threads"] = args.threads
     return result
@@ -44,6 +47,7 @@ def _repeat_pipeline(args: argparse.Namespace) -> int:
            "--threads", str(args.threads), "--backend", args.backend, "--scenes", str(args.scenes)]
     cmd += (["--model", str(args.model)] if args.model else []) + (["--bf16"] if args.bf16 else [])
     cmd += ["--input", args.input] if args.input else []
+    cmd += (["--far-rows", args.far_rows] if args.far_rows is not None else []) + (["--far-model", args.far_model] if args.far_model else [])
     runs = []
     for i in tqdm(range(args.repeat), unit="run", desc="bench pipeline", file=sys.stderr,
                   disable=args.json or args.no_progress):
@@ -83,7 +87,7 @@ def run_bench(args: argparse.Namespace) -> int:
         print(f"bench pipeline ({result['setting']}): {result['input']} -> {result['output']}, model input "
               f"{result['model_input'][0]}x{result['model_input'][1]}; model {result['model']} "
               f"({result['backend']}, {plural(result['threads'], 'thread')}), {args.frames} frames, "
-              f"{result['boxes_per_frame']:.1f} boxes/frame")
+              f"{result['boxes_per_frame']:.1f} boxes/frame; {result['far_band']}")
         print(format_table(result["stages"]))
         print(f"frames/s (median end to end): {result['fps']:.1f}   everything but the forward: "
               f"{result['non_forward_median_ms']:.2f} ms   peak RSS: {result['peak_rss_mb']:.0f} MiB")

@@ -1,13 +1,15 @@
 """``cone-perception detect``: run the detector over an image, a folder, a video or a rosbag -> JSON lines.
 
   cone-perception detect SOURCE --out FILE.jsonl [--model M] [--imgsz WxH] [--crop V0,V1[,U0,U1]]
-                                 [--downscale N] [--backend B] [--save-vis DIR] [--every N]
+                                 [--downscale N] [--calib C] [--far-rows auto|off|V0,V1] [--far-model M]
+                                 [--backend B] [--save-vis DIR] [--every N]
 
 One line per image (see ``cone_perception/data/predictions.py``), boxes in the image's own pixels.
 A video's frames are named ``<video stem>_<frame index, 6 digits>`` (index from 0 in the file);
 a bag's by their stamp in ns. No image read at all is an error (exit 2).
 Without ``--crop`` each image is letterboxed to the model input (``--imgsz``, default the
-model's); with ``--crop`` the band is cut (and downscaled by ``--downscale``) as the car does.
+model's); with ``--crop`` the band is cut (and downscaled by ``--downscale``) as the car does; with ``--calib`` the
+calibration's band and far strip (at its calibrated rows: ``detect`` has no attitude) run, as on the car.
 """
 
 from __future__ import annotations
@@ -34,9 +36,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--imgsz", type=size_arg, default=None, help="letterbox each image to this model input WxH")
     p.add_argument("--crop", type=parse_crop, default=None, help="band V0,V1[,U0,U1] in image px, cut before the model")
     p.add_argument("--downscale", type=int, default=1, choices=[1, 2, 4], help="with --crop: integer downscale")
-    p.add_argument("--far-rows", default=None, metavar="V0,V1",
-                   help="with --crop: also run image rows V0-V1 at full resolution, the whole width (the far band: "
-                        "small, far cones), and merge its boxes (docs/detector.md 'Far band')")
+    p.add_argument("--calib", default=None, metavar="C",
+                   help="as the car runs this camera: the calibration's band (crop, downscale) and, unless --far-rows "
+                        "says otherwise, its far strip at its calibrated rows (instead of --crop/--downscale)")
+    p.add_argument("--far-rows", default=None, metavar="auto|off|V0,V1",
+                   help="the far band: image rows also run at full resolution, the whole width, merged with the band's "
+                        "boxes (docs/detector.md 'Far band'): auto = the --calib calibration's far strip (the default "
+                        "with --calib); V0,V1 = these rows (with --crop or --calib); off = none (the default without --calib)")
+    p.add_argument("--far-model", default=None, metavar="PATH",
+                   help="the far band's own model file (e.g. one trained for its full"
+                        "-resolution scale; default: the band's model); its classes must be the band model's")
     p.add_argument("--conf", type=float, default=DEFAULT_CONF, help="confidence threshold (default %(default)s)")
     p.add_argument("--iou", type=float, default=DEFAULT_IOU, help="NMS IoU threshold (default %(default)s)")
     p.add_argument("--topic", default=None, help="rosbag: camera topic (default: the only image topic)")

@@ -9,24 +9,70 @@ its boxes with the band's:
   it is a nearer cone cut by the strip, which the band sees whole;
 * the rest join the band's boxes, and one class-aware NMS keeps the best box of each cone.
 
-Cost: one more forward on ``width x (V1 - V0)`` px (1920x192: 1.33x the pixels of 960x288).
-What it is worth: ``models/cone_detector.md``, "Small, far cones".
+Its rows (``far_rows``, one spelling for the node parameter and the commands' ``--far-rows``):
+
+* ``auto`` (the default): the calibration's far strip (:mod:`cone_perception.geometry.strip`): the rows
+  where cones 15-40 m ahead stand, as tall as the attitude margins need (``example_mainhoop``: 96 rows),
+  moved each frame with the attitude the pipeline has (the previous frame's); off where the calibration
+  has no ``camera_matrix`` or says ``far_strip: off`` (said, never silently);
+* ``V0,V1``: those rows, fixed (the hand-set override);
+* ``off`` or empty: no far band.
+
+Cost: one more forward on ``width x (V1 - V0)`` px (1920x96: 0.67x the pixels of 960x288).
+What it is worth: ``models/cone_detector.md``, "Small, far cones"; docs/benchmarks.md, "Far strip".
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..classes import CLASS_NAMES
 from ..crop import CropSpec
 from ..errors import ConfigError
+from ..geometry.strip import StripPlan
 from ..model.decode import nms_per_class
 from ..params import DEFAULT_IOU
 from .detector import Detector
 
 #: A far-band box whose top or bottom is this close to the strip's edge (full-image px) is a cut cone.
 EDGE_PX = 2.0
+#: ``far_rows`` values: the calibration's strip, and no far band.
+FAR_ROWS_AUTO = "auto"
+FAR_ROWS_OFF = ("off", "")
+
+
+@dataclass(frozen=True)
+class FarRows:
+    """What a ``far_rows`` value means for one calibration (:func:`far_rows_for`): the strip's crop at the
+    calibration's attitude (None: no far band), its plan when it moves with the attitude, and in words."""
+
+    crop: CropSpec | None
+    plan: StripPlan | None
+    what: str
+
+
+def far_rows_for(rows: str | None, calib, source: str = "far_rows") -> FarRows:
+    """``auto`` / ``off`` / ``""`` / ``"V0,V1"`` (None: ``auto``) for a :class:`~cone_perception.geometry.calib.Calibration`.
+    ConfigError naming ``source`` for bad rows; the calibration's own strip was checked at its load."""
+    rows = FAR_ROWS_AUTO if rows is None else str(rows).strip()
+    if rows.lower() in FAR_ROWS_OFF:
+        return FarRows(None, None, f"far band off ({source} {rows or 'empty'})")
+    if rows.lower() != FAR_ROWS_AUTO:
+        crop = far_band_crop(rows, calib.image_width, calib.image_height, calib.crop, source)
+        return FarRows(crop, None, f"far band rows {crop.v0}-{crop.v1} ({crop.height_full_px} rows, fixed: {source})")
+    if calib.far_strip is None:
+        return FarRows(None, None, f"far strip off (the calibration {calib.source} says far_strip: off)")
+    if calib.camera_matrix is None:
+        return FarRows(None, None, f"far strip off: the calibration {calib.source} has no camera_matrix to place it "
+                                   f"with ({source} V0,V1 sets rows by hand)")
+    plan = calib.strip_plan()
+    crop = far_band_crop(plan.rows, calib.image_width, calib.image_height, calib.crop, f"{calib.source}: far_strip")
+    s = plan.spec
+    return FarRows(crop, plan, f"far strip rows {crop.v0}-{crop.v1} ({plan.height} rows: cones {s.near_m:g}-{s.far_m:g} m "
+                               f"ahead, margins {s.pitch_margin_deg:g} deg pitch / {s.roll_margin_deg:g} deg roll), "
+                               "moved with the attitude")
 
 
 def far_band_crop(rows: str | tuple[int, int], image_width: int, image_height: int, band: CropSpec,
@@ -70,29 +116,82 @@ def merge_boxes(band_boxes: np.ndarray, far_boxes: np.ndarray, iou: float = DEFA
     return both[keep]
 
 
+def check_far_classes(band_detector, far_detector, source: str = "far_model") -> None:
+    """ConfigError naming ``source`` (the far model's option) unless the far band's model finds the same
+    cone classes as the band's: their boxes merge into one set, and a class only one of them knows would
+    come and go with the cone's distance. Detectors without a ``class_map`` (test doubles) are not checked."""
+    band, far = getattr(band_detector, "class_map", None), getattr(far_detector, "class_map", None)
+    if band is None or far is None:
+        return
+    band, far = {int(c) for c in band}, {int(c) for c in far}
+    if band != far:
+        def names(ids):
+            return ", ".join(CLASS_NAMES[i] for i in sorted(ids)) or "none"
+        raise ConfigError(source, getattr(far_detector, "source", None),
+                          f"the far band's model has the classes [{names(far)}], the band's model [{names(band)}]: "
+                          f"only in the far model: [{names(far - band)}], only in the band's: [{names(band - far)}]")
+
+
 @dataclass
 class FarBand:
-    """The far band of one camera: its crop and the detector built for its size (``Detector.load_for_band``)."""
+    """The far band of one camera: its crop and the detector built for its size (``Detector.load_for_band``).
 
-    crop: CropSpec
+    ``model_source``: the option the far band's model came from (``far_model``, ``--far-model``), named by
+    :meth:`check_classes`'s error."""
+
+    crop: CropSpec  # the strip's rows at the calibration's attitude (fixed rows: always these)
     detector: object  # a Detector (anything with detect(bgr, crop) -> BOX_DTYPE and a timing dict)
+    model_source: str = "far_model"
+    plan: StripPlan | None = None  # the calibration's strip, moved with the attitude; None: fixed rows
+
+    def crop_for(self, pitch_deg: float = 0.0, roll_deg: float = 0.0) -> tuple[CropSpec, bool]:
+        """(this frame's strip crop, clamped): the strip moved with the attitude offset (degrees) and kept
+        inside the image (``clamped``: it had to be); fixed rows do not move."""
+        if self.plan is None:
+            return self.crop, False
+        top, clamped = self.plan.top_for(pitch_deg, roll_deg)
+        if top == self.crop.v0:
+            return self.crop, clamped
+        return replace(self.crop, v0=top, v1=top + self.crop.height_full_px), clamped
+
+    def check_classes(self, band_detector) -> None:
+        """ConfigError naming :attr:`model_source` unless this band's model has the band model's classes
+        (:func:`check_far_classes`); the Pipeline calls it before the first frame."""
+        check_far_classes(band_detector, self.detector, self.model_source)
 
     @classmethod
     def load(cls, model, rows: str | tuple[int, int], image_width: int, image_height: int, band: CropSpec,
-             source: str = "far_rows", **detector_kw) -> "FarBand":
-        """The far band of ``rows`` with ``model`` built for its strip (``Detector.load_for_band``)."""
+             source: str = "far_rows", model_source: str = "far_model", **detector_kw) -> "FarBand":
+        """The far band of ``rows`` with ``model`` (the band's own, or a far model: ``model_source`` names
+        its option in errors) built for its strip (``Detector.load_for_band``)."""
         crop = far_band_crop(rows, image_width, image_height, band, source)
         det = Detector.load_for_band(model, (crop.out_width, crop.out_height), **detector_kw)
         det.warmup()
-        return cls(crop, det)
+        return cls(crop, det, model_source)
 
-    def detect(self, strip_bgr: np.ndarray) -> np.ndarray:
-        """Full-resolution strip ``(V1 - V0, W, 3)`` BGR -> its boxes, cut cones dropped (full-image px)."""
-        return drop_cut_boxes(self.detector.detect(strip_bgr, self.crop), self.crop)
+    @classmethod
+    def for_calibration(cls, model, rows: str | None, calib, source: str = "far_rows",
+                        model_source: str = "far_model", say=None, **detector_kw) -> "FarBand | None":
+        """The far band ``rows`` (:func:`far_rows_for`: ``auto`` = the calibration's strip) of ``calib`` with
+        ``model`` built for it, or None when off; ``say(text)`` is told which (e.g. ``print``)."""
+        fr = far_rows_for(rows, calib, source)
+        if say is not None:
+            say(fr.what)
+        if fr.crop is None:
+            return None
+        det = Detector.load_for_band(model, (fr.crop.out_width, fr.crop.out_height), **detector_kw)
+        det.warmup()
+        return cls(fr.crop, det, model_source, fr.plan)
 
-    def merged(self, band_boxes: np.ndarray, strip_bgr: np.ndarray) -> np.ndarray:
+    def detect(self, strip_bgr: np.ndarray, crop: CropSpec | None = None) -> np.ndarray:
+        """Full-resolution strip ``(V1 - V0, W, 3)`` BGR cut at ``crop`` (this frame's rows, :meth:`crop_for`;
+        default :attr:`crop`) -> its boxes, cut cones dropped (full-image px)."""
+        crop = crop or self.crop
+        return drop_cut_boxes(self.detector.detect(strip_bgr, crop), crop)
+
+    def merged(self, band_boxes: np.ndarray, strip_bgr: np.ndarray, crop: CropSpec | None = None) -> np.ndarray:
         iou = getattr(self.detector, "iou", DEFAULT_IOU)
-        return merge_boxes(band_boxes, self.detect(strip_bgr), iou)
+        return merge_boxes(band_boxes, self.detect(strip_bgr, crop), iou)
 
 
-__all__ = ["EDGE_PX", "FarBand", "drop_cut_boxes", "far_band_crop", "merge_boxes"]
+__all__ = ["EDGE_PX", "FAR_ROWS_AUTO", "FAR_ROWS_OFF", "FarBand", "FarRows", "check_far_classes", "far_rows_for", "drop_cut_boxes", "far_band_crop", "merge_boxes"]

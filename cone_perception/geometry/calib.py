@@ -6,7 +6,8 @@ Fields (see ``calib/README.md``): ``camera``, ``image_width``, ``image_height``,
 ``max_range_m``, ``pixel_sigma`` (``u``, ``v``); optional ``frame_id``
 (default ``rear_axle``), ``camera_matrix`` (3x3), ``dist_coeffs`` (list), ``mount_pose``
 (``x_m y_m z_m yaw_deg pitch_deg roll_deg``: lets the mapping recompose ``H_F_B`` for a body attitude
-offset, see :mod:`cone_perception.attitude`).
+offset, see :mod:`cone_perception.attitude`), ``far_strip`` (``off``, or ``near_m far_m pitch_margin_deg
+roll_margin_deg``: the far strip's range and margins, :mod:`.strip`; absent = the defaults).
 Other keys are kept as they are (``extra``) and written back on save.
 
 Every problem raises :class:`~cone_perception.errors.ConfigError` naming the
@@ -27,9 +28,10 @@ from ..classes import CLASS_NAMES
 from ..crop import MAX_IMAGE_SIDE_PX, CropSpec
 from ..errors import ConfigError
 from ..resources import calib_dir, resolve_in
-from .camera import MountPose
+from .camera import MountPose, PinholeCamera
 from .homography import FOOT_RULES, fix_homography_sign
 from .pose import MOUNT_POSE_CHECK_RANGE_M, MOUNT_POSE_TOLERANCE, mount_pose_disagreement, pose_from_homography
+from .strip import DEFAULT_STRIP, FarStripSpec, StripPlan, plan_strip, strip_spec_from_yaml
 
 DEFAULT_FOOT_POINTS = {
     "blue": "bottom_right",
@@ -39,6 +41,9 @@ DEFAULT_FOOT_POINTS = {
     "unknown": "bottom_center",
 }
 DEFAULT_CAMERA = "example_mainhoop"
+#: ``max_range_m`` where a calibration does not say: cones farther are not published. 40 m: the far
+#: strip's reach (docs/benchmarks.md, "Far cones by range band"); each cone's covariance says how sure.
+DEFAULT_MAX_RANGE_M = 40.0
 #: What the shipped calibrations use instead of the thesis's corners: the bottom centre of the box
 #: (the base edge nearest the camera) moved by the foot offset along the viewing ray to the cone's
 #: centre. The offsets lie between half the base width and half its diagonal (small cone base
@@ -64,6 +69,7 @@ _KNOWN_KEYS = {
     "foot_offset_from_width",
     "camera_xy_m",
     "mount_pose",
+    "far_strip",
 }
 #: Keys of ``mount_pose`` in the YAML (the static transform of the camera uses the same names).
 MOUNT_POSE_KEYS = ("x_m", "y_m", "z_m", "yaw_deg", "pitch_deg", "roll_deg")
@@ -80,7 +86,7 @@ class Calibration:
     T_F_S: np.ndarray
     crop: CropSpec
     foot_points: tuple[str, ...]  # rule per project class id
-    max_range_m: float = 30.0
+    max_range_m: float = DEFAULT_MAX_RANGE_M
     pixel_sigma_u: float = 1.0
     pixel_sigma_v: float = 1.0
     frame_id: str = "rear_axle"
@@ -92,6 +98,7 @@ class Calibration:
     foot_offset_from_width: bool = False
     camera_xy_m: tuple[float, float] | None = None
     mount_pose: MountPose | None = None  # needs camera_matrix; enables per-frame attitude
+    far_strip: FarStripSpec | None = DEFAULT_STRIP  # the far strip's range and margins; None = off
     extra: dict[str, Any] = field(default_factory=dict)
     source: str = "<memory>"
 
@@ -121,6 +128,17 @@ class Calibration:
             pose = pose_from_homography(self.H_F_B, self.camera_matrix).pose
             return np.array([pose.x_m, pose.y_m])
         return np.zeros(2)
+
+    def strip_plan(self) -> StripPlan | None:
+        """The far strip of this camera (:func:`~.strip.plan_strip`): None when ``far_strip`` is off or
+        there is no ``camera_matrix`` to place it with. ConfigError naming ``far_strip`` when it would leave
+        the image or lie above the horizon (:func:`load_calibration` asks at load)."""
+        if self.far_strip is None or self.camera_matrix is None:
+            return None
+        pose = self.mount_pose or pose_from_homography(self.H_F_B, self.camera_matrix).pose
+        dist = np.zeros(0) if self.dist_coeffs is None else np.asarray(self.dist_coeffs, dtype=np.float64)
+        cam = PinholeCamera(self.camera_matrix, self.image_width, self.image_height, pose, dist)
+        return plan_strip(cam, self.far_strip, self.source)
 
     def ground_reference_px(self) -> tuple[float, float]:
         """A pixel known to see the ground: the bottom centre of the image."""
@@ -152,6 +170,8 @@ class Calibration:
             d["camera_xy_m"] = [float(v) for v in self.camera_xy_m]
         if self.mount_pose is not None:
             d["mount_pose"] = mount_pose_to_dict(self.mount_pose)
+        if self.far_strip != DEFAULT_STRIP:
+            d["far_strip"] = "off" if self.far_strip is None else self.far_strip.to_dict()
         d.update(self.extra)
         return d
 
@@ -347,7 +367,7 @@ def calibration_from_dict(data: dict, source: str = "<memory>") -> Calibration:
         T_F_S=T_F_S,
         crop=crop,
         foot_points=tuple(fp[n] for n in CLASS_NAMES),
-        max_range_m=f.number("max_range_m", 30.0, positive=True),
+        max_range_m=f.number("max_range_m", DEFAULT_MAX_RANGE_M, positive=True),
         pixel_sigma_u=f.number("u", 1.0, where=sigma, prefix="pixel_sigma.", positive=True),
         pixel_sigma_v=f.number("v", 1.0, where=sigma, prefix="pixel_sigma.", positive=True),
         frame_id=str(f.get("frame_id", "rear_axle")),
@@ -357,6 +377,7 @@ def calibration_from_dict(data: dict, source: str = "<memory>") -> Calibration:
         foot_offset_from_width=from_width,
         camera_xy_m=cam_xy,
         mount_pose=mount_pose,
+        far_strip=strip_spec_from_yaml(data.get("far_strip"), f.err),
         extra={k: v for k, v in data.items() if k not in _KNOWN_KEYS},
         source=source,
     )
@@ -370,6 +391,7 @@ def calibration_from_dict(data: dict, source: str = "<memory>") -> Calibration:
             raise f.err("mount_pose", f"disagrees with the file's own H_F_B (H_S_B, T_F_S, camera_matrix) by "
                         f"{bad * 100:.1f} % of range at {MOUNT_POSE_CHECK_RANGE_M:g} m (at most "
                         f"{MOUNT_POSE_TOLERANCE * 100:g} %): wrong pose, or H calibrated for another mount")
+    calib.strip_plan()  # a far strip outside the image or above the horizon: refused here, naming far_strip
     return calib
 
 

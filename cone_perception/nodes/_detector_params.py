@@ -36,16 +36,17 @@ class DetectorLoader:
         self.kw[name] = value
         setattr(detector, name, value)
 
-    def load(self, band_wh: tuple[int, int] | None = None) -> Detector:
-        """Load the model and warm it up. ``band_wh`` (W, H) is the size of the images the node will
+    def load(self, band_wh: tuple[int, int] | None = None, model: str | None = None) -> Detector:
+        """Load the model (``model``: another file than the ``model`` parameter's, e.g. ``far_model``) and warm it up. ``band_wh`` (W, H) is the size of the images the node will
         see, when known: a checkpoint is then built for the band's own size (no letterbox, also for
         fixed-size backends) and warmed at it, so the first real frame is as fast as the rest."""
+        model = model or self.model
         if band_wh:
-            det = Detector.load_for_band(self.model, band_wh, **self.kw)
+            det = Detector.load_for_band(model, band_wh, **self.kw)
             for _ in range(3):
                 det.infer(np.zeros((band_wh[1], band_wh[0], 3), np.uint8))
         else:
-            det = Detector.load(self.model, **self.kw)
+            det = Detector.load(model, **self.kw)
             det.warmup()
         self.node.get_logger().info(
             f"model {det.source} ({det.backend} {det.precision}, {self.threads or 'library default'} thread(s), "

@@ -6,9 +6,14 @@ The network is built for the calibration's band at start-up; with ``track: true`
 runs too and gets each frame's attitude.
 
 Parameters (generated from cone_perception/params.py by ``cone-perception params --write``):
-  far_rows (string, default ""; V0,V1 or empty): image rows V0,V1 also run at full resolution, the
-    whole width (the far band for small, far cones; a second forward, about a third of the frames/s;
-    docs/detector.md, Far band); empty = off
+  far_rows (string, default auto; auto, off, or V0,V1): the far band: image rows also run at full
+    resolution, the whole width, for small, far cones (a second forward; docs/detector.md, Far
+    band). auto = the calibration's far strip (the rows where cones 15-40 m ahead stand, moved each
+    frame with the attitude; off where the calibration has no camera_matrix); V0,V1 = these rows,
+    fixed; off or empty = none
+  far_model (string, default ""): the far band's own model file (one trained for its full-resolution
+    scale); empty = the band's model. Its classes must be the band model's (refused at start-up
+    otherwise)
   track (bool, default false): also the tracker stage: /cones/tracked out (the parameters of
     cone_tracker); it gets each frame's attitude, which a separate cone_tracker does not
   Also those of driver_adapter (calibration, input_transport); those of detection (model, backend,
@@ -39,13 +44,18 @@ from ._tracking import NodeTracking
 
 class PipelineNode(PerceptionNode):
     def _far_band(self, calib, rows: str):
-        """The far band of ``far_rows`` (a detector built for its strip), or None when the parameter is empty."""
-        if not rows:
-            return None
-        from ..detector.farband import FarBand, far_band_crop
+        """The far band of ``far_rows`` (``auto``: the calibration's strip; a detector built for its size), or
+        None when off; which it is goes to the log."""
+        from ..detector.farband import FarBand, far_rows_for
 
-        crop = far_band_crop(rows, calib.image_width, calib.image_height, calib.crop, "parameter far_rows")
-        return FarBand(crop, self.loader.load((crop.out_width, crop.out_height)))  # warmed like the band's
+        fr = far_rows_for(rows, calib, "parameter far_rows")
+        self.get_logger().info(fr.what)
+        if fr.crop is None:
+            return None
+        model = declare(self, "far_model") or None  # None: the band's model
+        # warmed like the band's; the Pipeline refuses a far model of other classes before the first frame
+        det = self.loader.load((fr.crop.out_width, fr.crop.out_height), model)
+        return FarBand(fr.crop, det, "parameter far_model", fr.plan)
 
     def _set_threshold(self, name: str, value) -> None:
         self.loader.set_threshold(self.pipeline.detector, name, value)
@@ -62,6 +72,8 @@ class PipelineNode(PerceptionNode):
         self.advertise_cones(calib.frame_id, markers)
         mode, imu = declare_attitude(self)
         self.pipeline = Pipeline(calib, detector, mode, imu, self._far_band(calib, declare(self, "far_rows")))
+        if self.pipeline.far is not None:  # /diagnostics: frames with the strip, those clamped to the image (WARN)
+            self.health.watch("far_strip", self.pipeline.strip_counts, warn=["clamped"])
         self.pub_boxes = self.create_publisher(PointCloud2, "cone_boxes", QOS_DATA)
         self.runtime = RuntimeParameters(self)
         self.runtime.register("publish_markers", lambda v: setattr(self, "publish_markers", bool(v)))

@@ -15,15 +15,38 @@ from ..crop import CropSpec
 from ..data.predictions import write_prediction
 from ..data.sources import iter_source
 from ..detector import Detector, default_model_path, detect_one, resolve_backend
-from ..detector.farband import FarBand
+from ..detector.farband import FAR_ROWS_AUTO, FAR_ROWS_OFF, FarBand, far_rows_for
 from ..errors import ConfigError
+from ..geometry.calib import load_calibration
 from ..vis import draw_band, draw_boxes
 from ..words import plural
 
 
+def _car_band(args: argparse.Namespace) -> None:
+    """``--calib``: set ``--crop``, ``--downscale`` and ``--far-rows`` (V0,V1 or None) from the calibration;
+    without it ``--far-rows`` is rows or off (``auto`` needs a calibration)."""
+    rows = None if args.far_rows is None else str(args.far_rows).strip()
+    if args.calib is None:
+        if rows is not None and rows.lower() == FAR_ROWS_AUTO:
+            raise ConfigError("--far-rows", None, "auto needs --calib: the far strip is placed from a calibration")
+        args.far_rows = None if rows is None or rows.lower() in FAR_ROWS_OFF else rows
+        return
+    if args.crop or args.imgsz:
+        raise ConfigError("--calib", None, "sets the band itself: leave out --crop / --imgsz")
+    calib = load_calibration(args.calib)
+    c = calib.crop
+    args.crop, args.downscale = (c.v0, c.v1, c.u0, c.u1), c.downscale
+    fr = far_rows_for(rows, calib, "--far-rows")
+    print(f"detect: band rows {c.v0}-{c.v1} / {c.downscale} of {calib.source}; {fr.what}", file=sys.stderr)
+    args.far_rows = f"{fr.crop.v0},{fr.crop.v1}" if fr.crop is not None else None
+
+
 def run_detect(args: argparse.Namespace) -> int:
+    _car_band(args)  # --calib: the calibration's band and far strip as --crop / --downscale / --far-rows
     if args.far_rows and not args.crop:
-        raise ConfigError("--far-rows", None, "needs --crop: the far band adds to the car's band")
+        raise ConfigError("--far-rows", None, "needs --crop or --calib: the far band adds to the car's band")
+    if args.far_model and not args.far_rows:
+        raise ConfigError("--far-model", None, "needs a far band (--far-rows, or --calib with its far strip)")
     model = args.model or default_model_path()
     backend = resolve_backend(args.backend, model, bf16=args.bf16)
     det = Detector.load(model, backend=backend, conf=args.conf, iou=args.iou,
@@ -45,8 +68,12 @@ def run_detect(args: argparse.Namespace) -> int:
         if not args.far_rows:
             return None
         if (w, h) not in far_by_size:
-            far_by_size[(w, h)] = FarBand.load(model, args.far_rows, w, h, band_for(w), "--far-rows", backend=backend,
-                                               conf=args.conf, iou=args.iou, bf16=args.bf16)
+            far_model = args.far_model or model
+            far = FarBand.load(far_model, args.far_rows, w, h, band_for(w), "--far-rows", "--far-model",
+                               backend=resolve_backend(args.backend, far_model, bf16=args.bf16), conf=args.conf,
+                               iou=args.iou, bf16=args.bf16)
+            far.check_classes(det)  # a far model of other classes: refused before its first image
+            far_by_size[(w, h)] = far
         return far_by_size[(w, h)]
 
     def detector_for_size(band):

@@ -21,7 +21,7 @@ from ..data.bagio import bag_topics, check_new_output
 from ..data.bags import read_attitude_truth, read_ground_truth, read_twists
 from ..data.outfiles import print_written, refuse_existing, remove_bag
 from ..detector import Detector, default_model_path
-from ..detector.farband import FarBand, far_band_crop
+from ..detector.farband import FarBand, far_rows_for
 from ..detector.model_files import box_model_or_default
 from ..errors import ConfigError
 from ..evaluation import GT_MIN_VISIBLE, LocalisationReport, format_localisation
@@ -53,11 +53,13 @@ def run_replay(args: argparse.Namespace) -> int:
         raise ConfigError("--tracker", None, "needs --track")
     if args.max_range is not None:
         calib = replace(calib, max_range_m=float(args.max_range))
-    if args.far_rows:  # a bad value fails before any model loads or node starts
-
-        far_band_crop(args.far_rows, calib.image_width, calib.image_height, calib.crop, "--far-rows")
-        if args.live == "separate":
+    far_rows = far_rows_for(args.far_rows, calib, "--far-rows")  # a bad value fails before any model loads
+    if args.live == "separate" and far_rows.crop is not None:
+        if args.far_rows is not None:
             raise ConfigError("--far-rows", None, "needs the fused pipeline node (--live fused or offline)")
+        print("replay: no far strip with --live separate (the detection node runs the band only)")
+    if args.far_model and far_rows.crop is None:
+        raise ConfigError("--far-model", None, f"needs a far band ({far_rows.what})")
     refuse_existing([p for p in (args.out, args.json) if p is not None], args.force, "replay")
     if args.out is not None:
         if args.force and args.out.exists():
@@ -96,10 +98,9 @@ def _run_offline(args, calib) -> dict:
     det = Detector.load_for_band(args.model or default_model_path(), (calib.crop.out_width, calib.crop.out_height),
                                  backend=args.backend, conf=conf, threads=args.threads or None, bf16=args.bf16)
     det.warmup()
-    far = None
-    if args.far_rows:
-        far = FarBand.load(det.source, args.far_rows, calib.image_width, calib.image_height, calib.crop, "--far-rows",
-                           backend=args.backend, conf=conf, threads=args.threads or None, bf16=args.bf16)
+    far = FarBand.for_calibration(args.far_model or det.source, args.far_rows, calib, "--far-rows", "--far-model",
+                                  say=lambda t: print(f"replay: {t}"), backend=args.backend, conf=conf,
+                                  threads=args.threads or None, bf16=args.bf16)
     imu = _imu_source(args, calib)
     att_cfg = None
     if args.box_model == "model" or (args.box_model == "auto" and not args.gt_topic):
@@ -124,6 +125,8 @@ def _run_offline(args, calib) -> dict:
         print(format_replay_tracking(res.tracking))
     if args.out:
         print_written([args.out], "replay")
+    if far is not None:
+        print(f"far band: {format_strip_counts(pipeline)}")
     if args.attitude_png:
         stamps = sorted(res.attitude)
         attitude_plot(args.attitude_png, stamps, [res.attitude[s] for s in stamps], read_attitude_truth(args.bag),
@@ -131,7 +134,22 @@ def _run_offline(args, calib) -> dict:
         print_written([args.attitude_png], "replay")
     return {"mode": "offline", "frames": n, "dropped": dict(res.stats.dropped), "wall_s": res.wall_s,
             "stages": stages, "localisation": res.localisation, "tracking": res.tracking,
-            "attitude_fits": res.pipeline_attitude}
+            "attitude_fits": res.pipeline_attitude,
+            "far_strip": strip_summary(pipeline) if far is not None else None}
+
+
+def strip_summary(pipeline) -> dict:
+    """The replay summary's ``far_strip``: its rows at the calibration's attitude, whether it moves, frames
+    with it and those where the attitude would have moved it out of the image (clamped)."""
+    far = pipeline.far
+    return {"rows": [far.crop.v0, far.crop.v1], "moves": far.plan is not None, **pipeline.strip_counts}
+
+
+def format_strip_counts(pipeline) -> str:
+    s = strip_summary(pipeline)
+    how = "moved with the attitude" if s["moves"] else "fixed"
+    return (f"rows {s['rows'][0]}-{s['rows'][1]} at the calibration's attitude ({how}), {s['frames']} frames, "
+            f"clamped to the image in {s['clamped']}")
 
 
 def tracker_config(settings: list[str]) -> TrackerConfig:
@@ -177,8 +195,10 @@ def _run_live(args, calib) -> dict:
     if args.model:
         params["model"] = str(Path(args.model).resolve())
     params["threads"] = args.threads
-    if args.far_rows:
+    if args.far_rows is not None:
         params["far_rows"] = args.far_rows
+    if args.far_model:
+        params["far_model"] = str(Path(args.far_model).resolve())
     if args.bf16:
         params["bf16"] = True
     res = live_replay(args.bag, mode=args.live, topic=args.topic, params=params, pace=args.pace,

@@ -11,7 +11,9 @@ import numpy as np
 from ..classes import CLASS_NAMES
 from ..crop import CropSpec
 from ..errors import ConfigError
-from ..geometry.calib import RECOMMENDED_FOOT_OFFSET_M, RECOMMENDED_FOOT_POINTS, Calibration, save_calibration
+from ..geometry.calib import (
+    DEFAULT_MAX_RANGE_M, RECOMMENDED_FOOT_OFFSET_M, RECOMMENDED_FOOT_POINTS, Calibration, save_calibration,
+)
 from ..geometry.camera import MountPose, PinholeCamera, default_intrinsics
 from .look import RenderOptions
 from .render import Renderer
@@ -90,7 +92,7 @@ class SynthConfig:
             crop=crop,
             foot_points=tuple(RECOMMENDED_FOOT_POINTS[n] for n in CLASS_NAMES),
             foot_offset_m=tuple(RECOMMENDED_FOOT_OFFSET_M[n] for n in CLASS_NAMES),
-            max_range_m=30.0,
+            max_range_m=DEFAULT_MAX_RANGE_M,
             pixel_sigma_u=1.5,
             pixel_sigma_v=1.5,
             camera_matrix=cam.K,
