@@ -159,6 +159,15 @@ def test_pipeline_node_with_far_rows_publishes_the_merged_boxes(ros, tmp_path): 
     np.testing.assert_allclose(np.sort(got["v1"]), np.sort(want["v1"]), atol=0.05)
     with pytest.raises(ConfigError, match="far_rows"):
         PipelineNode(context=ros.context, parameter_overrides=[Parameter("far_rows", value="10,20")])
+    # by default: the calibration's strip, moved with the attitude; its counts on /diagnostics
+    default = ros.add(PipelineNode(context=ros.context))
+    assert default.pipeline.far.crop == CropSpec(370, 466, 0, 1920, 1) and default.pipeline.far.plan is not None
+    default.pipeline.strip_counts["clamped"] += 1  # as a frame moved out of the image would
+    rep = default.health.assess(10**9)
+    values = dict(rep.values)
+    assert values["far_strip:frames"] == "0" and values["far_strip:clamped"] == "1" and "far_strip clamped" in rep.message
+    off = ros.add(PipelineNode(context=ros.context, parameter_overrides=[Parameter("far_rows", value="off")]))
+    assert off.pipeline.far is None and "far_strip" not in off.health.watched
     with pytest.raises(ConfigError, match="parameter far_model.*only in the band's: \\[unknown\\]"):
         PipelineNode(context=ros.context, parameter_overrides=[Parameter("far_rows", value="384,576"),
                                                                Parameter("far_model", value=str(_other_classes_model(tmp_path)))])
