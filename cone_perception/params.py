@@ -202,8 +202,9 @@ _MAPPING = (
 _PIPELINE = (
     _p("far_rows", "auto", "the far band: image rows also run at full resolution, the whole width, for small, far "
        "cones (a second forward; docs/detector.md, Far band). auto = the calibration's far strip (the rows where "
-       "cones 15-40 m ahead stand, moved each frame with the attitude; off where the calibration has no "
-       "camera_matrix); V0,V1 = these rows, fixed; off or empty = none", values="auto, off, or V0,V1"),
+       "cones 15-40 m ahead stand, moved each frame with the attitude; none where the calibration has no "
+       "camera_matrix); V0,V1 = these rows, fixed; none or empty = no far band (not off: ROS reads off as a "
+       "boolean)", values="auto, none, or V0,V1"),
     _p("far_model", "", "the far band's own model file (one trained for its full-resolution scale); empty = the band's "
        "model. Its classes must be the band model's (refused at start-up otherwise)"),
     _p("track", False, "also the tracker stage: /cones/tracked out (the parameters of cone_tracker); it gets each "

@@ -166,8 +166,12 @@ def test_pipeline_node_with_far_rows_publishes_the_merged_boxes(ros, tmp_path): 
     rep = default.health.assess(10**9)
     values = dict(rep.values)
     assert values["far_strip:frames"] == "0" and values["far_strip:clamped"] == "1" and "far_strip clamped" in rep.message
-    off = ros.add(PipelineNode(context=ros.context, parameter_overrides=[Parameter("far_rows", value="off")]))
+    off = ros.add(PipelineNode(context=ros.context, parameter_overrides=[Parameter("far_rows", value="none")]))
     assert off.pipeline.far is None and "far_strip" not in off.health.watched
+    # -p far_rows:=off arrives as a boolean (YAML): refused naming the parameter and why, not rclpy's type error
+    with pytest.raises(ConfigError, match=r"parameter far_rows: must be a string, got 'False' of type 'BOOL': a word "
+                                          "ROS reads as a boolean"):
+        PipelineNode(context=ros.context, parameter_overrides=[Parameter("far_rows", value=False)])
     with pytest.raises(ConfigError, match="parameter far_model.*only in the band's: \\[unknown\\]"):
         PipelineNode(context=ros.context, parameter_overrides=[Parameter("far_rows", value="384,576"),
                                                                Parameter("far_model", value=str(_other_classes_model(tmp_path)))])

@@ -64,10 +64,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-range", type=float, default=None, metavar="M",
                    help="offline: use this max_range_m instead of the calibration's (cones farther are dropped; to "
                         "measure a range before setting it in a calibration)")
-    p.add_argument("--far-rows", default=None, metavar="auto|off|V0,V1",
+    p.add_argument("--far-rows", default=None, metavar="auto|none|V0,V1",
                    help="the far band, image rows also run at full resolution, the whole width (docs/detector.md "
                         "'Far band'): auto (default) = the calibration's far strip, moved each frame with the attitude; "
-                        "V0,V1 = these rows, fixed; off = none. Live: the pipeline node's far_rows (fused only)")
+                        "V0,V1 = these rows, fixed; none (or off) = the band alone. Live: the pipeline node's far_rows (fused only)")
     p.add_argument("--far-model", default=None, metavar="PATH",
                    help="the far band's own model file (e.g. one trained for its full"
                         "-resolution scale; default: the band's model); its classes must be the band model's; live: the node's far_model")

@@ -18,7 +18,7 @@ Its rows (``far_rows``, one spelling for the node parameter and the commands' ``
   moved each frame with the attitude the pipeline has (the previous frame's); off where the calibration
   has no ``camera_matrix`` or says ``far_strip: off`` (said, never silently);
 * ``V0,V1``: those rows, fixed (the hand-set override);
-* ``off`` or empty: no far band.
+* ``none`` or empty (the commands also take ``off``): no far band.
 
 Cost: one more forward on ``width x (V1 - V0)`` px (1920x96: 0.67x the pixels of 960x288).
 What it is worth: ``models/cone_detector.md``, "Small, far cones"; docs/benchmarks.md, "Far strip".
@@ -40,9 +40,10 @@ from .detector import Detector
 
 #: A far-band box whose top or bottom is this close to the strip's edge (full-image px) is a cut cone.
 EDGE_PX = 2.0
-#: ``far_rows`` values: the calibration's strip, and no far band.
+#: ``far_rows`` values: the calibration's strip, and no far band (``none``; the commands also take ``off``,
+#: which a ROS parameter cannot hold: ``-p far_rows:=off`` reads as a boolean).
 FAR_ROWS_AUTO = "auto"
-FAR_ROWS_OFF = ("off", "")
+FAR_ROWS_OFF = ("none", "", "off")
 
 
 @dataclass(frozen=True)
@@ -56,7 +57,7 @@ class FarRows:
 
 
 def far_rows_for(rows: str | None, calib, source: str = "far_rows") -> FarRows:
-    """``auto`` / ``off`` / ``""`` / ``"V0,V1"`` (None: ``auto``) for a :class:`~cone_perception.geometry.calib.Calibration`.
+    """``auto`` / ``none`` (``""``, ``off``) / ``"V0,V1"`` (None: ``auto``) for a :class:`~cone_perception.geometry.calib.Calibration`.
     ConfigError naming ``source`` for bad rows; the calibration's own strip was checked at its load."""
     rows = FAR_ROWS_AUTO if rows is None else str(rows).strip()
     if rows.lower() in FAR_ROWS_OFF:

@@ -6,11 +6,11 @@ The network is built for the calibration's band at start-up; with ``track: true`
 runs too and gets each frame's attitude.
 
 Parameters (generated from cone_perception/params.py by ``cone-perception params --write``):
-  far_rows (string, default auto; auto, off, or V0,V1): the far band: image rows also run at full
+  far_rows (string, default auto; auto, none, or V0,V1): the far band: image rows also run at full
     resolution, the whole width, for small, far cones (a second forward; docs/detector.md, Far
     band). auto = the calibration's far strip (the rows where cones 15-40 m ahead stand, moved each
-    frame with the attitude; off where the calibration has no camera_matrix); V0,V1 = these rows,
-    fixed; off or empty = none
+    frame with the attitude; none where the calibration has no camera_matrix); V0,V1 = these rows,
+    fixed; none or empty = no far band (not off: ROS reads off as a boolean)
   far_model (string, default ""): the far band's own model file (one trained for its full-resolution
     scale); empty = the band's model. Its classes must be the band model's (refused at start-up
     otherwise)
