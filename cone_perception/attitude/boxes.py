@@ -12,7 +12,7 @@ box model holds, per box height bucket (px at the model input), the median of
 
 measured on labelled frames (``cone-perception eval --box-model-out``,
 :func:`cone_perception.evaluation.boxfit.measure_box_model`) and stored beside the model file
-(:func:`cone_perception.detector.model_files.read_box_model`). :meth:`BoxModel.correct` turns detected
+(:func:`cone_perception.attitude.box_files.read_box_model`). :meth:`BoxModel.correct` turns detected
 boxes into the label-like boxes the fit's cone model expects. :data:`DEFAULT_BOX_MODEL` (no shift, a wide
 per-cone spread) is the conservative stand-in for a model without one. ROS-free, no I/O.
 """
