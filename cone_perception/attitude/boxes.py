@@ -78,6 +78,22 @@ class BoxModel:
         b[:, 3] += bo * label_h
         return b
 
+    def detected(self, boxes: np.ndarray, input_scale: float | None = None) -> np.ndarray:
+        """The inverse of :meth:`correct`: (N, 4) labelled boxes (u1, v1, u2, v2 full-image px) -> the boxes this
+        detector draws around such cones, by the medians: the top moves down by ``top_low``, the bottom up by
+        ``bottom_high`` of the labelled height (looked up at the detected height, one refinement). Columns u
+        unchanged. Rendered drives use it to give a detector's boxes the real frames' behaviour
+        (:mod:`cone_perception.synth.boxlook`)."""
+        b = np.array(boxes, dtype=np.float64).reshape(-1, 4)
+        if len(b) == 0:
+            return b
+        label_h = b[:, 3] - b[:, 1]
+        r, _, _ = self.at(label_h, input_scale)
+        _, t, bo = self.at(label_h * r, input_scale)
+        b[:, 1] += t * label_h
+        b[:, 3] -= bo * label_h
+        return b
+
     def median_row(self, i: int) -> str:
         """One bucket as text (cards, warnings)."""
         lo = self.buckets_px[i]
