@@ -147,8 +147,10 @@ def test_replay_box_behaviour_real_on_a_synthetic_drive(tmp_path):
     for name, extra in (("as-is", []), ("real", ["--box-behaviour", "real"]),
                         ("medians", ["--box-behaviour", "real", "--box-jitter", "0"])):
         out = tmp_path / name
+        # the far strip off (on by default): its boxes merge with the band's, and moved tops change which merge,
+        # and the strip moves with the image attitude these boxes give: the same boxes in the same order need the band alone
         assert main(["replay", str(bag), "--calib", str(tmp_path / "drive_calib.yaml"), "--attitude", "image",
-                     "--no-progress", "--out", str(out), *extra]) == 0
+                     "--far-rows", "none", "--no-progress", "--out", str(out), *extra]) == 0
         boxes[name] = np.concatenate([from_pointcloud2(m.msg, BOX_DTYPE) for m in bagio.read_messages(out, "/cone_boxes")])
     a, r, m = boxes["as-is"], boxes["real"], boxes["medians"]
     assert len(a) == len(r) == len(m) >= 20
