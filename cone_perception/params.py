@@ -198,12 +198,18 @@ _MAPPING = (
        choices=("", "fixed", "image", "imu", "fused")),
     _p("imu_rest_deg", (0.0, 0.0), "the IMU's pitch and roll (degrees) with the car at rest on the level ground of "
        "the calibration (cone-perception imu-rest measures it); for attitude imu / fused"),
+    _p("box_model", "auto", "how the image attitude reads the detector's boxes (docs/attitude.md, Box model): model = "
+       "the box model measured on real frames beside the model file (MODEL.box_model.yaml; a model without one: a "
+       "wide default, warned), rendered = the rendered drives' box-top table, auto = rendered for a synthetic "
+       "camera's calibration (camera: synth), else model; shown on /diagnostics (attitude:box_model)",
+       choices=("auto", "model", "rendered")),
 )
 _PIPELINE = (
     _p("far_rows", "auto", "the far band: image rows also run at full resolution, the whole width, for small, far "
        "cones (a second forward; docs/detector.md, Far band). auto = the calibration's far strip (the rows where "
-       "cones 15-40 m ahead stand, moved each frame with the attitude; off where the calibration has no "
-       "camera_matrix); V0,V1 = these rows, fixed; off or empty = none", values="auto, off, or V0,V1"),
+       "cones 15-40 m ahead stand, moved each frame with the attitude; none where the calibration has no "
+       "camera_matrix); V0,V1 = these rows, fixed; none or empty = no far band (not off: ROS reads off as a "
+       "boolean)", values="auto, none, or V0,V1"),
     _p("far_model", "", "the far band's own model file (one trained for its full-resolution scale); empty = the band's "
        "model. Its classes must be the band model's (refused at start-up otherwise)"),
     _p("track", False, "also the tracker stage: /cones/tracked out (the parameters of cone_tracker); it gets each "
@@ -270,7 +276,9 @@ NODES: dict[str, NodeSpec] = {n.name: n for n in (
         ("`/cones` (sensor_msgs/PointCloud2, frame = the calibration's `frame_id`, default `rear_axle`)",
          "`/cones/markers` (visualization_msgs/MarkerArray)", "`cones/attitude` (geometry_msgs/Vector3Stamped: "
          "the attitude each frame was mapped with, x = roll, y = pitch, rad)", _DIAG),
-        (PARAMS["calibration"], *_MAPPING)),
+        (PARAMS["calibration"], *_MAPPING, dataclasses.replace(
+            PARAMS["model"], description="the model file of the detection node that draws cone_boxes, for its box "
+                                         "model (box_model); empty = the shipped default model (models/cone_detector.pt)"))),
     NodeSpec(
         "pipeline", "the three stages fused in one process: image_raw -> cone_boxes, /cones, /cones/markers",
         ("`image_raw` or `image_raw/compressed` (by `input_transport`)", "`imu` (with `attitude` `imu` / `fused`)",

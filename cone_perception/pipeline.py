@@ -44,7 +44,8 @@ class Pipeline:
     ``process_*`` call takes the frame's capture stamp (``stamp_ns``), at which the IMU is read. ``far``: a
     :class:`~cone_perception.detector.farband.FarBand` (full-resolution rows near the horizon, a second
     forward; its boxes merge with the band's), or None; a calibrated strip moves each frame with the
-    attitude of the frame before (:attr:`strip_counts` counts the frames where it was clamped to the image).
+    attitude of the frame before, and with an IMU also with what it turned since, read at this frame's stamp
+    (:attr:`strip_counts` counts the frames where it was clamped to the image).
     ``attitude_config``: the image fit's :class:`~cone_perception.attitude.ImageAttitudeConfig` (e.g. with the
     detector's measured ``box_model``); None: the defaults (the rendered drives' box table).
     ``cones_conf``: with a detector run at a lower threshold (the tracker's confirmation threshold), the
@@ -69,13 +70,24 @@ class Pipeline:
         #: (clamped to it): the replay summary and the node's /diagnostics report them
         self.strip_counts = {"frames": 0, "clamped": 0}
         self.strip_rows: tuple[int, int] | None = None  # the last frame's strip rows (V0, V1)
-        self._strip_attitude = (0.0, 0.0)  # the attitude the strip follows: the previous frame's
+        self._strip_attitude = np.zeros(2)  # (pitch, roll) the strip follows: the previous frame's attitude
+        self._strip_body: np.ndarray | None = None  # the IMU's reading at the previous frame's stamp
 
-    def _far_crop(self):
-        """(this frame's strip crop, clamped): moved with the previous frame's attitude; (None, False) without."""
+    def _far_crop(self, stamp_ns: int | None):
+        """(this frame's strip crop, clamped), or (None, False) without a far band: moved with the previous
+        frame's attitude, plus what the IMU (modes imu, fused) turned since then, read at this frame's stamp."""
         if self.far is None:
             return None, False
-        return self.far.crop_for(*self._strip_attitude)
+        att = self._strip_attitude
+        if self.imu is not None and self.far.plan is not None:
+            # read without counting: the attitude estimator reads the IMU at this stamp too, and counts it there
+            stale = self.imu.counts.stale_at_frame
+            body = self.imu.at(stamp_ns)
+            self.imu.counts.stale_at_frame = stale
+            if body is not None and self._strip_body is not None:
+                att = att + (body - self._strip_body)
+            self._strip_body = body
+        return self.far.crop_for(float(att[0]), float(att[1]))
 
     def _run(self, band: np.ndarray, t_adapter_s: float, strip: np.ndarray | None, stamp_ns: int | None,
              far_crop=None, clamped: bool = False) -> FrameResult:
@@ -99,7 +111,7 @@ class Pipeline:
             att = attitude_for_boxes(self.attitude, boxes, stamp_ns)
             timing["attitude"] = (time.perf_counter() - t0) * 1e3
         t0 = time.perf_counter()
-        self._strip_attitude = (att.pitch_deg, att.roll_deg)
+        self._strip_attitude = np.array([att.pitch_deg, att.roll_deg])
         cones = self.mapper.map_boxes(boxes, att)
         weak_cones = self.mapper.map_boxes(weak, att) if weak is not None else None
         timing["mapping"] = (time.perf_counter() - t0) * 1e3
@@ -117,7 +129,7 @@ class Pipeline:
         ``FrameError`` for a bad frame."""
         self._check_stamp(stamp_ns)
         t0 = time.perf_counter()
-        far, clamped = self._far_crop()
+        far, clamped = self._far_crop(stamp_ns)
         band, strip = self.adapter.bands_from_raw(encoding, width, height, step, data, far)
         return self._run(band, time.perf_counter() - t0, strip, stamp_ns, far, clamped)
 
@@ -126,6 +138,6 @@ class Pipeline:
         :meth:`process_raw`."""
         self._check_stamp(stamp_ns)
         t0 = time.perf_counter()
-        far, clamped = self._far_crop()
+        far, clamped = self._far_crop(stamp_ns)
         band, strip = self.adapter.bands_from_compressed(data, far)
         return self._run(band, time.perf_counter() - t0, strip, stamp_ns, far, clamped)

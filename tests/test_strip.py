@@ -191,9 +191,10 @@ def test_cut_cones_are_dropped_at_the_moved_rows():
 
 
 def test_pipeline_moves_the_strip_with_the_attitude_and_counts_the_clamped_frames():
-    """attitude imu: frame 1 at the calibration's attitude (rows 370-466); the IMU then reads 2 deg nose up:
-    frame 2's strip (placed with frame 1's attitude) is still there, frame 3's moved down about 34 rows with
-    the adapter cutting those rows; 40 deg: clamped to the image's bottom and counted."""
+    """attitude imu: frame 1 at the calibration's attitude (rows 370-466); the IMU then reads 2 deg nose up at
+    frame 2's stamp: frame 2's strip moves down about 34 rows (the previous frame's attitude plus what the IMU
+    turned since), with the adapter cutting those rows; 40 deg: clamped to the image's bottom and counted. The
+    strip's IMU reads are not counted as the estimator's (a frame without a fresh sample counts once)."""
     from cone_perception.attitude import ImuAttitude
     from cone_perception.pipeline import Pipeline
     from cone_perception.synth.motion import quat_from_rpy
@@ -205,14 +206,17 @@ def test_pipeline_moves_the_strip_with_the_attitude_and_counts_the_clamped_frame
     far = FarBand(CropSpec(370, 466, 0, 1920, 1), strip, plan=CALIB.strip_plan())
     pipe = Pipeline(CALIB, band, "imu", imu, far)
     rows = []
-    for i, pitch in enumerate((0.0, -2.0, -2.0, -40.0, -40.0)):
+    for i, pitch in enumerate((0.0, -2.0, -2.0, -40.0)):
         imu.add(i * 100_000_000, quat_from_rpy(0.0, np.radians(pitch), 0.0))
         pipe.process_raw("bgr8", 1920, 1080, 5760, bgr.tobytes(), stamp_ns=i * 100_000_000)
         rows.append(pipe.strip_rows)
         c = strip.crops[-1]
         assert (c.v0, c.v1) == pipe.strip_rows and strip.shapes[-1] == (96, 1920, 3)
         assert strip.pixels[-1] == [c.v0 % 256, (c.v1 - 1) % 256]  # the adapter cut this frame's rows
-    assert rows[0] == rows[1] == (370, 466)
-    assert rows[2][0] - 370 == pytest.approx(34, abs=3) and rows[2] == rows[3]
-    assert rows[4] == (984, 1080)
-    assert pipe.strip_counts == {"frames": 5, "clamped": 1}
+    assert rows[0] == (370, 466)
+    assert rows[1][0] - 370 == pytest.approx(34, abs=3) and rows[1] == rows[2]
+    assert rows[3] == (984, 1080)
+    assert pipe.strip_counts == {"frames": 4, "clamped": 1}
+    assert imu.counts.stale_at_frame == 0
+    pipe.process_raw("bgr8", 1920, 1080, 5760, bgr.tobytes(), stamp_ns=10 * 100_000_000)  # no fresh IMU sample
+    assert imu.counts.stale_at_frame == 1 and pipe.strip_rows == (984, 1080)

@@ -20,8 +20,8 @@ from ..data.outfiles import json_safe, print_written, refuse_existing
 from ..data.sources import read_bag_image, read_image
 from ..errors import ConfigError
 from ..geometry.calib import (
-    RECOMMENDED_FOOT_OFFSET_M, RECOMMENDED_FOOT_POINTS, Calibration, calibration_from_dict, load_calibration,
-    save_calibration,
+    DEFAULT_MAX_RANGE_M, RECOMMENDED_FOOT_OFFSET_M, RECOMMENDED_FOOT_POINTS, Calibration, calibration_from_dict,
+    load_calibration, save_calibration,
 )
 from ..geometry.camera import MountPose, default_intrinsics
 from ..geometry.pose import MOUNT_POSE_CHECK_RANGE_M, MOUNT_POSE_TOLERANCE, mount_pose_disagreement
@@ -80,7 +80,7 @@ def run_calibrate(args: argparse.Namespace, command_line: str) -> int:
             }
         }
         title = f"calibration report: {camera} ({image_name})"
-    max_range = existing.max_range_m if existing else 30.0
+    max_range = existing.max_range_m if existing else DEFAULT_MAX_RANGE_M
     rep = quality_report(res, args.far_m, max_range)
     if not args.from_pose and "pose_from_H" in rep:
         extra["mount_estimate"] = {
@@ -289,4 +289,9 @@ def _build_calibration(
             dist_coeffs=dist,
             extra=extra,
         )
+    try:
+        calib.strip_plan()
+    except ConfigError as e:  # this camera cannot place the far strip: the file says so instead of failing to load
+        print(f"calibrate: far strip off for this camera ({e.message})", file=sys.stderr)
+        calib = dataclasses.replace(calib, far_strip=None)
     return calibration_from_dict(calib.to_dict(), str(out))  # the file we write must load

@@ -54,9 +54,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="pipeline, table: inference backend (default %(default)s: ONNX Runtime on the CPU where "
                         "installed, else torch; fixed-size ones are built for each band's input size)")
     p.add_argument("--bf16", action="store_true", help="pipeline, table: backend torch with bfloat16 autocast on the CPU")
-    p.add_argument("--far-rows", default=None, metavar="auto|off|V0,V1",
+    p.add_argument("--far-rows", default=None, metavar="auto|none|V0,V1",
                    help="pipeline: the far band, image rows also run at full resolution (docs/detector.md 'Far band'): "
-                        "auto (default) = the calibration's far strip; V0,V1 = these rows; off = none")
+                        "auto (default) = the calibration's far strip; V0,V1 = these rows; none (or off) = the band alone")
     p.add_argument("--far-model", default=None, metavar="PATH",
                    help="pipeline: the far band's own model file (e.g. one trained for its full"
                         "-resolution scale; default: the band's model); its classes must be the band model's")

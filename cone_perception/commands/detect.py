@@ -1,7 +1,7 @@
 """``cone-perception detect``: run the detector over an image, a folder, a video or a rosbag -> JSON lines.
 
   cone-perception detect SOURCE --out FILE.jsonl [--model M] [--imgsz WxH] [--crop V0,V1[,U0,U1]]
-                                 [--downscale N] [--calib C] [--far-rows auto|off|V0,V1] [--far-model M]
+                                 [--downscale N] [--calib C] [--far-rows auto|none|V0,V1] [--far-model M]
                                  [--backend B] [--save-vis DIR] [--every N]
 
 One line per image (see ``cone_perception/data/predictions.py``), boxes in the image's own pixels.
@@ -39,10 +39,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--calib", default=None, metavar="C",
                    help="as the car runs this camera: the calibration's band (crop, downscale) and, unless --far-rows "
                         "says otherwise, its far strip at its calibrated rows (instead of --crop/--downscale)")
-    p.add_argument("--far-rows", default=None, metavar="auto|off|V0,V1",
+    p.add_argument("--far-rows", default=None, metavar="auto|none|V0,V1",
                    help="the far band: image rows also run at full resolution, the whole width, merged with the band's "
                         "boxes (docs/detector.md 'Far band'): auto = the --calib calibration's far strip (the default "
-                        "with --calib); V0,V1 = these rows (with --crop or --calib); off = none (the default without --calib)")
+                        "with --calib); V0,V1 = these rows (with --crop or --calib); none (or off) = no far band (the default "
+                        "without --calib)")
     p.add_argument("--far-model", default=None, metavar="PATH",
                    help="the far band's own model file (e.g. one trained for its full"
                         "-resolution scale; default: the band's model); its classes must be the band model's")

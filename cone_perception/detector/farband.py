@@ -7,6 +7,8 @@ its boxes with the band's:
 
 * a far-band box that touches the strip's top or bottom edge (within ``EDGE_PX``) is dropped:
   it is a nearer cone cut by the strip, which the band sees whole;
+* a band box of a cone the far band found too gives way to the far band's box (:func:`seen_by_far`: the
+  halved band's box of a small cone is too rough for IoU to pair them);
 * the rest join the band's boxes, and one class-aware NMS keeps the best box of each cone.
 
 Its rows (``far_rows``, one spelling for the node parameter and the commands' ``--far-rows``):
@@ -16,7 +18,7 @@ Its rows (``far_rows``, one spelling for the node parameter and the commands' ``
   moved each frame with the attitude the pipeline has (the previous frame's); off where the calibration
   has no ``camera_matrix`` or says ``far_strip: off`` (said, never silently);
 * ``V0,V1``: those rows, fixed (the hand-set override);
-* ``off`` or empty: no far band.
+* ``none`` or empty (the commands also take ``off``): no far band.
 
 Cost: one more forward on ``width x (V1 - V0)`` px (1920x96: 0.67x the pixels of 960x288).
 What it is worth: ``models/cone_detector.md``, "Small, far cones"; docs/benchmarks.md, "Far strip".
@@ -38,9 +40,10 @@ from .detector import Detector
 
 #: A far-band box whose top or bottom is this close to the strip's edge (full-image px) is a cut cone.
 EDGE_PX = 2.0
-#: ``far_rows`` values: the calibration's strip, and no far band.
+#: ``far_rows`` values: the calibration's strip, and no far band (``none``; the commands also take ``off``,
+#: which a ROS parameter cannot hold: ``-p far_rows:=off`` reads as a boolean).
 FAR_ROWS_AUTO = "auto"
-FAR_ROWS_OFF = ("off", "")
+FAR_ROWS_OFF = ("none", "", "off")
 
 
 @dataclass(frozen=True)
@@ -54,7 +57,7 @@ class FarRows:
 
 
 def far_rows_for(rows: str | None, calib, source: str = "far_rows") -> FarRows:
-    """``auto`` / ``off`` / ``""`` / ``"V0,V1"`` (None: ``auto``) for a :class:`~cone_perception.geometry.calib.Calibration`.
+    """``auto`` / ``none`` (``""``, ``off``) / ``"V0,V1"`` (None: ``auto``) for a :class:`~cone_perception.geometry.calib.Calibration`.
     ConfigError naming ``source`` for bad rows; the calibration's own strip was checked at its load."""
     rows = FAR_ROWS_AUTO if rows is None else str(rows).strip()
     if rows.lower() in FAR_ROWS_OFF:
@@ -105,12 +108,28 @@ def drop_cut_boxes(boxes: np.ndarray, crop: CropSpec, edge_px: float = EDGE_PX) 
     return boxes[keep]
 
 
+def seen_by_far(band_boxes: np.ndarray, far_boxes: np.ndarray) -> np.ndarray:
+    """Bool per band box: the far band found the same cone (box centres within half the taller box's
+    height, heights within 2x of each other, whatever the class). The halved band's box of a 10 px cone is
+    a pixel or two off at full scale, so IoU often misses such a pair (both boxes kept: a false cone
+    beside the true one); the far band's box, placed at full resolution, is the one to keep."""
+    if len(band_boxes) == 0 or len(far_boxes) == 0:
+        return np.zeros(len(band_boxes), bool)
+    bc = np.stack([band_boxes["u1"] + band_boxes["u2"], band_boxes["v1"] + band_boxes["v2"]], 1) / 2
+    fc = np.stack([far_boxes["u1"] + far_boxes["u2"], far_boxes["v1"] + far_boxes["v2"]], 1) / 2
+    bh = (band_boxes["v2"] - band_boxes["v1"])[:, None]
+    fh = (far_boxes["v2"] - far_boxes["v1"])[None, :]
+    d = np.hypot(bc[:, None, 0] - fc[None, :, 0], bc[:, None, 1] - fc[None, :, 1])
+    return ((d <= 0.5 * np.maximum(bh, fh)) & (bh <= 2 * fh) & (fh <= 2 * bh)).any(1)
+
+
 def merge_boxes(band_boxes: np.ndarray, far_boxes: np.ndarray, iou: float = DEFAULT_IOU) -> np.ndarray:
-    """Boxes of the band and of the far band (``BOX_DTYPE``, full-image px) -> one set, best first:
-    class-aware NMS over both, so a cone both saw keeps its best-scored box."""
+    """Boxes of the band and of the far band (``BOX_DTYPE``, full-image px) -> one set, best first: a band
+    box of a cone the far band found too gives way to the far band's (:func:`seen_by_far`), then one
+    class-aware NMS over both keeps the best box of what still overlaps."""
     if len(far_boxes) == 0:
         return band_boxes
-    both = np.concatenate([band_boxes, far_boxes])
+    both = np.concatenate([band_boxes[~seen_by_far(band_boxes, far_boxes)], far_boxes])
     xywh = np.stack([both["u1"], both["v1"], both["u2"] - both["u1"], both["v2"] - both["v1"]], 1)
     keep = nms_per_class(xywh, both["score"], both["class_id"], 0.0, iou)
     return both[keep]
@@ -194,4 +213,5 @@ class FarBand:
         return merge_boxes(band_boxes, self.detect(strip_bgr, crop), iou)
 
 
-__all__ = ["EDGE_PX", "FAR_ROWS_AUTO", "FAR_ROWS_OFF", "FarBand", "FarRows", "check_far_classes", "far_rows_for", "drop_cut_boxes", "far_band_crop", "merge_boxes"]
+__all__ = ["EDGE_PX", "FAR_ROWS_AUTO", "FAR_ROWS_OFF", "FarBand", "FarRows", "check_far_classes", "far_rows_for",
+           "seen_by_far", "drop_cut_boxes", "far_band_crop", "merge_boxes"]

@@ -8,6 +8,7 @@ from __future__ import annotations
 from typing import Callable
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType, SetParametersResult
+from rclpy.exceptions import InvalidParameterTypeException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -21,6 +22,9 @@ _ROS_TYPES = {
     str: ParameterType.PARAMETER_STRING,
     tuple: ParameterType.PARAMETER_DOUBLE_ARRAY,
 }
+
+
+_ROS_TYPE_WORDS = {bool: "bool", int: "integer", float: "double", str: "string", tuple: "double array"}
 
 
 def specs_of(kind: str) -> dict[str, ParamSpec]:
@@ -59,7 +63,13 @@ def declare(node: Node, name: str):
     from a parameter file out of range or of the wrong type stops the node with the reason). An array
     comes back as a list."""
     spec = _spec(node, name)
-    value = node.declare_parameter(name, spec.ros_default, descriptor(spec)).value
+    try:
+        value = node.declare_parameter(name, spec.ros_default, descriptor(spec)).value
+    except InvalidParameterTypeException as e:  # e.g. -p far_rows:=off, which ROS reads as a boolean
+        hint = (": a word ROS reads as a boolean (on, off, yes, no, true, false) is not a string; write another or "
+                "quote it (name:=\"'off'\")") if spec.type is str else ""
+        got = str(e.args[0]).split("' to ", 1)[-1].split(", expecting", 1)[0] if e.args else "another type"
+        raise ConfigError(f"parameter {name}", None, f"must be a {_ROS_TYPE_WORDS[spec.type]}, got {got}{hint}") from None
     why = spec.check(value)
     if why:
         raise ConfigError(f"parameter {name}", None, why)

@@ -6,11 +6,11 @@ The network is built for the calibration's band at start-up; with ``track: true`
 runs too and gets each frame's attitude.
 
 Parameters (generated from cone_perception/params.py by ``cone-perception params --write``):
-  far_rows (string, default auto; auto, off, or V0,V1): the far band: image rows also run at full
+  far_rows (string, default auto; auto, none, or V0,V1): the far band: image rows also run at full
     resolution, the whole width, for small, far cones (a second forward; docs/detector.md, Far
     band). auto = the calibration's far strip (the rows where cones 15-40 m ahead stand, moved each
-    frame with the attitude; off where the calibration has no camera_matrix); V0,V1 = these rows,
-    fixed; off or empty = none
+    frame with the attitude; none where the calibration has no camera_matrix); V0,V1 = these rows,
+    fixed; none or empty = no far band (not off: ROS reads off as a boolean)
   far_model (string, default ""): the far band's own model file (one trained for its full-resolution
     scale); empty = the band's model. Its classes must be the band model's (refused at start-up
     otherwise)
@@ -18,9 +18,9 @@ Parameters (generated from cone_perception/params.py by ``cone-perception params
     cone_tracker); it gets each frame's attitude, which a separate cone_tracker does not
   Also those of driver_adapter (calibration, input_transport); those of detection (model, backend,
     device, fp16, bf16, threads, conf, iou, max_det, debug_image, debug_image_hz); those of mapping
-    (publish_markers, attitude, imu_rest_deg); those of cone_tracker, with track: true (odom_topic,
-    odom_type, odom_max_age_s, publish_tracked_markers); those of every node (input_timeout_s,
-    max_frame_age_s, input_rate_hz).
+    (publish_markers, attitude, imu_rest_deg, box_model); those of cone_tracker, with track: true
+    (odom_topic, odom_type, odom_max_age_s, publish_tracked_markers); those of every node
+    (input_timeout_s, max_frame_age_s, input_rate_hz).
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ from ..geometry.calib import load_calibration
 from ..errors import FrameError
 from ..pipeline import FrameResult, Pipeline
 from . import _msgs
-from ._attitude import declare_attitude
+from ._attitude import declare_attitude, declare_box_model, report_attitude
 from ._debug import DebugImagePublisher
 from ._detector_params import DetectorLoader
 from ._params import RuntimeParameters, declare
@@ -71,7 +71,10 @@ class PipelineNode(PerceptionNode):
         detector = self.loader.load((calib.crop.out_width, calib.crop.out_height))
         self.advertise_cones(calib.frame_id, markers)
         mode, imu = declare_attitude(self)
-        self.pipeline = Pipeline(calib, detector, mode, imu, self._far_band(calib, declare(self, "far_rows")))
+        att_config, box_model = declare_box_model(self, calib, self.loader.model)  # the detector's box model
+        self.pipeline = Pipeline(calib, detector, mode, imu, self._far_band(calib, declare(self, "far_rows")),
+                                 attitude_config=att_config)
+        report_attitude(self, self.pipeline.attitude_mode, self.pipeline.attitude, box_model)
         if self.pipeline.far is not None:  # /diagnostics: frames with the strip, those clamped to the image (WARN)
             self.health.watch("far_strip", self.pipeline.strip_counts, warn=["clamped"])
         self.pub_boxes = self.create_publisher(PointCloud2, "cone_boxes", QOS_DATA)
@@ -84,7 +87,8 @@ class PipelineNode(PerceptionNode):
         if bool(declare(self, "track")):
             self.tracking = NodeTracking(self, calib)
         self.subscribe_camera(transport)
-        self.get_logger().info(f"calibration {calib.source}, frame {calib.frame_id}, attitude {self.pipeline.attitude_mode}")
+        self.get_logger().info(f"calibration {calib.source}, frame {calib.frame_id}, attitude {self.pipeline.attitude_mode}"
+                               + (f", box model {box_model}" if self.pipeline.attitude else ""))
 
     def on_raw(self, msg: Image) -> None:
         t0 = time.perf_counter()

@@ -15,6 +15,7 @@ from tqdm import tqdm
 
 from ..data.bags import read_ground_truth
 from ..detector import Detector, default_model_path
+from ..detector.farband import FarBand
 from ..errors import ConfigError
 from ..evaluation import LocalisationReport, format_localisation
 from ..evaluation.plots import bag_frames_picture
@@ -61,7 +62,8 @@ def run_demo(args: argparse.Namespace) -> int:
 
         det = Detector.load(model)
         det.warmup()
-        res = offline_replay(bag, Pipeline(calib, det), progress=progress)
+        far = FarBand.for_calibration(model, None, calib, say=lambda t: print(f"  {t}"))  # as the node: the strip
+        res = offline_replay(bag, Pipeline(calib, det, far=far), progress=progress)
         cones, boxes, wall = res.cones, res.boxes, res.wall_s
         latency = res.timer.summary().get("end_to_end", {"n": 0})
         sent, lost = res.stats.ok + res.stats.dropped_total, res.stats.dropped_total
