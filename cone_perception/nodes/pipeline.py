@@ -58,10 +58,12 @@ class PipelineNode(PerceptionNode):
         transport = declare(self, "input_transport")
         markers = bool(declare(self, "publish_markers"))
         self.loader = DetectorLoader(self)
+        far_rows = declare(self, "far_rows")
+        plan = self.loader.plan_threads(bool(far_rows))  # with a strip and threads >= 2: both forwards at once
         detector = self.loader.load((calib.crop.out_width, calib.crop.out_height))
         self.advertise_cones(calib.frame_id, markers)
         mode, imu = declare_attitude(self)
-        self.pipeline = Pipeline(calib, detector, mode, imu, self._far_band(calib, declare(self, "far_rows")))
+        self.pipeline = Pipeline(calib, detector, mode, imu, self._far_band(calib, far_rows), concurrent=plan.concurrent)
         self.pub_boxes = self.create_publisher(PointCloud2, "cone_boxes", QOS_DATA)
         self.runtime = RuntimeParameters(self)
         self.runtime.register("publish_markers", lambda v: setattr(self, "publish_markers", bool(v)))
@@ -73,6 +75,11 @@ class PipelineNode(PerceptionNode):
             self.tracking = NodeTracking(self, calib)
         self.subscribe_camera(transport)
         self.get_logger().info(f"calibration {calib.source}, frame {calib.frame_id}, attitude {self.pipeline.attitude_mode}")
+
+    def destroy_node(self):
+        if getattr(self, "pipeline", None) is not None:
+            self.pipeline.close()  # joins the far strip's worker thread, if one runs
+        return super().destroy_node()
 
     def on_raw(self, msg: Image) -> None:
         t0 = time.perf_counter()
