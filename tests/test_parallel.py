@@ -19,6 +19,8 @@ from cone_perception.geometry.calib import load_calibration
 from cone_perception.pipeline import Pipeline
 from cone_perception.records import boxes_from_arrays
 
+from rosutil import ros  # noqa: F401 (a fixture)
+
 STRIP = CropSpec(384, 480, 0, 1920, 1)
 
 
@@ -148,3 +150,36 @@ def test_concurrent_and_sequential_give_the_same_boxes():
             np.testing.assert_array_equal(a.boxes, b.boxes)
             np.testing.assert_array_equal(a.cones, b.cones)
             assert {"far_forward", "far_band", "far_wait"} <= set(b.timing_ms)
+
+
+def test_the_pipeline_node_runs_both_forwards_at_once_on_two_threads_and_joins_at_destroy(ros):  # noqa: F811
+    """``threads: 2`` with ``far_rows``: both networks on one intra-op thread, the forwards at once, the boxes
+    of the sequential core pipeline; destroying the node leaves no worker thread. ``threads: 1``: sequential."""
+    from rclpy.parameter import Parameter
+
+    from cone_perception.nodes.pipeline import PipelineNode
+
+    calib = load_calibration("example_mainhoop")
+    before = len(_workers())
+    node = PipelineNode(context=ros.context, parameter_overrides=[Parameter("far_rows", value="384,480"),
+                                                                   Parameter("threads", value=2)])
+    try:
+        pipe = node.pipeline
+        assert pipe.concurrent
+        for det in (pipe.detector, pipe.far.detector):
+            assert det._run.session.get_session_options().intra_op_num_threads == 1
+        det = Detector.load_for_band(default_model_path(), (calib.crop.out_width, calib.crop.out_height), threads=1)
+        far = FarBand.load(default_model_path(), "384,480", calib.image_width, calib.image_height, calib.crop, threads=1)
+        data = rendered_frames(calib, 1)[0]
+        want = _process(Pipeline(calib, det, far=far), calib, data).boxes
+        np.testing.assert_array_equal(_process(pipe, calib, data).boxes, want)
+        assert len(_workers()) == before + 1
+    finally:
+        node.destroy_node()
+    assert len(_workers()) == before
+    one = PipelineNode(context=ros.context, parameter_overrides=[Parameter("far_rows", value="384,480")])
+    try:
+        assert not one.pipeline.concurrent
+        assert one.pipeline.far.detector._run.session.get_session_options().intra_op_num_threads == 1
+    finally:
+        one.destroy_node()
