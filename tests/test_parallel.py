@@ -135,12 +135,15 @@ def test_an_error_of_the_band_waits_for_the_strip_first():
     assert not runner.alive
 
 
-def test_concurrent_and_sequential_give_the_same_boxes():
+@pytest.mark.parametrize("backend", ["onnx", "torch"])
+def test_concurrent_and_sequential_give_the_same_boxes(backend):
     """The shipped model on rendered scenes, band + 96-row strip, both networks on one intra-op thread:
     the same boxes, scores and cones whether the strip's forward runs after the band's or beside it."""
     calib = load_calibration("example_mainhoop")
-    det = Detector.load_for_band(default_model_path(), (calib.crop.out_width, calib.crop.out_height), threads=1)
-    far = FarBand.load(default_model_path(), "384,480", calib.image_width, calib.image_height, calib.crop, threads=1)
+    det = Detector.load_for_band(default_model_path(), (calib.crop.out_width, calib.crop.out_height), threads=1,
+                                 backend=backend)
+    far = FarBand.load(default_model_path(), "384,480", calib.image_width, calib.image_height, calib.crop, threads=1,
+                       backend=backend)
     frames = rendered_frames(calib, 4)
     seq = Pipeline(calib, det, "fixed", far=far)
     with Pipeline(calib, det, "fixed", far=far, concurrent=True) as conc:
