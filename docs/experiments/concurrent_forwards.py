@@ -13,7 +13,7 @@ alone on two threads, `band 2`, of the same round). Designs (threads: band's net
 * ``conc 1+1``: at once, one each: the shipped rule for ``threads: 2`` (detector/parallel.py);
 * ``conc 2+1``: balancing: at once, the band (the larger network) on two intra-op threads, the strip on one
   (three threads on two cores);
-* ``seq 2+2 nospin``, ``conc 2+1 nospin``: the same with ONNX Runtime's intra-op threads not spinning after
+* ``band 2 nospin``, ``seq 2+2 nospin``, ``conc 2+1 nospin``: the same with ONNX Runtime's intra-op threads not spinning after
   their work (``session.intra_op.allow_spinning = 0``), so an idle network's pool gives its core back.
 """
 from __future__ import annotations
@@ -38,6 +38,7 @@ DESIGNS = {
     "seq 2+2": (2, 2, False, True),
     "conc 1+1": (1, 1, True, True),
     "conc 2+1": (2, 1, True, True),
+    "band 2 nospin": (2, None, False, False),
     "seq 2+2 nospin": (2, 2, False, False),
     "conc 2+1 nospin": (2, 1, True, False),
 }
