@@ -199,6 +199,11 @@ _MAPPING = (
        choices=("", "fixed", "image", "imu", "fused")),
     _p("imu_rest_deg", (0.0, 0.0), "the IMU's pitch and roll (degrees) with the car at rest on the level ground of "
        "the calibration (cone-perception imu-rest measures it); for attitude imu / fused"),
+    _p("box_model", "auto", "how the image attitude reads the detector's boxes (docs/attitude.md, Box model): model = "
+       "the box model measured on real frames beside the model file (MODEL.box_model.yaml; a model without one: a "
+       "wide default, warned), rendered = the rendered drives' box-top table, auto = rendered for a synthetic "
+       "camera's calibration (camera: synth), else model; shown on /diagnostics (attitude:box_model)",
+       choices=("auto", "model", "rendered")),
 )
 _PIPELINE = (
     _p("far_rows", "", "image rows V0,V1 also run at full resolution, the whole width (the far band for small, far "
@@ -268,7 +273,9 @@ NODES: dict[str, NodeSpec] = {n.name: n for n in (
         ("`/cones` (sensor_msgs/PointCloud2, frame = the calibration's `frame_id`, default `rear_axle`)",
          "`/cones/markers` (visualization_msgs/MarkerArray)", "`cones/attitude` (geometry_msgs/Vector3Stamped: "
          "the attitude each frame was mapped with, x = roll, y = pitch, rad)", _DIAG),
-        (PARAMS["calibration"], *_MAPPING)),
+        (PARAMS["calibration"], *_MAPPING, dataclasses.replace(
+            PARAMS["model"], description="the model file of the detection node that draws cone_boxes, for its box "
+                                         "model (box_model); empty = the shipped default model (models/cone_detector.pt)"))),
     NodeSpec(
         "pipeline", "the three stages fused in one process: image_raw -> cone_boxes, /cones, /cones/markers",
         ("`image_raw` or `image_raw/compressed` (by `input_transport`)", "`imu` (with `attitude` `imu` / `fused`)",

@@ -43,6 +43,15 @@ def models_dir() -> Path:
     return share_dir() / "models"
 
 
+#: File name of the shipped default model under ``models/``.
+DEFAULT_MODEL_NAME = "cone_detector.pt"
+
+
+def default_model_path() -> Path:
+    """``models/cone_detector.pt`` of the installed package (may not exist yet)."""
+    return models_dir() / DEFAULT_MODEL_NAME
+
+
 def launch_dir() -> Path:
     return share_dir() / "launch_configs"
 

@@ -412,6 +412,7 @@ class NodeHealth:
         self._last: dict[str, int] = {}
         self._last_ns: int | None = None
         self.watched: dict[str, tuple[Mapping[str, int], frozenset[str]]] = {}
+        self.info: dict[str, str] = {}  # facts on every /diagnostics: key -> text (``attitude:box_model``)
 
     def watch(self, name: str, counts: Mapping[str, int], warn: Iterable[str] = ()) -> None:
         """Report a stage's own event counts (e.g. the tracker's ``events``, read at each
@@ -481,6 +482,7 @@ class NodeHealth:
             values += [(f"{s.topic}:{k}", str(v)) for k, v in s.counts().items()]
         for name, (counts, _) in self.watched.items():
             values += [(f"{name}:{k}", str(v)) for k, v in sorted(counts.items())]
+        values += list(self.info.items())
         return HealthReport(level, message, values)
 
     def summary(self) -> str:

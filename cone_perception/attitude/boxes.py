@@ -12,7 +12,7 @@ box model holds, per box height bucket (px at the model input), the median of
 
 measured on labelled frames (``cone-perception eval --box-model-out``,
 :func:`cone_perception.evaluation.boxfit.measure_box_model`) and stored beside the model file
-(:func:`cone_perception.detector.model_files.read_box_model`). :meth:`BoxModel.correct` turns detected
+(:func:`cone_perception.attitude.box_files.read_box_model`). :meth:`BoxModel.correct` turns detected
 boxes into the label-like boxes the fit's cone model expects. :data:`DEFAULT_BOX_MODEL` (no shift, a wide
 per-cone spread) is the conservative stand-in for a model without one. ROS-free, no I/O.
 """
@@ -76,6 +76,22 @@ class BoxModel:
         label_h = (b[:, 3] - b[:, 1]) / np.maximum(r, 1e-3)
         b[:, 1] -= t * label_h
         b[:, 3] += bo * label_h
+        return b
+
+    def detected(self, boxes: np.ndarray, input_scale: float | None = None) -> np.ndarray:
+        """The inverse of :meth:`correct`: (N, 4) labelled boxes (u1, v1, u2, v2 full-image px) -> the boxes this
+        detector draws around such cones, by the medians: the top moves down by ``top_low``, the bottom up by
+        ``bottom_high`` of the labelled height (looked up at the detected height, one refinement). Columns u
+        unchanged. Rendered drives use it to give a detector's boxes the real frames' behaviour
+        (:mod:`cone_perception.synth.boxlook`)."""
+        b = np.array(boxes, dtype=np.float64).reshape(-1, 4)
+        if len(b) == 0:
+            return b
+        label_h = b[:, 3] - b[:, 1]
+        r, _, _ = self.at(label_h, input_scale)
+        _, t, bo = self.at(label_h * r, input_scale)
+        b[:, 1] += t * label_h
+        b[:, 3] -= bo * label_h
         return b
 
     def median_row(self, i: int) -> str:

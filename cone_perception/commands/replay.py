@@ -79,8 +79,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="offline, attitude image/fused: which box model the image fit reads the detector's boxes with: "
                         "model (measured on real frames, MODEL.box_model.yaml beside the model file; a model without one "
                         "gets a conservative default and a warning), rendered (the rendered drives' table, for synthetic "
-                        "bags), auto (rendered with --gt-topic, i.e. a synthetic drive with truth; else model; "
-                        "default %(default)s)")
+                        "bags), auto (rendered with --gt-topic, i.e. a synthetic drive with truth, unless --box-behaviour "
+                        "real; else model; default %(default)s)")
+    p.add_argument("--box-behaviour", choices=("as-is", "real"), default="as-is",
+                   help="offline, synthetic bags: real gives the detector's boxes the real frames' behaviour of its box "
+                        "model (MODEL.box_model.yaml: heights 0.97-0.99x, tops 1-3 %% low, the top scattered by the "
+                        "measured spread; synth/boxlook.py), as-is keeps them (default %(default)s)")
+    p.add_argument("--box-jitter", type=float, default=None, metavar="F",
+                   help="--box-behaviour real: 1-sigma of each box top as a fraction of its height (default: the box "
+                        "model's measured spread, 0.07 for the shipped models; 0 = the medians only)")
     p.add_argument("--imu-topic", default="/imu", help="offline: the bag's sensor_msgs/Imu topic (default %(default)s)")
     p.add_argument("--imu-rest", default="0,0", metavar="PITCH,ROLL",
                    help="the IMU's pitch and roll (degrees) with the car at rest on the level calibration ground "

@@ -1,6 +1,7 @@
 """Model files: where the shipped default model lies, the description of an exported model (class names,
-input size) from its YAML sidecar (``<file name>.yaml``) or the metadata embedded in the file, and the
-detector's box model measured on labelled frames (``<file name>.box_model.yaml``, issue 27)."""
+input size) from its YAML sidecar (``<file name>.yaml``) or the metadata embedded in the file; the
+detector's box model measured on labelled frames (``<file name>.box_model.yaml``, issue 27) is read and written
+by :mod:`cone_perception.attitude.box_files` (re-exported here)."""
 
 from __future__ import annotations
 
@@ -10,20 +11,13 @@ from pathlib import Path
 
 import yaml
 
-from ..attitude.boxes import DEFAULT_BOX_MODEL, BoxModel
+from ..attitude.box_files import (  # noqa: F401 (the box model's files: re-exported, their home is attitude/)
+    BOX_MODEL_CHOICES, box_model_for, box_model_or_default, box_model_path, read_box_model, write_box_model,
+)
 from ..errors import ConfigError
-from ..resources import models_dir
+from ..resources import DEFAULT_MODEL_NAME, default_model_path  # noqa: F401 (re-exported)
 
 log = logging.getLogger(__name__)
-
-#: File name of the shipped default model under ``models/``.
-DEFAULT_MODEL_NAME = "cone_detector.pt"
-
-
-def default_model_path() -> Path:
-    """``models/cone_detector.pt`` of the installed package (may not exist yet)."""
-    return models_dir() / DEFAULT_MODEL_NAME
-
 
 def sidecar_path(model_path: str | Path) -> Path:
     """The YAML sidecar ``export`` writes for one exported file: ``<file name>.yaml`` (``m.onnx`` ->
@@ -100,49 +94,3 @@ def write_sidecar(model_path: Path, class_names: list[str], imgsz: tuple[int, in
     side.write_text(yaml.safe_dump(doc, sort_keys=False))
     return side
 
-
-def box_model_path(model_path: str | Path) -> Path:
-    """The box-model sidecar of a model file: ``<file name>.box_model.yaml`` (``m.pt`` -> ``m.pt.box_model.yaml``)."""
-    model_path = Path(model_path)
-    return model_path.with_name(model_path.name + ".box_model.yaml")
-
-
-def write_box_model(path: str | Path, box_model: BoxModel, command: str = "") -> Path:
-    """Write ``box_model`` (:class:`~cone_perception.attitude.boxes.BoxModel`) to the YAML file ``path``
-    (``box_model:`` mapping; ``command``: how it was measured)."""
-    path = Path(path)
-    doc = {"box_model": box_model.to_dict()}
-    if command:
-        doc["measured_with"] = command
-    path.write_text(yaml.safe_dump(doc, sort_keys=False))
-    return path
-
-
-def read_box_model(model_path: str | Path) -> BoxModel | None:
-    """The box model beside a model file (:func:`box_model_path`; for an export ``m.onnx`` also that of
-    ``m.pt``), or None where there is none. :class:`ConfigError` naming the file and field for a bad one."""
-    model_path = Path(model_path)
-    for side in (box_model_path(model_path), box_model_path(model_path.with_suffix(".pt"))):
-        if not side.is_file():
-            continue
-        try:
-            doc = yaml.safe_load(side.read_text()) or {}
-        except yaml.YAMLError as e:
-            raise ConfigError(str(side), None, f"not valid YAML: {e}") from e
-        try:
-            return BoxModel.from_dict(doc.get("box_model") if isinstance(doc, dict) else None)
-        except ValueError as e:
-            raise ConfigError(str(side), "box_model", str(e)) from None
-    return None
-
-
-def box_model_or_default(model_path: str | Path | None) -> BoxModel:
-    """The model's box model, or :data:`~cone_perception.attitude.boxes.DEFAULT_BOX_MODEL` with a warning
-    (no shift, a wide per-cone spread: measure one with ``eval --box-model-out``)."""
-    bm = read_box_model(model_path) if model_path is not None else None
-    if bm is None:
-        log.warning("%s has no box model (%s): the image attitude takes its boxes as the labelled cones with a wide "
-                    "per-cone spread; measure one with `cone-perception eval --box-model-out`", model_path,
-                    box_model_path(model_path).name if model_path is not None else "no model file")
-        return DEFAULT_BOX_MODEL
-    return bm

@@ -1,16 +1,20 @@
-"""The attitude parameters (``attitude``, ``imu_rest_deg``: :mod:`cone_perception.params`) and the IMU
-subscription shared by the ``mapping`` and ``pipeline`` nodes (the logic is in
-:mod:`cone_perception.attitude`; the nodes publish ``cones/attitude`` themselves:
+"""The attitude parameters (``attitude``, ``imu_rest_deg``, ``box_model``: :mod:`cone_perception.params`), the
+IMU subscription and the attitude's ``/diagnostics`` values shared by the ``mapping`` and ``pipeline`` nodes (the
+logic is in :mod:`cone_perception.attitude`; the nodes publish ``cones/attitude`` themselves:
 :meth:`~cone_perception.nodes._common.PerceptionNode.publish_attitude`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 from sensor_msgs.msg import Imu
 
-from ..attitude import ImuAttitude, QUAT_NORM_TOL
+from ..attitude import ImageAttitudeConfig, ImuAttitude, QUAT_NORM_TOL
+from ..attitude.box_files import box_model_for
 from . import _msgs
-from ..errors import FrameError
+from ..errors import ConfigError, FrameError
+from ..resources import default_model_path
 from ._params import declare
 
 #: IMU in: best effort (IMU drivers publish so), a short queue (100 Hz and more).
@@ -36,3 +40,49 @@ def declare_attitude(node) -> tuple[str, ImuAttitude | None]:
 
         node.create_subscription(Imu, "imu", node.guarded(on_imu, "imu", frames=False), IMU_QUEUE)
     return mode, imu
+
+
+def declare_box_model(node, calib, model_path) -> tuple[ImageAttitudeConfig, str]:
+    """Declare ``box_model``; the image fit's config reading the boxes of the model file ``model_path``
+    (None: the shipped default) that way, and the box model in words (``attitude:box_model`` on ``/diagnostics``)."""
+    choice = str(declare(node, "box_model"))
+    try:
+        bm, what = box_model_for(choice, model_path or default_model_path(), calib.camera == "synth")
+    except ValueError as e:
+        raise ConfigError("parameter", "box_model", str(e)) from None
+    return ImageAttitudeConfig(box_model=bm), what
+
+
+class AttitudeCountsView(Mapping):
+    """The attitude estimator's counts as they are now (read at each ``/diagnostics``): the image fit's
+    (``fitted``, ``too_few_cones``, ``rejected_beyond_limit``, ``used_calibration``: frames mapped with the
+    calibration's H) and, with an IMU, ``imu_*``."""
+
+    def __init__(self, estimator) -> None:
+        self.estimator = estimator
+
+    def _now(self) -> dict[str, int]:
+        est = self.estimator
+        d = dict(est.counts.as_dict())
+        imu = getattr(est, "imu", None)
+        if imu is not None:
+            d.update({f"imu_{k}": v for k, v in imu.counts.as_dict().items()})
+        return d
+
+    def __getitem__(self, key: str) -> int:
+        return self._now()[key]
+
+    def __iter__(self):
+        return iter(self._now())
+
+    def __len__(self) -> int:
+        return len(self._now())
+
+
+def report_attitude(node, mode: str, estimator, box_model: str) -> None:
+    """Put the attitude on the node's ``/diagnostics``: ``attitude:mode``, ``attitude:box_model`` and, with an
+    estimator, its counts (:class:`AttitudeCountsView`, e.g. ``attitude:used_calibration``)."""
+    node.health.info["attitude:mode"] = mode
+    node.health.info["attitude:box_model"] = box_model if estimator is not None else "none (attitude fixed)"
+    if estimator is not None:
+        node.health.watch("attitude", AttitudeCountsView(estimator))

@@ -12,6 +12,14 @@ Parameters (generated from cone_perception/params.py by ``cone-perception params
   imu_rest_deg (double[2], default [0.0, 0.0]): the IMU's pitch and roll (degrees) with the car at
     rest on the level ground of the calibration (cone-perception imu-rest measures it); for attitude
     imu / fused
+  box_model (string, default auto; auto | model | rendered): how the image attitude reads the
+    detector's boxes (docs/attitude.md, Box model): model = the box model measured on real frames
+    beside the model file (MODEL.box_model.yaml; a model without one: a wide default, warned),
+    rendered = the rendered drives' box-top table, auto = rendered for a synthetic camera's
+    calibration (camera: synth), else model; shown on /diagnostics (attitude:box_model)
+  model (string, default ""; a .pt, .onnx or .torchscript path): the model file of the detection
+    node that draws cone_boxes, for its box model (box_model); empty = the shipped default model
+    (models/cone_detector.pt)
   Also those of every node (input_timeout_s, max_frame_age_s, input_rate_hz).
 """
 
@@ -25,7 +33,7 @@ from ..attitude import attitude_estimator, attitude_for_boxes
 from ..geometry.calib import load_calibration
 from ..mapping import ConeMapper, validate_boxes
 from . import _msgs
-from ._attitude import declare_attitude
+from ._attitude import declare_attitude, declare_box_model, report_attitude
 from ._params import RuntimeParameters, declare
 
 
@@ -40,10 +48,12 @@ class MappingNode(PerceptionNode):
         self.runtime = RuntimeParameters(self)
         self.runtime.register("publish_markers", lambda v: setattr(self, "publish_markers", bool(v)))
         mode, imu = declare_attitude(self)
-        self.attitude_mode, self.attitude = attitude_estimator(self.mapper, mode, imu)
+        config, box_model = declare_box_model(self, calib, declare(self, "model"))
+        self.attitude_mode, self.attitude = attitude_estimator(self.mapper, mode, imu, config)
+        report_attitude(self, self.attitude_mode, self.attitude, box_model)
         self.subscribe_frames(PointCloud2, "cone_boxes", self.on_boxes, QOS_DATA)
         self.get_logger().info(f"calibration {calib.source}, frame {calib.frame_id}, max range {calib.max_range_m} m, "
-                               f"attitude {self.attitude_mode}")
+                               f"attitude {self.attitude_mode}" + (f", box model {box_model}" if self.attitude else ""))
 
     def on_boxes(self, msg: PointCloud2) -> None:
         boxes = _msgs.boxes_from_msg(msg)

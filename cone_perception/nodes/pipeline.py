@@ -13,9 +13,9 @@ Parameters (generated from cone_perception/params.py by ``cone-perception params
     cone_tracker); it gets each frame's attitude, which a separate cone_tracker does not
   Also those of driver_adapter (calibration, input_transport); those of detection (model, backend,
     device, fp16, bf16, threads, conf, iou, max_det, debug_image, debug_image_hz); those of mapping
-    (publish_markers, attitude, imu_rest_deg); those of cone_tracker, with track: true (odom_topic,
-    odom_type, odom_max_age_s, publish_tracked_markers); those of every node (input_timeout_s,
-    max_frame_age_s, input_rate_hz).
+    (publish_markers, attitude, imu_rest_deg, box_model); those of cone_tracker, with track: true
+    (odom_topic, odom_type, odom_max_age_s, publish_tracked_markers); those of every node
+    (input_timeout_s, max_frame_age_s, input_rate_hz).
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from ..geometry.calib import load_calibration
 from ..errors import FrameError
 from ..pipeline import FrameResult, Pipeline
 from . import _msgs
-from ._attitude import declare_attitude
+from ._attitude import declare_attitude, declare_box_model, report_attitude
 from ._debug import DebugImagePublisher
 from ._detector_params import DetectorLoader
 from ._params import RuntimeParameters, declare
@@ -63,7 +63,10 @@ class PipelineNode(PerceptionNode):
         detector = self.loader.load((calib.crop.out_width, calib.crop.out_height))
         self.advertise_cones(calib.frame_id, markers)
         mode, imu = declare_attitude(self)
-        self.pipeline = Pipeline(calib, detector, mode, imu, self._far_band(calib, far_rows), concurrent=plan.concurrent)
+        att_config, box_model = declare_box_model(self, calib, self.loader.model)  # the detector's box model
+        self.pipeline = Pipeline(calib, detector, mode, imu, self._far_band(calib, far_rows),
+                                 attitude_config=att_config, concurrent=plan.concurrent)
+        report_attitude(self, self.pipeline.attitude_mode, self.pipeline.attitude, box_model)
         self.pub_boxes = self.create_publisher(PointCloud2, "cone_boxes", QOS_DATA)
         self.runtime = RuntimeParameters(self)
         self.runtime.register("publish_markers", lambda v: setattr(self, "publish_markers", bool(v)))
@@ -74,7 +77,8 @@ class PipelineNode(PerceptionNode):
         if bool(declare(self, "track")):
             self.tracking = NodeTracking(self, calib)
         self.subscribe_camera(transport)
-        self.get_logger().info(f"calibration {calib.source}, frame {calib.frame_id}, attitude {self.pipeline.attitude_mode}")
+        self.get_logger().info(f"calibration {calib.source}, frame {calib.frame_id}, attitude {self.pipeline.attitude_mode}"
+                               + (f", box model {box_model}" if self.pipeline.attitude else ""))
 
     def destroy_node(self):
         if getattr(self, "pipeline", None) is not None:

@@ -30,6 +30,7 @@ from ..evaluation.attitude import attitude_plot, format_attitude_report
 from ..evaluation.tracking import DriveEvaluation, format_drive_evaluation
 from ..geometry.calib import load_calibration, resolve_calibration_path
 from ..pipeline import Pipeline
+from ..synth.boxlook import real_box_behaviour
 from ..timing import format_table, summarize
 from ..tracking import TrackerConfig
 from .offline import offline_replay
@@ -46,6 +47,9 @@ def run_replay(args: argparse.Namespace) -> int:
                       or args.tracker or args.max_range is not None):
         raise ConfigError("--live", None, "--drop-detections, --odom-topic, --track-conf, --tracker and --max-range "
                                           "work offline only")
+    if args.live and args.box_behaviour != "as-is" or args.box_jitter is not None and args.box_behaviour != "real":
+        raise ConfigError("--box-behaviour" if args.live else "--box-jitter", None,
+                          "--box-behaviour real works offline only; --box-jitter needs it")
     if args.track_conf is not None and not (args.track and 0.0 < args.track_conf < args.conf):
         raise ConfigError("--track-conf", None, f"needs --track and a score in (0, --conf {args.conf:g}), got {args.track_conf:g}")
     if args.max_range is not None and not (np.isfinite(args.max_range) and args.max_range > 0):
@@ -103,8 +107,10 @@ def _run_offline(args, calib) -> dict:
         far = FarBand.load(det.source, args.far_rows, calib.image_width, calib.image_height, calib.crop, "--far-rows",
                            backend=args.backend, conf=conf, threads=plan.network_threads or None, bf16=args.bf16)
     imu = _imu_source(args, calib)
+    if args.box_behaviour == "real":  # the real frames' boxes on a rendered drive (band and far band alike)
+        det, far = real_box_behaviour(det, far, box_model_or_default(det.source), args.box_jitter)
     att_cfg = None
-    if args.box_model == "model" or (args.box_model == "auto" and not args.gt_topic):
+    if args.box_model == "model" or (args.box_model == "auto" and (not args.gt_topic or args.box_behaviour == "real")):
         att_cfg = ImageAttitudeConfig(box_model=box_model_or_default(det.source))
     pipeline = Pipeline(calib, det, args.attitude, imu, far, cones_conf=args.conf if args.track_conf is not None else None,
                         attitude_config=att_cfg, concurrent=plan.concurrent)

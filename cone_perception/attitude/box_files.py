@@ -1,0 +1,84 @@
+"""The detector's box model on disk (``<model file name>.box_model.yaml`` beside the model, issue 27): read,
+write, the conservative default for a model without one, and which box model a run uses (:func:`box_model_for`:
+``--box-model`` of ``replay`` / ``map``, the nodes' ``box_model``). Imports no torch (the mapping node reads it).
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import yaml
+
+from ..errors import ConfigError
+from .boxes import DEFAULT_BOX_MODEL, BoxModel
+
+log = logging.getLogger(__name__)
+
+
+def box_model_path(model_path: str | Path) -> Path:
+    """The box-model sidecar of a model file: ``<file name>.box_model.yaml`` (``m.pt`` -> ``m.pt.box_model.yaml``)."""
+    model_path = Path(model_path)
+    return model_path.with_name(model_path.name + ".box_model.yaml")
+
+
+def write_box_model(path: str | Path, box_model: BoxModel, command: str = "") -> Path:
+    """Write ``box_model`` (:class:`~cone_perception.attitude.boxes.BoxModel`) to the YAML file ``path``
+    (``box_model:`` mapping; ``command``: how it was measured)."""
+    path = Path(path)
+    doc = {"box_model": box_model.to_dict()}
+    if command:
+        doc["measured_with"] = command
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return path
+
+
+def read_box_model(model_path: str | Path) -> BoxModel | None:
+    """The box model beside a model file (:func:`box_model_path`; for an export ``m.onnx`` also that of
+    ``m.pt``), or None where there is none. :class:`ConfigError` naming the file and field for a bad one."""
+    model_path = Path(model_path)
+    for side in (box_model_path(model_path), box_model_path(model_path.with_suffix(".pt"))):
+        if not side.is_file():
+            continue
+        try:
+            doc = yaml.safe_load(side.read_text()) or {}
+        except yaml.YAMLError as e:
+            raise ConfigError(str(side), None, f"not valid YAML: {e}") from e
+        try:
+            return BoxModel.from_dict(doc.get("box_model") if isinstance(doc, dict) else None)
+        except ValueError as e:
+            raise ConfigError(str(side), "box_model", str(e)) from None
+    return None
+
+
+def box_model_or_default(model_path: str | Path | None) -> BoxModel:
+    """The model's box model, or :data:`~cone_perception.attitude.boxes.DEFAULT_BOX_MODEL` with a warning
+    (no shift, a wide per-cone spread: measure one with ``eval --box-model-out``)."""
+    bm = read_box_model(model_path) if model_path is not None else None
+    if bm is None:
+        log.warning("%s has no box model (%s): the image attitude takes its boxes as the labelled cones with a wide "
+                    "per-cone spread; measure one with `cone-perception eval --box-model-out`", model_path,
+                    box_model_path(model_path).name if model_path is not None else "no model file")
+        return DEFAULT_BOX_MODEL
+    return bm
+
+
+#: How the image attitude reads a detector's boxes (``replay``/``map`` ``--box-model``, the nodes' ``box_model``):
+#: ``model`` = the model's measured box model, ``rendered`` = the rendered drives' box-top table, ``auto`` =
+#: rendered for a synthetic camera (its detector's boxes sit on rendered cones as the table says), else model.
+BOX_MODEL_CHOICES = ("auto", "model", "rendered")
+
+
+def box_model_for(choice: str, model_path: str | Path, synthetic: bool) -> tuple[BoxModel | None, str]:
+    """``(box model or None for the rendered table, what it is in words)`` for a :data:`BOX_MODEL_CHOICES`
+    ``choice``, the detector's model file (:func:`~cone_perception.resources.default_model_path` for the
+    shipped one) and whether the camera is a rendered one (``synthetic``: the
+    calibration's ``camera`` is ``synth``). ValueError for an unknown choice."""
+    if choice not in BOX_MODEL_CHOICES:
+        raise ValueError(f"unknown box model choice {choice!r}; known: {', '.join(BOX_MODEL_CHOICES)}")
+    if choice == "rendered" or (choice == "auto" and synthetic):
+        return None, "rendered table" + (" (synthetic camera)" if choice == "auto" else "")
+    bm = box_model_or_default(model_path)
+    if bm is DEFAULT_BOX_MODEL:
+        return bm, f"default (no {box_model_path(model_path).name}: no shift, spread {bm.sigma_rel:g})"
+    return bm, f"measured ({box_model_path(model_path).name}, spread {bm.sigma_rel:g})"
