@@ -3,9 +3,11 @@
 With a far strip (:mod:`.farband`) every frame runs two forwards. On two CPU threads they can run
 one after the other, each network on two intra-op threads, or at once, each network on one intra-op
 thread: the strip on a worker thread, the band on the calling thread. ONNX Runtime and torch release
-the GIL in the forward, so the two overlap. At once is the faster way on two threads
-(docs/benchmarks.md, "Band and strip at once"): a network's forward does not halve on two
-intra-op threads, and the strip, smaller than the band, hides behind it.
+the GIL in the forward, so the two overlap: a strip smaller than the band hides behind the band's
+forward, and neither network has an intra-op pool to synchronise (ONNX Runtime's two-thread pool
+spins and loses scheduler ticks whenever other work runs). It needs two free cores: with one core
+busy elsewhere, one thread one after the other is faster (docs/benchmarks.md, "Band and far strip at
+once on two threads").
 
 * :class:`ForwardPlan`: the rule, from the ``threads`` setting and whether a strip runs:
   ``threads >= 2`` and a strip: at once, each network on ``threads // 2`` intra-op threads;
