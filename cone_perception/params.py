@@ -179,7 +179,8 @@ _DETECTOR = (
     _p("fp16", False, "half precision on the GPU (CUDA only)"),
     _p("bf16", False, "bfloat16 autocast on the CPU (backend torch); pays only on CPUs with native bf16"),
     _p("threads", RUNTIME_THREADS, "the network's CPU threads; 0 = the library's default (all cores); 1 leaves the "
-       "other cores to the rest of the car (docs/benchmarks.md, Backend and threads)", min=0, max=256),
+       "other cores to the rest of the car (docs/benchmarks.md, Backend and threads); with a far strip and 2 or more, "
+       "the band's and the strip's forwards run at once, threads // 2 each (docs/detector.md, Far band)", min=0, max=256),
     _p("conf", DEFAULT_CONF, "confidence threshold: boxes scoring at most this are dropped", min=0.0, max=1.0,
        dynamic=True),
     _p("iou", DEFAULT_IOU, "NMS IoU threshold (class-aware): a box overlapping a better one of its class by more is "

@@ -13,11 +13,13 @@ import numpy as np
 
 from .adapter import DriverAdapter
 from .attitude import FIXED, Attitude, attitude_estimator, attitude_for_boxes
-from .detector.farband import FarBand
+from .detector.farband import FarBand, merge_boxes
+from .detector.parallel import PairRunner
 from .geometry.calib import Calibration
 from .mapping import ConeMapper
+from .params import DEFAULT_IOU
 
-STAGES = ("adapter", "preprocess", "forward", "postprocess", "far_band", "attitude", "mapping")
+STAGES = ("adapter", "preprocess", "forward", "postprocess", "far_forward", "far_band", "far_wait", "attitude", "mapping")
 
 
 @dataclass
@@ -52,13 +54,20 @@ class Pipeline:
     score that splits its boxes: those at or above it are the frame's boxes and ``/cones`` (and fit the
     attitude), those below are mapped with the same attitude into :attr:`FrameResult.weak_cones`, for the
     tracker only (docs/tracking.md, "Weak detections"). None: no split.
+    ``concurrent``: with ``far``, run the band's and the strip's detect at the same time, the strip on a
+    worker thread (:mod:`cone_perception.detector.parallel`; :class:`~cone_perception.detector.parallel.ForwardPlan`
+    says when, and with how many threads each detector is loaded); the same boxes as one after the other.
+    :meth:`close` joins the worker. Stage times with ``far``: ``far_forward`` (the strip's forward),
+    ``far_band`` (its detect and the merge, on whichever thread), ``far_wait`` (what it adds to the frame:
+    ``far_band`` when sequential, the wait for it after the band's detect plus the merge when concurrent).
     """
 
     def __init__(self, calib: Calibration, detector, attitude: str | None = None, imu=None, far: FarBand | None = None,
-                 cones_conf: float | None = None, attitude_config=None):
+                 cones_conf: float | None = None, attitude_config=None, concurrent: bool = False):
         self.calib = calib
         if far is not None:
             far.check_classes(detector)  # a far model of other classes: refused before the first frame
+        self._pair = PairRunner(concurrent and far is not None)  # the band's and the strip's detect
         self.far = far  # the far band (full-resolution rows near the horizon, detector/farband.py), or None
         self.adapter = DriverAdapter(calib.crop, calib.image_width, calib.image_height, far.crop if far else None)
         self.detector = detector
@@ -91,16 +100,24 @@ class Pipeline:
 
     def _run(self, band: np.ndarray, t_adapter_s: float, strip: np.ndarray | None, stamp_ns: int | None,
              far_crop=None, clamped: bool = False) -> FrameResult:
-        boxes = self.detector.detect(band, self.calib.crop)
         timing = {"adapter": t_adapter_s * 1e3}
-        timing.update({k.removesuffix("_ms"): v for k, v in self.detector.timing.items()})
-        if self.far is not None and strip is not None:
+        if self.far is not None and strip is not None:  # two forwards, at once with a concurrent plan
+            boxes, far_boxes, t = self._pair.run(lambda: self.detector.detect(band, self.calib.crop),
+                                                 lambda: self.far.detect(strip, far_crop))
             t0 = time.perf_counter()
-            boxes = self.far.merged(boxes, strip, far_crop)
-            timing["far_band"] = (time.perf_counter() - t0) * 1e3
+            boxes = merge_boxes(boxes, far_boxes, getattr(self.far.detector, "iou", DEFAULT_IOU))
+            t_merge = (time.perf_counter() - t0) * 1e3
+            timing.update({k.removesuffix("_ms"): v for k, v in self.detector.timing.items()})
+            if "forward_ms" in getattr(self.far.detector, "timing", {}):
+                timing["far_forward"] = self.far.detector.timing["forward_ms"]
+            timing["far_band"] = t["second"] + t_merge  # the strip's own time, on whichever thread
+            timing["far_wait"] = t["wall"] - t["first"] + t_merge  # what it adds to the frame
             self.strip_counts["frames"] += 1
             self.strip_counts["clamped"] += int(clamped)
             self.strip_rows = (far_crop.v0, far_crop.v1) if far_crop is not None else None
+        else:
+            boxes = self.detector.detect(band, self.calib.crop)
+            timing.update({k.removesuffix("_ms"): v for k, v in self.detector.timing.items()})
         weak = None
         if self.cones_conf is not None:
             strong = boxes["score"] >= self.cones_conf
@@ -116,6 +133,21 @@ class Pipeline:
         weak_cones = self.mapper.map_boxes(weak, att) if weak is not None else None
         timing["mapping"] = (time.perf_counter() - t0) * 1e3
         return FrameResult(boxes, cones, timing, att, band, weak_cones)
+
+    @property
+    def concurrent(self) -> bool:
+        """Whether the band's and the far strip's forwards run at the same time (a worker thread)."""
+        return self._pair.concurrent
+
+    def close(self) -> None:
+        """Join the far strip's worker thread, if one runs (idempotent; a later frame starts a new one)."""
+        self._pair.close()
+
+    def __enter__(self) -> "Pipeline":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
     def _check_stamp(self, stamp_ns: int | None) -> None:
         if stamp_ns is None and self.imu is not None:

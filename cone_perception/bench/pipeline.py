@@ -25,11 +25,17 @@ from .frames import synthetic_frames
 BYTES_PER_PX = {"yuv422_yuy2": 2, "bgr8": 3, "rgb8": 3}
 
 
-def bench_pipeline(calib, det, frames: list[bytes], n_frames: int, warmup: int = 20, far=None) -> dict:
+def bench_pipeline(calib, det, frames: list[bytes], n_frames: int, warmup: int = 20, far=None,
+                   concurrent: bool = False) -> dict:
     """Time ``det`` in the fused pipeline of ``calib`` (its crop and downscale) on raw YUYV ``frames``
     (cycled): per stage, end to end with the packing of ``cone_boxes`` and ``/cones``. The result
-    of ``bench pipeline`` (and one row of ``bench table``). ``far``: a far band (``detector/farband.py``) or None."""
-    pipe = Pipeline(calib, det, far=far)
+    of ``bench pipeline`` (and one row of ``bench table``). ``far``: a far band (``detector/farband.py``) or None;
+    ``concurrent``: its forward at the same time as the band's (``detector/parallel.py``)."""
+    with Pipeline(calib, det, far=far, concurrent=concurrent) as pipe:
+        return _time_pipeline(pipe, calib, det, frames, n_frames, warmup)
+
+
+def _time_pipeline(pipe: Pipeline, calib, det, frames: list[bytes], n_frames: int, warmup: int) -> dict:
     debug = DebugImage(pipe.mapper)
     w, h = calib.image_width, calib.image_height
     crop = calib.crop

@@ -16,10 +16,17 @@ from ..bench.frames import rendered_frames
 from ..bench.pipeline import bench_adapter, bench_pipeline, bench_tracker, load_for_crop
 from ..bench.table import crop_for_setting, run_table
 from ..detector.farband import FarBand, far_rows_for
+from ..detector.parallel import ForwardPlan
 from ..errors import ConfigError
 from ..geometry.calib import load_calibration
 from ..timing import format_runs, format_table, summarize_runs
 from ..words import plural
+
+
+def forward_plan(threads: int, strip: bool, sequential: bool = False) -> ForwardPlan:
+    """:meth:`ForwardPlan.of` (the nodes' rule), or with ``sequential`` (``--sequential``) the two forwards one
+    after the other, each network on all ``threads``: the design the rule replaces, for comparison."""
+    return ForwardPlan(False, threads) if sequential else ForwardPlan.of(threads, strip)
 
 
 def _bench_pipeline(args: argparse.Namespace, calib) -> dict:
@@ -28,13 +35,16 @@ def _bench_pipeline(args: argparse.Namespace, calib) -> dict:
     far_rows = far_rows_for(args.far_rows, calib, "--far-rows")  # a bad value fails before any model loads
     if args.far_model and far_rows.crop is None:
         raise ConfigError("--far-model", None, f"needs a far band ({far_rows.what})")
-    det = load_for_crop(args.model, args.backend, calib.crop, args.threads, bf16=args.bf16)
+    plan = forward_plan(args.threads, far_rows.crop is not None, args.sequential)
+    det = load_for_crop(args.model, args.backend, calib.crop, plan.network_threads, bf16=args.bf16)
     far = FarBand.for_calibration(args.far_model or det.source, args.far_rows, calib, "--far-rows", "--far-model",
-                                  backend=args.backend, threads=args.threads, bf16=args.bf16)
-    result = bench_pipeline(calib, det, rendered_frames(calib, max(1, args.scenes)), args.frames, args.warmup, far)
-    result["far_rows"] = f"{far.crop.v0},{far.crop.v1}" if far is not None else "off"
+                                  backend=args.backend, threads=plan.network_threads, bf16=args.bf16)
+    result = bench_pipeline(calib, det, rendered_frames(calib, max(1, args.scenes)), args.frames, args.warmup, far,
+                            plan.concurrent)
+    result["far_rows"] = f"{far.crop.v0},{far.crop.v1}" if far is not None else "none"
     result["far_band"] = far_rows.what
     result["far_model"] = far.detector.source if far is not None and args.far_model else ""
+    result["forwards"] = plan.describe() if far is not None else ""
     result["setting"] = args.input or "calibration"
     result["threads"] = args.threads
     return result
@@ -48,6 +58,7 @@ def _repeat_pipeline(args: argparse.Namespace) -> int:
     cmd += (["--model", str(args.model)] if args.model else []) + (["--bf16"] if args.bf16 else [])
     cmd += ["--input", args.input] if args.input else []
     cmd += (["--far-rows", args.far_rows] if args.far_rows is not None else []) + (["--far-model", args.far_model] if args.far_model else [])
+    cmd += ["--sequential"] if args.sequential else []
     runs = []
     for i in tqdm(range(args.repeat), unit="run", desc="bench pipeline", file=sys.stderr,
                   disable=args.json or args.no_progress):
@@ -91,6 +102,11 @@ def run_bench(args: argparse.Namespace) -> int:
         print(format_table(result["stages"]))
         print(f"frames/s (median end to end): {result['fps']:.1f}   everything but the forward: "
               f"{result['non_forward_median_ms']:.2f} ms   peak RSS: {result['peak_rss_mb']:.0f} MiB")
+        if result["forwards"]:
+            st = result["stages"]
+            print(f"far strip {result['far_rows']} ({result['forwards']}): its own time {st['far_band']['median_ms']:.2f} ms "
+                  f"(forward {st['far_forward']['median_ms']:.2f}), adds {st['far_wait']['median_ms']:.2f} ms to the frame "
+                  "(medians; far_band - far_wait: the time hidden behind the band's detect)")
         return 0
     result = bench_adapter(calib, args.encoding, args.frames, args.warmup)
     result["threads"] = args.threads

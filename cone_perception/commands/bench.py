@@ -2,7 +2,8 @@
 
   cone-perception bench adapter  [--frames 300] [--calib CAL] [--encoding yuv422_yuy2] [--json]
   cone-perception bench pipeline [--frames 300] [--calib CAL] [--model M] [--backend B] [--threads N]
-                                 [--input full|half|crop|crop_half] [--repeat N] [--json]
+                                 [--input full|half|crop|crop_half] [--far-rows V0,V1 [--sequential]]
+                                 [--repeat N] [--json]
   cone-perception bench tracker [--frames 300] [--rows 8] [--calib CAL] [--json]
   cone-perception bench table --models A.pt[,B.pt] --val DIR --gt-names A,B,.. --band V0,V1 --out DIR [--frames N]
 
@@ -60,6 +61,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--far-model", default=None, metavar="PATH",
                    help="pipeline: the far band's own model file (e.g. one trained for its full"
                         "-resolution scale; default: the band's model); its classes must be the band model's")
+    p.add_argument("--sequential", action="store_true",
+                   help="pipeline with a far band: the band's and the strip's forwards one after the other, each network "
+                        "on --threads intra-op threads (default: with --threads >= 2 at once, the strip on a worker "
+                        "thread, each network on threads // 2; detector/parallel.py)")
     p.add_argument("--scenes", type=int, default=16, help="pipeline, table: distinct rendered scenes, cycled (default %(default)s)")
     p.add_argument("--input", default=None, choices=INPUT_SETTINGS,
                    help="pipeline: override the calibration's crop: full = all rows, downscale 1; half = all rows, "

@@ -6,6 +6,7 @@ import numpy as np
 from rclpy.node import Node
 
 from ..detector import Detector, default_model_path
+from ..detector.parallel import ForwardPlan
 from ._params import declare
 
 
@@ -30,6 +31,15 @@ class DetectorLoader:
             threads=self.threads or None,
         )
 
+    def plan_threads(self, strip: bool) -> ForwardPlan:
+        """The band's and the far strip's forwards for the ``threads`` parameter (:meth:`ForwardPlan.of`: with a
+        strip and ``threads >= 2`` at once, each network on ``threads // 2``); later loads use its thread count."""
+        plan = ForwardPlan.of(self.threads, strip)
+        self.kw["threads"] = plan.network_threads or None
+        if strip:
+            self.node.get_logger().info(f"far strip: {plan.describe()} ({self.threads or 'library default'} thread(s))")
+        return plan
+
     def set_threshold(self, detector: Detector, name: str, value) -> None:
         """Apply a new ``conf``, ``iou`` or ``max_det`` to ``detector`` and to later (re)loads."""
         value = int(value) if name == "max_det" else float(value)
@@ -49,7 +59,7 @@ class DetectorLoader:
             det = Detector.load(model, **self.kw)
             det.warmup()
         self.node.get_logger().info(
-            f"model {det.source} ({det.backend} {det.precision}, {self.threads or 'library default'} thread(s), "
+            f"model {det.source} ({det.backend} {det.precision}, {self.kw['threads'] or 'library default'} thread(s), "
             f"input {det.imgsz[0]}x{det.imgsz[1]}) loaded and warm")
         return det
 

@@ -21,7 +21,8 @@ Parameters (generated from cone_perception/params.py by ``cone-perception params
     native bf16
   threads (int, default 1; 0 .. 256): the network's CPU threads; 0 = the library's default (all
     cores); 1 leaves the other cores to the rest of the car (docs/benchmarks.md, Backend and
-    threads)
+    threads); with a far strip and 2 or more, the band's and the strip's forwards run at once,
+    threads // 2 each (docs/detector.md, Far band)
   conf (double, default 0.25; 0.0 .. 1.0; set at run time): confidence threshold: boxes scoring at
     most this are dropped
   iou (double, default 0.45; 0.0 .. 1.0; set at run time): NMS IoU threshold (class-aware): a box

@@ -31,6 +31,7 @@ import time
 
 from sensor_msgs.msg import CompressedImage, Image, PointCloud2
 
+from ..detector.farband import far_rows_for
 from ..geometry.calib import load_calibration
 from ..errors import FrameError
 from ..pipeline import FrameResult, Pipeline
@@ -43,12 +44,11 @@ from ._tracking import NodeTracking
 
 
 class PipelineNode(PerceptionNode):
-    def _far_band(self, calib, rows: str):
-        """The far band of ``far_rows`` (``auto``: the calibration's strip; a detector built for its size), or
-        None when off; which it is goes to the log."""
-        from ..detector.farband import FarBand, far_rows_for
+    def _far_band(self, fr):
+        """The far band of ``far_rows`` resolved (:func:`~cone_perception.detector.farband.far_rows_for`; ``auto``:
+        the calibration's strip) with a detector built for its size, or None when off; which it is goes to the log."""
+        from ..detector.farband import FarBand
 
-        fr = far_rows_for(rows, calib, "parameter far_rows")
         self.get_logger().info(fr.what)
         if fr.crop is None:
             return None
@@ -68,12 +68,14 @@ class PipelineNode(PerceptionNode):
         transport = declare(self, "input_transport")
         markers = bool(declare(self, "publish_markers"))
         self.loader = DetectorLoader(self)
+        far_rows = far_rows_for(declare(self, "far_rows"), calib, "parameter far_rows")  # auto: the calibration's strip
+        plan = self.loader.plan_threads(far_rows.crop is not None)  # with a strip and threads >= 2: both forwards at once
         detector = self.loader.load((calib.crop.out_width, calib.crop.out_height))
         self.advertise_cones(calib.frame_id, markers)
         mode, imu = declare_attitude(self)
         att_config, box_model = declare_box_model(self, calib, self.loader.model)  # the detector's box model
-        self.pipeline = Pipeline(calib, detector, mode, imu, self._far_band(calib, declare(self, "far_rows")),
-                                 attitude_config=att_config)
+        self.pipeline = Pipeline(calib, detector, mode, imu, self._far_band(far_rows),
+                                 attitude_config=att_config, concurrent=plan.concurrent)
         report_attitude(self, self.pipeline.attitude_mode, self.pipeline.attitude, box_model)
         if self.pipeline.far is not None:  # /diagnostics: frames with the strip, those clamped to the image (WARN)
             self.health.watch("far_strip", self.pipeline.strip_counts, warn=["clamped"])
@@ -89,6 +91,11 @@ class PipelineNode(PerceptionNode):
         self.subscribe_camera(transport)
         self.get_logger().info(f"calibration {calib.source}, frame {calib.frame_id}, attitude {self.pipeline.attitude_mode}"
                                + (f", box model {box_model}" if self.pipeline.attitude else ""))
+
+    def destroy_node(self):
+        if getattr(self, "pipeline", None) is not None:
+            self.pipeline.close()  # joins the far strip's worker thread, if one runs
+        return super().destroy_node()
 
     def on_raw(self, msg: Image) -> None:
         t0 = time.perf_counter()

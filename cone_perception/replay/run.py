@@ -22,6 +22,7 @@ from ..data.bags import read_attitude_truth, read_ground_truth, read_twists
 from ..data.outfiles import print_written, refuse_existing, remove_bag
 from ..detector import Detector, default_model_path
 from ..detector.farband import FarBand, far_rows_for
+from ..detector.parallel import ForwardPlan
 from ..detector.model_files import box_model_or_default
 from ..errors import ConfigError
 from ..evaluation import GT_MIN_VISIBLE, LocalisationReport, format_localisation
@@ -99,12 +100,14 @@ def _run_offline(args, calib) -> dict:
     tracking = _tracking(args, calib)  # its bad options fail before the model loads
     # built for the calibration's band, as the pipeline node does (a fixed-size backend never letterboxes)
     conf = args.track_conf if args.track_conf is not None else args.conf  # the pipeline splits at --conf
+    strip_on = far_rows_for(args.far_rows, calib, "--far-rows").crop is not None  # auto (None): the calibration's
+    plan = ForwardPlan.of(args.threads, strip_on)  # with a strip and 2 threads: both forwards at once
     det = Detector.load_for_band(args.model or default_model_path(), (calib.crop.out_width, calib.crop.out_height),
-                                 backend=args.backend, conf=conf, threads=args.threads or None, bf16=args.bf16)
+                                 backend=args.backend, conf=conf, threads=plan.network_threads or None, bf16=args.bf16)
     det.warmup()
     far = FarBand.for_calibration(args.far_model or det.source, args.far_rows, calib, "--far-rows", "--far-model",
                                   say=lambda t: print(f"replay: {t}"), backend=args.backend, conf=conf,
-                                  threads=args.threads or None, bf16=args.bf16)
+                                  threads=plan.network_threads or None, bf16=args.bf16)
     imu = _imu_source(args, calib)
     if args.box_behaviour == "real":  # the real frames' boxes on a rendered drive (band and far band alike)
         det, far = real_box_behaviour(det, far, box_model_or_default(det.source), args.box_jitter)
@@ -112,9 +115,10 @@ def _run_offline(args, calib) -> dict:
     if args.box_model == "model" or (args.box_model == "auto" and (not args.gt_topic or args.box_behaviour == "real")):
         att_cfg = ImageAttitudeConfig(box_model=box_model_or_default(det.source))
     pipeline = Pipeline(calib, det, args.attitude, imu, far, cones_conf=args.conf if args.track_conf is not None else None,
-                        attitude_config=att_cfg)
-    res = offline_replay(args.bag, pipeline, args.topic, args.out, args.gt_topic,
-                         _progress(args.no_progress), imu_topic=args.imu_topic, tracking=tracking)
+                        attitude_config=att_cfg, concurrent=plan.concurrent)
+    with pipeline:  # joins the strip's worker thread, if one ran
+        res = offline_replay(args.bag, pipeline, args.topic, args.out, args.gt_topic,
+                             _progress(args.no_progress), imu_topic=args.imu_topic, tracking=tracking)
     stages = res.timer.summary()
     n = res.stats.ok
     print(f"replay (offline) {args.bag}: {n} frames processed, {res.stats.summary()}")
