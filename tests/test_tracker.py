@@ -317,11 +317,13 @@ def attitude_drive(give_attitude: bool, seed: int = 0, frames: int = 300, sigma_
                    register: bool = False) -> dict[str, tuple[float, float]]:
     """Drive 0.4 m a frame past two rows of cones; each frame's cones share one pitch error (AR(1), 1-sigma
     ``sigma_deg``, correlation time ``tau_s``) on top of independent noise growing with range, and carry
-    its covariance ``J S J^T`` as the mapping gives it. Returns per range group (raw, tracked) median error."""
+    its covariance ``J S J^T`` as the mapping gives it. Returns per range group (raw, tracked) median error.
+    Spawning is as it was when these margins were set (spawn_max_m inf): this drive measures the attitude
+    treatment, not which detections start tracks."""
     rng = np.random.default_rng(seed)
     xs = np.arange(3.0, 3.0 + 0.4 * frames + 25, 4.0)
     world = np.concatenate([np.c_[xs, np.full_like(xs, 1.6)], np.c_[xs + 2, np.full_like(xs, -1.6)]])
-    trk = ConeTracker(TrackerConfig())
+    trk = ConeTracker(TrackerConfig(spawn_max_m=float("inf")))
     a, rho = 0.0, np.exp(-0.05 / tau_s)
     S = np.diag([sigma_deg**2, 0.0])
     raw, out = [], []
@@ -474,8 +476,9 @@ def test_weak_detections_do_not_steer_the_registration():
 
 def test_spawn_max_m_gives_the_next_far_cone_of_a_row_its_own_track():
     """Two cones of a row 4.5 m apart at 30 m, each with a covariance metres long along the ray: inside
-    spawn_chi2 of each other, so by default only the first gets a track; with spawn_max_m 2 the second
-    starts its own (they are farther apart than that) and both are kept apart afterwards."""
+    spawn_chi2 of each other, so without spawn_max_m (inf) only the first gets a track; with spawn_max_m 2
+    (the default since issue 26e) the second starts its own (they are farther apart than that) and both
+    are kept apart afterwards."""
 
     def far(xy):
         c = cones(xy, BLUE, score=0.9)
@@ -491,5 +494,42 @@ def test_spawn_max_m_gives_the_next_far_cone_of_a_row_its_own_track():
             ids.append(trk.output()["track_id"].tolist())
         return ids
 
-    assert all(i == [1] for i in run())
+    assert all(i == [1] for i in run(spawn_max_m=float("inf")))
     assert all(i == [1, 2] for i in run(spawn_max_m=2.0))  # the same two ids every frame: not merged, not respawned
+    assert run() == run(spawn_max_m=2.0)  # the default
+
+
+def far_fov(max_range_m: float) -> FieldOfView:
+    """Sees x in [2, 60] m, |y| <= 5 m, to ``max_range_m`` (the calibration's range)."""
+    return FieldOfView(lambda xy: np.asarray(xy)[:, ::-1], (-5.0, 2.0, 5.0, 60.0), max_range_m, margin_frac=0.0)
+
+
+def test_far_cones_are_tracked_to_the_calibrations_range_at_the_defaults():
+    """Issue 26e: the tracker has no range of its own by default; the calibration's (the field of view's)
+    decides. A cone at 32 m (beyond the old 20 m) is tracked and published; one at 45 m, beyond the
+    calibration's 40 m, is not; an own max_range_m below the calibration's still cuts."""
+
+    def run(config: TrackerConfig, x: float) -> int:
+        trk = ConeTracker(config, fov=far_fov(40.0))
+        for k in range(6):
+            trk.update(k * DT_NS, cones([[x, 1.5], [x, -1.5]], [BLUE, YELLOW]), Motion2D() if k else None)
+        return len(trk.output())
+
+    assert TrackerConfig().max_range_m == float("inf")
+    assert ConeTracker(TrackerConfig(), fov=far_fov(40.0)).max_range_m == 40.0
+    assert run(TrackerConfig(), 32.0) == 2
+    assert run(TrackerConfig(), 45.0) == 0
+    assert run(TrackerConfig(max_range_m=20.0), 32.0) == 0
+    assert run(TrackerConfig(max_range_m=20.0), 12.0) == 2
+
+
+def test_a_far_track_out_of_the_calibrations_range_is_not_counted_missed():
+    """A track beyond the field of view's range loses no certainty when it is not seen."""
+    trk = ConeTracker(fov=far_fov(40.0))
+    for k in range(4):
+        trk.update(k * DT_NS, cones([[38.0, 1.5]], BLUE), Motion2D() if k else None)
+    c = trk.certainty.copy()
+    trk.update(4 * DT_NS, cones([], BLUE), Motion2D(-3.0, 0.0, 0.0))  # the car backs off: the cone is at 41 m
+    assert trk.xy[0, 0] == pytest.approx(41.0, abs=0.2) and trk.certainty[0] == pytest.approx(c[0])
+    trk.update(5 * DT_NS, cones([], BLUE), Motion2D(3.0, 0.0, 0.0))  # back at 38 m, in range and not seen
+    assert trk.certainty[0] < c[0]

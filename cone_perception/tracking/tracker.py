@@ -74,9 +74,10 @@ class TrackerConfig:
     registration_failed_std_m: float = 0.1  # extra position std of every track when the registration failed
     gap_std_m: float = 0.1  # extra position std of every track after a gap: gap_std_m + gap_std_m_per_s * (dt - max_gap_s)
     gap_std_m_per_s: float = 0.5
-    max_range_m: float = 20.0  # detections farther than this are not used (too uncertain along the ray)
+    max_range_m: float = float("inf")  # detections farther are not used; inf: the calibration's max_range_m (the field
+    # of view's) is the only range, so /cones/tracked reaches as far as /cones (docs/tracking.md, "Range")
     spawn_chi2: float = 50.0  # an unassigned detection this near (Mahalanobis^2) to a track starts no new one
-    spawn_max_m: float = float("inf")  # ... unless it is farther than this (m) from that track: far cones' covariance
+    spawn_max_m: float = 2.0  # ... unless it is farther than this (m) from that track: far cones' covariance
     # is metres long along the ray, so the next cone of a row 4-5 m behind would otherwise never get a track;
     # two tracks farther apart than this are not merged either
     merge_chi2: float = 6.0  # two tracks this near (and of one class) are merged into the older one
@@ -170,6 +171,11 @@ class ConeTracker:
         self.certainty = np.zeros(n)
         self.C = np.zeros((n, 2, 2))  # cross-covariance of each track's error with the attitude error, m * deg
 
+    @property
+    def max_range_m(self) -> float:
+        """The range of the detections used: :attr:`TrackerConfig.max_range_m` within the field of view's."""
+        return min(self.config.max_range_m, self.fov.max_range_m if self.fov is not None else float("inf"))
+
     def __len__(self) -> int:
         return len(self.ids)
 
@@ -218,7 +224,7 @@ class ConeTracker:
             self.events[reason] += 1
             raise FrameError(reason, f"frame stamp {stamp_ns} ns is not after the last fused frame {self.last_stamp_ns} ns")
         cones = _valid_cones(cones, self.events)
-        cones = cones[np.hypot(cones["x"], cones["y"]) <= cfg.max_range_m]
+        cones = cones[np.hypot(cones["x"], cones["y"]) <= self.max_range_m]
         weak = cones["score"] < cfg.strong_score  # (n_z,) bool: below the /cones threshold, for confirmation only
         strong = ~weak
         z = np.empty((len(cones), 2))
@@ -334,7 +340,7 @@ class ConeTracker:
         missed[cols] = False
         if missed.any():
             vis = self.fov.visible(self.xy[missed]) if self.fov is not None else np.ones(int(missed.sum()), bool)
-            vis &= np.hypot(self.xy[missed, 0], self.xy[missed, 1]) <= cfg.max_range_m
+            vis &= np.hypot(self.xy[missed, 0], self.xy[missed, 1]) <= self.max_range_m
             idx = np.flatnonzero(missed)[vis]
             self.misses[idx] += 1
             self.certainty[idx] = _bayes(self.certainty[idx], cfg.miss_likelihood_ratio)

@@ -1,11 +1,11 @@
 """Tracker settings for far cones (issue 26, item 3) on synthetic drives: one detector pass, many trackers.
 
-    .venv/bin/python docs/experiments/weak_confirm.py [--far-rows 384,576] BAG [BAG ...]
+    .venv/bin/python docs/experiments/weak_confirm.py [--far-rows auto|off|384,576] [--only TEXT] BAG [BAG ...]
 
 Each BAG is a `cone-perception synth bag` drive (BAG_calib.yaml, BAG_gt.jsonl beside it). The pipeline
 (default model, attitude as `replay`'s default, the calibration's range raised to 40 m) runs once per
 bag at score 0.1, split at 0.25 (FrameResult.weak_cones); then each tracker design below gets the same
-frames (only /cones, or /cones + the weak ones) and is scored as `replay --track --gt-topic` scores
+frames (only /cones, or /cones + the weak ones; `--only TEXT`: the designs whose name holds TEXT) and is scored as `replay --track --gt-topic` scores
 /cones/tracked (DriveEvaluation). Prints one markdown row per design and bag: recall per range band
 (cones >= half visible) / false cones per frame in the band, and false cones per frame within 40 m.
 """
@@ -38,19 +38,31 @@ DESIGNS = {
     "range 40 m, spawn_max_m 2, min_hits 2": (False, {"max_range_m": 40.0, "spawn_max_m": 2.0, "min_hits": 2}),
     "range 40 m, spawn_max_m 2 + weak 0.10-0.25": (True, {"max_range_m": 40.0, "spawn_max_m": 2.0, "strong_score": 0.25}),
     "range 40 m, spawn_max_m 2 + weak < 0.45": (True, {"max_range_m": 40.0, "spawn_max_m": 2.0, "strong_score": 0.45}),
+    # issue 26e: no range of the tracker's own (the calibration's, 40 m here)
+    "calib range, spawn_max_m 2": (False, {"max_range_m": float("inf"), "spawn_max_m": 2.0}),
+    "calib range, spawn_max_m 2.5": (False, {"max_range_m": float("inf"), "spawn_max_m": 2.5}),
+    "calib range, spawn_max_m 1.75": (False, {"max_range_m": float("inf"), "spawn_max_m": 1.75}),
+    "calib range, spawn_max_m 2.25": (False, {"max_range_m": float("inf"), "spawn_max_m": 2.25}),
+    "calib range, spawn_max_m 3": (False, {"max_range_m": float("inf"), "spawn_max_m": 3.0}),
+    "calib range, spawn_max_m 2, publish_min_certainty 0.6": (False, {"max_range_m": float("inf"), "spawn_max_m": 2.0,
+                                                                     "publish_min_certainty": 0.6}),
+    "calib range, spawn_max_m 2, min_hits 3": (False, {"max_range_m": float("inf"), "spawn_max_m": 2.0, "min_hits": 3}),
+    "calib range, spawn_max_m 2 + weak 0.10-0.25": (True, {"max_range_m": float("inf"), "spawn_max_m": 2.0,
+                                                         "strong_score": 0.25}),
 }
 
 ap = argparse.ArgumentParser()
 ap.add_argument("bags", nargs="+")
-ap.add_argument("--far-rows", default=None)
+ap.add_argument("--far-rows", default=None, help="auto (default: the calibration's strip), off, or V0,V1")
+ap.add_argument("--only", default="", help="only the designs whose name holds this text")
 args = ap.parse_args()
+DESIGNS = {k: v for k, v in DESIGNS.items() if args.only in k}
 print("| design | bag | " + " | ".join(["0-7 m", "7-15 m", "15-25 m", "25-40 m"]) + " | false / frame < 40 m |")
 print("|---|---|---|---|---|---|---|")
 for bag in args.bags:
     calib = replace(load_calibration(f"{bag}_calib.yaml"), max_range_m=40.0)
     det = Detector.load_for_band(default_model_path(), (calib.crop.out_width, calib.crop.out_height), conf=0.1, threads=1)
-    far = FarBand.load(det.source, args.far_rows, calib.image_width, calib.image_height, calib.crop, "--far-rows",
-                       conf=0.1, threads=1) if args.far_rows else None
+    far = FarBand.for_calibration(det.source, args.far_rows, calib, "--far-rows", conf=0.1, threads=1)
     imu = ImuAttitude((0.0, 0.0))
     pipe = Pipeline(calib, det, None, imu, far, cones_conf=0.25)
     imu_msgs, k, frames = read_imu(bag), 0, []
