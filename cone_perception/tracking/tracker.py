@@ -75,7 +75,7 @@ class TrackerConfig:
     gap_std_m: float = 0.1  # extra position std of every track after a gap: gap_std_m + gap_std_m_per_s * (dt - max_gap_s)
     gap_std_m_per_s: float = 0.5
     max_range_m: float = float("inf")  # detections farther are not used; inf: the calibration's max_range_m (the field
-    # of view's) is the only range, so /cones/tracked reaches as far as /cones (docs/tracking.md, "Range")
+    # of view's) is the only range, so /cones/tracked reaches as far as /cones (docs/tracking.md, "Far cones")
     spawn_chi2: float = 50.0  # an unassigned detection this near (Mahalanobis^2) to a track starts no new one
     spawn_max_m: float = 2.0  # ... unless it is farther than this (m) from that track: far cones' covariance
     # is metres long along the ray, so the next cone of a row 4-5 m behind would otherwise never get a track;
