@@ -57,21 +57,37 @@ def test_merge_keeps_one_box_per_cone_and_the_far_band_only_cones():
 
 def test_a_band_box_the_far_band_also_found_gives_way_to_it():
     """The halved band's box of a 10 px cone is a pixel or two off: here IoU 0.38 with the far band's box of the
-    same cone (NMS at 0.45 kept both: a false cone beside the true one). It gives way to the far band's box, even
-    of another class; a band box of another cone nearby (centres more than half a height apart, or sizes more
-    than 2x apart: a near cone behind) stays."""
+    same cone (NMS at 0.45 kept both: a false cone beside the true one). It gives way to the far band's box of its
+    class scored at least half its own; a band box of another cone nearby (centres more than half a height apart,
+    or sizes more than 2x apart: a near cone behind) stays."""
     from cone_perception.detector.farband import seen_by_far
 
-    band = _boxes([[100, 400, 106, 410, 0.90, 0],   # the far cone, roughly
-                   [300, 400, 306, 410, 0.80, 1],   # seen by the far band with another class: still the same cone
+    band = _boxes([[100, 400, 106, 410, 0.70, 0],   # the far cone, roughly
+                   [300, 400, 306, 410, 0.80, 0],   # the same cone as a far box scored 0.5 (>= half of 0.8)
                    [500, 400, 506, 410, 0.70, 0],   # a neighbour 8 px to the right of a far-band cone
                    [700, 380, 730, 440, 0.70, 2]])  # a big box around a small far-band one: not the same cone
     far = _boxes([[101.5, 402.5, 107.5, 413, 0.40, 0], [300, 400, 306, 410, 0.5, 0], [508, 400, 514, 410, 0.5, 0],
                   [712, 405, 718, 415, 0.5, 2]])
-    assert seen_by_far(band, far).tolist() == [True, True, False, False]
+    band_out, far_out = seen_by_far(band, far)
+    assert band_out.tolist() == [True, True, False, False] and not far_out.any()
     merged = merge_boxes(band, far, iou=0.45)
     assert len(merged) == 6 and sorted(merged["u1"].tolist()) == [101.5, 300, 500, 508, 700, 712]
-    assert not seen_by_far(band, far[:0]).any() and not seen_by_far(band[:0], far).any()
+    assert not seen_by_far(band, far[:0])[0].any() and not seen_by_far(band[:0], far)[1].any()
+
+
+def test_a_low_score_far_box_does_not_remove_a_confident_band_box():
+    """Issue 26 bug (helper 26b): at detect --conf 0.001 a far box of any score and any class removed the band's
+    box of its spot, so a confident cone was replaced by a 0.02 box (recall at 0.25 fell, mAP too). Now a far box
+    scored under half the band box's gives way to it instead (one box per cone still), and a far box of another
+    class removes nothing (class-aware NMS decides between them)."""
+    band = _boxes([[100, 400, 106, 410, 0.90, 0],    # confident; the strip's box of it scores 0.02
+                   [300, 400, 306, 410, 0.85, 1]])   # confident; the strip calls it class 0 at 0.6
+    far = _boxes([[100.5, 400.5, 106.5, 410.5, 0.02, 0], [300.5, 400.5, 306.5, 410.5, 0.60, 0]])
+    merged = merge_boxes(band, far, iou=0.45)
+    got = sorted((float(b["u1"]), int(b["class_id"]), round(float(b["score"]), 2)) for b in merged)
+    assert got == [(100.0, 0, 0.9), (300.0, 1, 0.85), (300.5, 0, 0.6)]
+    confident = merged[merged["score"] >= 0.25]
+    assert {(int(b["class_id"]), round(float(b["u1"]))) for b in confident} >= {(0, 100), (1, 300)}
 
 
 def test_far_band_finds_far_cones_the_halved_band_misses():
