@@ -98,6 +98,7 @@ def test_far_band_finds_far_cones_the_halved_band_misses():
     from cone_perception.detector import Detector, default_model_path
     from cone_perception.geometry.calib import load_calibration
     from cone_perception.pipeline import Pipeline
+    from cone_perception.resources import default_far_model_path
     from cone_perception.synth.config import SynthConfig
     from cone_perception.synth.scene import random_pose
 
@@ -137,7 +138,8 @@ def test_far_band_finds_far_cones_the_halved_band_misses():
 
 
 def test_pipeline_node_with_far_rows_publishes_the_merged_boxes(ros, tmp_path):  # noqa: F811 (ros is a fixture)
-    """The node's ``far_rows`` parameter: its boxes are those of the core pipeline with the same far band;
+    """The node's ``far_rows`` parameter: its boxes are those of the core pipeline with the same far band (the
+    shipped far model: ``far_model`` auto);
     a bad value stops the node naming the parameter, and so does a ``far_model`` of other classes."""
     from rclpy.parameter import Parameter
     from sensor_msgs.msg import Image, PointCloud2
@@ -148,6 +150,7 @@ def test_pipeline_node_with_far_rows_publishes_the_merged_boxes(ros, tmp_path): 
     from cone_perception.nodes import _msgs
     from cone_perception.nodes.pipeline import PipelineNode
     from cone_perception.pipeline import Pipeline
+    from cone_perception.resources import default_far_model_path
 
     from rosutil import Inbox
 
@@ -155,7 +158,7 @@ def test_pipeline_node_with_far_rows_publishes_the_merged_boxes(ros, tmp_path): 
     node = ros.add(PipelineNode(context=ros.context, parameter_overrides=[Parameter("far_rows", value="384,576")]))
     assert node.pipeline.far is not None and node.pipeline.far.crop == CropSpec(384, 576, 0, 1920, 1)
     det = Detector.load_for_band(default_model_path(), (BAND.out_width, BAND.out_height))
-    far = FarBand.load(default_model_path(), "384,576", 1920, 1080, BAND)
+    far = FarBand.load(default_far_model_path(), "384,576", 1920, 1080, BAND)  # far_model's default: auto
     with_far, alone = Pipeline(calib, det, far=far), Pipeline(calib, det)
     # a frame where the far band adds boxes
     data, want = next((d, w) for d in rendered_frames(calib, 8)
@@ -259,8 +262,8 @@ def test_far_model_of_other_classes_is_refused_before_the_first_frame(tmp_path):
 
 def test_far_model_on_the_command_lines(tmp_path, capsys):
     """``detect`` / ``replay`` / ``bench pipeline --far-model``: a model of other classes stops the command
-    with exit 2 naming --far-model; without --far-rows it is refused too; the shipped model as the far
-    model gives the very boxes of the default far band."""
+    with exit 2 naming --far-model; without --far-rows it is refused too; the shipped band model as the far
+    model gives the very boxes of ``--far-model band``."""
     import json
 
     import cv2
@@ -278,7 +281,7 @@ def test_far_model_on_the_command_lines(tmp_path, capsys):
     other = _other_classes_model(tmp_path)
     base = ["detect", str(tmp_path / "f.png"), "--crop", "384,960", "--downscale", "2", "--far-rows", "384,576",
             "--no-progress"]
-    assert main([*base, "--out", str(tmp_path / "a.jsonl")]) == 0
+    assert main([*base, "--out", str(tmp_path / "a.jsonl"), "--far-model", "band"]) == 0  # the band's own model
     assert main([*base, "--out", str(tmp_path / "b.jsonl"), "--far-model", str(default_model_path())]) == 0
     a, b = (json.loads((tmp_path / f"{n}.jsonl").read_text()) for n in "ab")
     assert a["boxes"] == b["boxes"] and len(a["boxes"]) > 0
