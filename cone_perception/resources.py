@@ -52,6 +52,37 @@ def default_model_path() -> Path:
     return models_dir() / DEFAULT_MODEL_NAME
 
 
+#: File name of the shipped far-strip model under ``models/`` (models/cone_detector_far.md).
+DEFAULT_FAR_MODEL_NAME = "cone_detector_far.pt"
+#: ``far_model`` / ``--far-model`` spellings: ``auto`` (the default) = the shipped far model; empty or ``band`` =
+#: the band's own model; anything else is a model file.
+FAR_MODEL_AUTO = "auto"
+FAR_MODEL_BAND = ("", "band")
+
+
+def default_far_model_path() -> Path:
+    """``models/cone_detector_far.pt`` of the installed package (may not exist)."""
+    return models_dir() / DEFAULT_FAR_MODEL_NAME
+
+
+def far_model_for(choice, band_model):
+    """The far strip's model of ``far_model`` / ``--far-model`` ``choice`` (None: ``auto``): ``auto`` -> the
+    shipped far model (the band's model where it is not installed), ``""`` / ``band`` -> ``band_model``
+    (whatever the caller uses for the band's: a path, or None), else ``Path(choice)``."""
+    c = FAR_MODEL_AUTO if choice is None else str(choice).strip()
+    if c.lower() == FAR_MODEL_AUTO:
+        far = default_far_model_path()
+        return far if far.exists() else band_model
+    if c.lower() in FAR_MODEL_BAND:
+        return band_model
+    return Path(c)
+
+
+def far_model_given(choice) -> bool:
+    """Whether ``--far-model`` names a model file (not None, ``auto``, ``band`` or empty)."""
+    return choice is not None and str(choice).strip().lower() not in (FAR_MODEL_AUTO, *FAR_MODEL_BAND)
+
+
 def launch_dir() -> Path:
     return share_dir() / "launch_configs"
 

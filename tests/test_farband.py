@@ -57,21 +57,37 @@ def test_merge_keeps_one_box_per_cone_and_the_far_band_only_cones():
 
 def test_a_band_box_the_far_band_also_found_gives_way_to_it():
     """The halved band's box of a 10 px cone is a pixel or two off: here IoU 0.38 with the far band's box of the
-    same cone (NMS at 0.45 kept both: a false cone beside the true one). It gives way to the far band's box, even
-    of another class; a band box of another cone nearby (centres more than half a height apart, or sizes more
-    than 2x apart: a near cone behind) stays."""
+    same cone (NMS at 0.45 kept both: a false cone beside the true one). It gives way to the far band's box of its
+    class scored at least half its own; a band box of another cone nearby (centres more than half a height apart,
+    or sizes more than 2x apart: a near cone behind) stays."""
     from cone_perception.detector.farband import seen_by_far
 
-    band = _boxes([[100, 400, 106, 410, 0.90, 0],   # the far cone, roughly
-                   [300, 400, 306, 410, 0.80, 1],   # seen by the far band with another class: still the same cone
+    band = _boxes([[100, 400, 106, 410, 0.70, 0],   # the far cone, roughly
+                   [300, 400, 306, 410, 0.80, 0],   # the same cone as a far box scored 0.5 (>= half of 0.8)
                    [500, 400, 506, 410, 0.70, 0],   # a neighbour 8 px to the right of a far-band cone
                    [700, 380, 730, 440, 0.70, 2]])  # a big box around a small far-band one: not the same cone
     far = _boxes([[101.5, 402.5, 107.5, 413, 0.40, 0], [300, 400, 306, 410, 0.5, 0], [508, 400, 514, 410, 0.5, 0],
                   [712, 405, 718, 415, 0.5, 2]])
-    assert seen_by_far(band, far).tolist() == [True, True, False, False]
+    band_out, far_out = seen_by_far(band, far)
+    assert band_out.tolist() == [True, True, False, False] and not far_out.any()
     merged = merge_boxes(band, far, iou=0.45)
     assert len(merged) == 6 and sorted(merged["u1"].tolist()) == [101.5, 300, 500, 508, 700, 712]
-    assert not seen_by_far(band, far[:0]).any() and not seen_by_far(band[:0], far).any()
+    assert not seen_by_far(band, far[:0])[0].any() and not seen_by_far(band[:0], far)[1].any()
+
+
+def test_a_low_score_far_box_does_not_remove_a_confident_band_box():
+    """Issue 26 bug (helper 26b): at detect --conf 0.001 a far box of any score and any class removed the band's
+    box of its spot, so a confident cone was replaced by a 0.02 box (recall at 0.25 fell, mAP too). Now a far box
+    scored under half the band box's gives way to it instead (one box per cone still), and a far box of another
+    class removes nothing (class-aware NMS decides between them)."""
+    band = _boxes([[100, 400, 106, 410, 0.90, 0],    # confident; the strip's box of it scores 0.02
+                   [300, 400, 306, 410, 0.85, 1]])   # confident; the strip calls it class 0 at 0.6
+    far = _boxes([[100.5, 400.5, 106.5, 410.5, 0.02, 0], [300.5, 400.5, 306.5, 410.5, 0.60, 0]])
+    merged = merge_boxes(band, far, iou=0.45)
+    got = sorted((float(b["u1"]), int(b["class_id"]), round(float(b["score"]), 2)) for b in merged)
+    assert got == [(100.0, 0, 0.9), (300.0, 1, 0.85), (300.5, 0, 0.6)]
+    confident = merged[merged["score"] >= 0.25]
+    assert {(int(b["class_id"]), round(float(b["u1"]))) for b in confident} >= {(0, 100), (1, 300)}
 
 
 def test_far_band_finds_far_cones_the_halved_band_misses():
@@ -82,6 +98,7 @@ def test_far_band_finds_far_cones_the_halved_band_misses():
     from cone_perception.detector import Detector, default_model_path
     from cone_perception.geometry.calib import load_calibration
     from cone_perception.pipeline import Pipeline
+    from cone_perception.resources import default_far_model_path
     from cone_perception.synth.config import SynthConfig
     from cone_perception.synth.scene import random_pose
 
@@ -121,7 +138,8 @@ def test_far_band_finds_far_cones_the_halved_band_misses():
 
 
 def test_pipeline_node_with_far_rows_publishes_the_merged_boxes(ros, tmp_path):  # noqa: F811 (ros is a fixture)
-    """The node's ``far_rows`` parameter: its boxes are those of the core pipeline with the same far band;
+    """The node's ``far_rows`` parameter: its boxes are those of the core pipeline with the same far band (the
+    shipped far model: ``far_model`` auto);
     a bad value stops the node naming the parameter, and so does a ``far_model`` of other classes."""
     from rclpy.parameter import Parameter
     from sensor_msgs.msg import Image, PointCloud2
@@ -132,6 +150,7 @@ def test_pipeline_node_with_far_rows_publishes_the_merged_boxes(ros, tmp_path): 
     from cone_perception.nodes import _msgs
     from cone_perception.nodes.pipeline import PipelineNode
     from cone_perception.pipeline import Pipeline
+    from cone_perception.resources import default_far_model_path
 
     from rosutil import Inbox
 
@@ -139,7 +158,7 @@ def test_pipeline_node_with_far_rows_publishes_the_merged_boxes(ros, tmp_path): 
     node = ros.add(PipelineNode(context=ros.context, parameter_overrides=[Parameter("far_rows", value="384,576")]))
     assert node.pipeline.far is not None and node.pipeline.far.crop == CropSpec(384, 576, 0, 1920, 1)
     det = Detector.load_for_band(default_model_path(), (BAND.out_width, BAND.out_height))
-    far = FarBand.load(default_model_path(), "384,576", 1920, 1080, BAND)
+    far = FarBand.load(default_far_model_path(), "384,576", 1920, 1080, BAND)  # far_model's default: auto
     with_far, alone = Pipeline(calib, det, far=far), Pipeline(calib, det)
     # a frame where the far band adds boxes
     data, want = next((d, w) for d in rendered_frames(calib, 8)
@@ -243,8 +262,8 @@ def test_far_model_of_other_classes_is_refused_before_the_first_frame(tmp_path):
 
 def test_far_model_on_the_command_lines(tmp_path, capsys):
     """``detect`` / ``replay`` / ``bench pipeline --far-model``: a model of other classes stops the command
-    with exit 2 naming --far-model; without --far-rows it is refused too; the shipped model as the far
-    model gives the very boxes of the default far band."""
+    with exit 2 naming --far-model; without --far-rows it is refused too; the shipped band model as the far
+    model gives the very boxes of ``--far-model band``."""
     import json
 
     import cv2
@@ -262,7 +281,7 @@ def test_far_model_on_the_command_lines(tmp_path, capsys):
     other = _other_classes_model(tmp_path)
     base = ["detect", str(tmp_path / "f.png"), "--crop", "384,960", "--downscale", "2", "--far-rows", "384,576",
             "--no-progress"]
-    assert main([*base, "--out", str(tmp_path / "a.jsonl")]) == 0
+    assert main([*base, "--out", str(tmp_path / "a.jsonl"), "--far-model", "band"]) == 0  # the band's own model
     assert main([*base, "--out", str(tmp_path / "b.jsonl"), "--far-model", str(default_model_path())]) == 0
     a, b = (json.loads((tmp_path / f"{n}.jsonl").read_text()) for n in "ab")
     assert a["boxes"] == b["boxes"] and len(a["boxes"]) > 0

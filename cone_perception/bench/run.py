@@ -15,6 +15,7 @@ from tqdm import tqdm
 from ..bench.frames import rendered_frames
 from ..bench.pipeline import bench_adapter, bench_pipeline, bench_tracker, load_for_crop
 from ..bench.table import crop_for_setting, run_table
+from ..resources import far_model_for, far_model_given
 from ..detector.farband import FarBand, far_rows_for
 from ..detector.parallel import ForwardPlan
 from ..errors import ConfigError
@@ -33,11 +34,11 @@ def _bench_pipeline(args: argparse.Namespace, calib) -> dict:
     if args.input:
         calib = replace(calib, crop=crop_for_setting(calib.crop, args.input, calib.image_width, calib.image_height))
     far_rows = far_rows_for(args.far_rows, calib, "--far-rows")  # a bad value fails before any model loads
-    if args.far_model and far_rows.crop is None:
+    if far_model_given(args.far_model) and far_rows.crop is None:
         raise ConfigError("--far-model", None, f"needs a far band ({far_rows.what})")
     plan = forward_plan(args.threads, far_rows.crop is not None, args.sequential)
     det = load_for_crop(args.model, args.backend, calib.crop, plan.network_threads, bf16=args.bf16)
-    far = FarBand.for_calibration(args.far_model or det.source, args.far_rows, calib, "--far-rows", "--far-model",
+    far = FarBand.for_calibration(far_model_for(args.far_model, det.source), args.far_rows, calib, "--far-rows", "--far-model",
                                   backend=args.backend, threads=plan.network_threads, bf16=args.bf16)
     result = bench_pipeline(calib, det, rendered_frames(calib, max(1, args.scenes)), args.frames, args.warmup, far,
                             plan.concurrent)

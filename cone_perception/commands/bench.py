@@ -58,9 +58,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--far-rows", default=None, metavar="auto|none|V0,V1",
                    help="pipeline: the far band, image rows also run at full resolution (docs/detector.md 'Far band'): "
                         "auto (default) = the calibration's far strip; V0,V1 = these rows; none (or off) = the band alone")
-    p.add_argument("--far-model", default=None, metavar="PATH",
-                   help="pipeline: the far band's own model file (e.g. one trained for its full"
-                        "-resolution scale; default: the band's model); its classes must be the band model's")
+    p.add_argument("--far-model", default=None, metavar="auto|band|PATH",
+                   help="pipeline: the far band's model: auto (default) = the shipped far-strip model "
+                        "(models/cone_detector_far.pt), band = the band's own model, or a model file; its classes must be the band model's")
     p.add_argument("--sequential", action="store_true",
                    help="pipeline with a far band: the band's and the strip's forwards one after the other, each network "
                         "on --threads intra-op threads (default: with --threads >= 2 at once, the strip on a worker "

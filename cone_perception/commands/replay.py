@@ -68,9 +68,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the far band, image rows also run at full resolution, the whole width (docs/detector.md "
                         "'Far band'): auto (default) = the calibration's far strip, moved each frame with the attitude; "
                         "V0,V1 = these rows, fixed; none (or off) = the band alone. Live: the pipeline node's far_rows (fused only)")
-    p.add_argument("--far-model", default=None, metavar="PATH",
-                   help="the far band's own model file (e.g. one trained for its full"
-                        "-resolution scale; default: the band's model); its classes must be the band model's; live: the node's far_model")
+    p.add_argument("--far-model", default=None, metavar="auto|band|PATH",
+                   help="the far band's model: auto (default) = the shipped far-strip model (models/cone_detector_far.pt), "
+                        "band = the band's own model, or a model file; its classes must be the band model's; live: the node's far_model")
     p.add_argument("--live", choices=["fused", "separate"], default=None,
                    help="play the bag into live node processes instead of replaying offline")
     p.add_argument("--pace", choices=["lockstep", "rate"], default="lockstep",

@@ -7,8 +7,10 @@ its boxes with the band's:
 
 * a far-band box that touches the strip's top or bottom edge (within ``EDGE_PX``) is dropped:
   it is a nearer cone cut by the strip, which the band sees whole;
-* a band box of a cone the far band found too gives way to the far band's box (:func:`seen_by_far`: the
-  halved band's box of a small cone is too rough for IoU to pair them);
+* of a band box and a far-band box of one cone and class (:func:`same_cone`: the halved band's box of a
+  small cone is too rough for IoU to pair them) one is kept (:func:`seen_by_far`): the far band's while its
+  score is at least ``FAR_PREFER`` (half) of the band box's, else the band's (a low-score far box must not
+  remove a confident band box);
 * the rest join the band's boxes, and one class-aware NMS keeps the best box of each cone.
 
 Its rows (``far_rows``, one spelling for the node parameter and the commands' ``--far-rows``):
@@ -40,6 +42,8 @@ from .detector import Detector
 
 #: A far-band box whose top or bottom is this close to the strip's edge (full-image px) is a cut cone.
 EDGE_PX = 2.0
+FAR_PREFER = 0.5  # a far box wins over a band box of its cone while scored >= this x the band box's
+FAR_SAME_CLASS = True  # pair only boxes of one class (seen_by_far)
 #: ``far_rows`` values: the calibration's strip, and no far band (``none``; the commands also take ``off``,
 #: which a ROS parameter cannot hold: ``-p far_rows:=off`` reads as a boolean).
 FAR_ROWS_AUTO = "auto"
@@ -108,28 +112,43 @@ def drop_cut_boxes(boxes: np.ndarray, crop: CropSpec, edge_px: float = EDGE_PX) 
     return boxes[keep]
 
 
-def seen_by_far(band_boxes: np.ndarray, far_boxes: np.ndarray) -> np.ndarray:
-    """Bool per band box: the far band found the same cone (box centres within half the taller box's
-    height, heights within 2x of each other, whatever the class). The halved band's box of a 10 px cone is
-    a pixel or two off at full scale, so IoU often misses such a pair (both boxes kept: a false cone
-    beside the true one); the far band's box, placed at full resolution, is the one to keep."""
+def same_cone(band_boxes: np.ndarray, far_boxes: np.ndarray, same_class: bool = FAR_SAME_CLASS) -> np.ndarray:
+    """(band, far) bool matrix: the pair are boxes of one cone (centres within half the taller box's height,
+    heights within 2x of each other; with ``same_class`` of one class too). The halved band's box of a 10 px
+    cone is a pixel or two off at full scale, so IoU often misses such a pair (both kept: a false cone)."""
     if len(band_boxes) == 0 or len(far_boxes) == 0:
-        return np.zeros(len(band_boxes), bool)
+        return np.zeros((len(band_boxes), len(far_boxes)), bool)
     bc = np.stack([band_boxes["u1"] + band_boxes["u2"], band_boxes["v1"] + band_boxes["v2"]], 1) / 2
     fc = np.stack([far_boxes["u1"] + far_boxes["u2"], far_boxes["v1"] + far_boxes["v2"]], 1) / 2
     bh = (band_boxes["v2"] - band_boxes["v1"])[:, None]
     fh = (far_boxes["v2"] - far_boxes["v1"])[None, :]
     d = np.hypot(bc[:, None, 0] - fc[None, :, 0], bc[:, None, 1] - fc[None, :, 1])
-    return ((d <= 0.5 * np.maximum(bh, fh)) & (bh <= 2 * fh) & (fh <= 2 * bh)).any(1)
+    m = (d <= 0.5 * np.maximum(bh, fh)) & (bh <= 2 * fh) & (fh <= 2 * bh)
+    if same_class:
+        m &= band_boxes["class_id"][:, None] == far_boxes["class_id"][None, :]
+    return m
 
 
-def merge_boxes(band_boxes: np.ndarray, far_boxes: np.ndarray, iou: float = DEFAULT_IOU) -> np.ndarray:
-    """Boxes of the band and of the far band (``BOX_DTYPE``, full-image px) -> one set, best first: a band
-    box of a cone the far band found too gives way to the far band's (:func:`seen_by_far`), then one
-    class-aware NMS over both keeps the best box of what still overlaps."""
+def seen_by_far(band_boxes: np.ndarray, far_boxes: np.ndarray, prefer: float = FAR_PREFER,
+                same_class: bool = FAR_SAME_CLASS) -> tuple[np.ndarray, np.ndarray]:
+    """(band box gives way, far box gives way), a bool per box: of each pair of boxes of one cone
+    (:func:`same_cone`) one is kept. The far band's, placed at full resolution, wins while its score is at
+    least ``prefer`` times the band box's; a far box scored lower gives way to the band's (a low-score far
+    box must not remove a confident band box: at ``detect --conf 0.001`` it cost recall, issue 26)."""
+    m = same_cone(band_boxes, far_boxes, same_class)
+    far_wins = m & (far_boxes["score"][None, :] >= prefer * band_boxes["score"][:, None])
+    return far_wins.any(1), (m & ~far_wins).any(0)
+
+
+def merge_boxes(band_boxes: np.ndarray, far_boxes: np.ndarray, iou: float = DEFAULT_IOU,
+                prefer: float = FAR_PREFER, same_class: bool = FAR_SAME_CLASS) -> np.ndarray:
+    """Boxes of the band and of the far band (``BOX_DTYPE``, full-image px) -> one set, best first: of a band
+    box and a far box of one cone one gives way (:func:`seen_by_far`), then one class-aware NMS over both
+    keeps the best box of what still overlaps."""
     if len(far_boxes) == 0:
         return band_boxes
-    both = np.concatenate([band_boxes[~seen_by_far(band_boxes, far_boxes)], far_boxes])
+    band_out, far_out = seen_by_far(band_boxes, far_boxes, prefer, same_class)
+    both = np.concatenate([band_boxes[~band_out], far_boxes[~far_out]])
     xywh = np.stack([both["u1"], both["v1"], both["u2"] - both["u1"], both["v2"] - both["v1"]], 1)
     keep = nms_per_class(xywh, both["score"], both["class_id"], 0.0, iou)
     return both[keep]
@@ -214,4 +233,4 @@ class FarBand:
 
 
 __all__ = ["EDGE_PX", "FAR_ROWS_AUTO", "FAR_ROWS_OFF", "FarBand", "FarRows", "check_far_classes", "far_rows_for",
-           "seen_by_far", "drop_cut_boxes", "far_band_crop", "merge_boxes"]
+           "seen_by_far", "same_cone", "drop_cut_boxes", "far_band_crop", "merge_boxes"]

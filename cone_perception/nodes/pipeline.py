@@ -11,9 +11,10 @@ Parameters (generated from cone_perception/params.py by ``cone-perception params
     band). auto = the calibration's far strip (the rows where cones 15-40 m ahead stand, moved each
     frame with the attitude; none where the calibration has no camera_matrix); V0,V1 = these rows,
     fixed; none or empty = no far band (not off: ROS reads off as a boolean)
-  far_model (string, default ""): the far band's own model file (one trained for its full-resolution
-    scale); empty = the band's model. Its classes must be the band model's (refused at start-up
-    otherwise)
+  far_model (string, default auto; auto, band, or a model file): the far band's model: auto = the
+    shipped far-strip model (models/cone_detector_far.pt, trained for its full-resolution scale);
+    band or empty = the band's own model; else a model file. Its classes must be the band model's
+    (refused at start-up otherwise)
   track (bool, default false): also the tracker stage: /cones/tracked out (the parameters of
     cone_tracker); it gets each frame's attitude, which a separate cone_tracker does not
   Also those of driver_adapter (calibration, input_transport); those of detection (model, backend,
@@ -48,11 +49,12 @@ class PipelineNode(PerceptionNode):
         """The far band of ``far_rows`` resolved (:func:`~cone_perception.detector.farband.far_rows_for`; ``auto``:
         the calibration's strip) with a detector built for its size, or None when off; which it is goes to the log."""
         from ..detector.farband import FarBand
+        from ..resources import far_model_for
 
         self.get_logger().info(fr.what)
         if fr.crop is None:
             return None
-        model = declare(self, "far_model") or None  # None: the band's model
+        model = far_model_for(declare(self, "far_model"), None)  # None: the band's model
         # warmed like the band's; the Pipeline refuses a far model of other classes before the first frame
         det = self.loader.load((fr.crop.out_width, fr.crop.out_height), model)
         return FarBand(fr.crop, det, "parameter far_model", fr.plan)

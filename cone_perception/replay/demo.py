@@ -14,6 +14,7 @@ import numpy as np
 from tqdm import tqdm
 
 from ..data.bags import read_ground_truth
+from ..resources import far_model_for
 from ..detector import Detector, default_model_path
 from ..detector.farband import FarBand
 from ..errors import ConfigError
@@ -62,7 +63,7 @@ def run_demo(args: argparse.Namespace) -> int:
 
         det = Detector.load(model)
         det.warmup()
-        far = FarBand.for_calibration(model, None, calib, say=lambda t: print(f"  {t}"))  # as the node: the strip
+        far = FarBand.for_calibration(far_model_for(None, model), None, calib, say=lambda t: print(f"  {t}"))  # as the node: the strip
         res = offline_replay(bag, Pipeline(calib, det, far=far), progress=progress)
         cones, boxes, wall = res.cones, res.boxes, res.wall_s
         latency = res.timer.summary().get("end_to_end", {"n": 0})

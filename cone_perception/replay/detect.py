@@ -14,6 +14,7 @@ from tqdm import tqdm
 from ..crop import CropSpec
 from ..data.predictions import write_prediction
 from ..data.sources import iter_source
+from ..resources import far_model_for, far_model_given
 from ..detector import Detector, default_model_path, detect_one, resolve_backend
 from ..detector.farband import FAR_ROWS_AUTO, FAR_ROWS_OFF, FarBand, far_rows_for
 from ..errors import ConfigError
@@ -45,7 +46,7 @@ def run_detect(args: argparse.Namespace) -> int:
     _car_band(args)  # --calib: the calibration's band and far strip as --crop / --downscale / --far-rows
     if args.far_rows and not args.crop:
         raise ConfigError("--far-rows", None, "needs --crop or --calib: the far band adds to the car's band")
-    if args.far_model and not args.far_rows:
+    if far_model_given(args.far_model) and not args.far_rows:
         raise ConfigError("--far-model", None, "needs a far band (--far-rows, or --calib with its far strip)")
     model = args.model or default_model_path()
     backend = resolve_backend(args.backend, model, bf16=args.bf16)
@@ -68,7 +69,7 @@ def run_detect(args: argparse.Namespace) -> int:
         if not args.far_rows:
             return None
         if (w, h) not in far_by_size:
-            far_model = args.far_model or model
+            far_model = far_model_for(args.far_model, model)
             far = FarBand.load(far_model, args.far_rows, w, h, band_for(w), "--far-rows", "--far-model",
                                backend=resolve_backend(args.backend, far_model, bf16=args.bf16), conf=args.conf,
                                iou=args.iou, bf16=args.bf16)

@@ -20,6 +20,7 @@ from ..attitude import ImageAttitudeConfig, ImuAttitude
 from ..data.bagio import bag_topics, check_new_output
 from ..data.bags import read_attitude_truth, read_ground_truth, read_twists
 from ..data.outfiles import print_written, refuse_existing, remove_bag
+from ..resources import far_model_for, far_model_given
 from ..detector import Detector, default_model_path
 from ..detector.farband import FarBand, far_rows_for
 from ..detector.parallel import ForwardPlan
@@ -63,7 +64,7 @@ def run_replay(args: argparse.Namespace) -> int:
         if args.far_rows is not None:
             raise ConfigError("--far-rows", None, "needs the fused pipeline node (--live fused or offline)")
         print("replay: no far strip with --live separate (the detection node runs the band only)")
-    if args.far_model and far_rows.crop is None:
+    if far_model_given(args.far_model) and far_rows.crop is None:
         raise ConfigError("--far-model", None, f"needs a far band ({far_rows.what})")
     refuse_existing([p for p in (args.out, args.json) if p is not None], args.force, "replay")
     if args.out is not None:
@@ -105,7 +106,7 @@ def _run_offline(args, calib) -> dict:
     det = Detector.load_for_band(args.model or default_model_path(), (calib.crop.out_width, calib.crop.out_height),
                                  backend=args.backend, conf=conf, threads=plan.network_threads or None, bf16=args.bf16)
     det.warmup()
-    far = FarBand.for_calibration(args.far_model or det.source, args.far_rows, calib, "--far-rows", "--far-model",
+    far = FarBand.for_calibration(far_model_for(args.far_model, det.source), args.far_rows, calib, "--far-rows", "--far-model",
                                   say=lambda t: print(f"replay: {t}"), backend=args.backend, conf=conf,
                                   threads=plan.network_threads or None, bf16=args.bf16)
     imu = _imu_source(args, calib)
@@ -207,8 +208,10 @@ def _run_live(args, calib) -> dict:
     params["threads"] = args.threads
     if args.far_rows is not None:
         params["far_rows"] = args.far_rows
-    if args.far_model:
+    if far_model_given(args.far_model):
         params["far_model"] = str(Path(args.far_model).resolve())
+    elif args.far_model is not None:
+        params["far_model"] = args.far_model
     if args.bf16:
         params["bf16"] = True
     res = live_replay(args.bag, mode=args.live, topic=args.topic, params=params, pace=args.pace,
