@@ -58,6 +58,10 @@ DEFAULT_FAR_MODEL_NAME = "cone_detector_far.pt"
 #: the band's own model; anything else is a model file.
 FAR_MODEL_AUTO = "auto"
 FAR_MODEL_BAND = ("", "band")
+#: ``far_model`` when not given: the band's own model. The shipped far model finds more small cones, but the
+#: image attitude reads its boxes through the band model's box table, and on the rendered jitter drives that
+#: made 7-15 m worse (docs/benchmarks.md, "The far model and the image attitude").
+FAR_MODEL_DEFAULT = "band"
 
 
 def default_far_model_path() -> Path:
@@ -66,10 +70,10 @@ def default_far_model_path() -> Path:
 
 
 def far_model_for(choice, band_model):
-    """The far strip's model of ``far_model`` / ``--far-model`` ``choice`` (None: ``auto``): ``auto`` -> the
+    """The far strip's model of ``far_model`` / ``--far-model`` ``choice`` (None: :data:`FAR_MODEL_DEFAULT`): ``auto`` -> the
     shipped far model (the band's model where it is not installed), ``""`` / ``band`` -> ``band_model``
     (whatever the caller uses for the band's: a path, or None), else ``Path(choice)``."""
-    c = FAR_MODEL_AUTO if choice is None else str(choice).strip()
+    c = FAR_MODEL_DEFAULT if choice is None else str(choice).strip()
     if c.lower() == FAR_MODEL_AUTO:
         far = default_far_model_path()
         return far if far.exists() else band_model

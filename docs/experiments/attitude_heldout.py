@@ -31,12 +31,14 @@ def rest(bag: str) -> str:
 
 
 def replay(bag: str, mode: str, imu_rest: str, far_rows: str | None, box_model: str = "auto",
-           box_behaviour: str = "as-is", box_jitter: str | None = None) -> dict:
+           box_behaviour: str = "as-is", box_jitter: str | None = None, far_model: str | None = None) -> dict:
     js = Path(f"{bag}_{mode}{'_far' if far_rows else ''}{'' if box_model == 'auto' else '_' + box_model}"
-              f"{'' if box_behaviour == 'as-is' else '_' + box_behaviour}{'' if box_jitter is None else '_j' + box_jitter}.json")
+              f"{'' if box_behaviour == 'as-is' else '_' + box_behaviour}{'' if box_jitter is None else '_j' + box_jitter}"
+              f"{'' if far_model is None else '_fm' + Path(far_model).stem}.json")
     extra = (["--far-rows", far_rows] if far_rows else []) + (["--box-model", box_model] if box_model != "auto" else [])
     extra += ["--box-behaviour", box_behaviour] if box_behaviour != "as-is" else []
     extra += ["--box-jitter", box_jitter] if box_jitter is not None else []
+    extra += ["--far-model", far_model] if far_model is not None else []
     subprocess.run(CLI + ["replay", bag, "--calib", f"{bag}_calib.yaml", "--gt-topic", "/cones_gt", "--attitude", mode,
                           f"--imu-rest={imu_rest}", "--json", str(js), "--force", "--no-progress", *extra],
                    check=True, capture_output=True, text=True)
@@ -47,7 +49,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("bags", nargs="+")
     ap.add_argument("--modes", default=",".join(MODES), help="comma-separated attitude modes (default all four)")
-    ap.add_argument("--far-rows", default=None, metavar="V0,V1", help="replay with the far band on these rows")
+    ap.add_argument("--far-rows", default=None, metavar="V0,V1",
+                    help="replay --far-rows (default: replay's own, the calibration's strip; none: no far band)")
+    ap.add_argument("--far-model", default=None, metavar="M", help="replay --far-model (band: the band's model in the strip)")
     ap.add_argument("--box-model", default="auto", choices=("auto", "model", "rendered"),
                     help="replay --box-model (default auto: the rendered table, these bags having /cones_gt)")
     ap.add_argument("--box-behaviour", default="as-is", choices=("as-is", "real"),
@@ -56,7 +60,7 @@ def main() -> None:
     ap.add_argument("--box-jitter", default=None, metavar="F", help="replay --box-jitter (with --box-behaviour real)")
     args = ap.parse_args()
     modes = [m for m in args.modes.split(",") if m]
-    label = (" + far band" if args.far_rows else "") + ("" if args.box_model == "auto" else f", {args.box_model} box model")
+    label = (f" + far rows {args.far_rows}" if args.far_rows else "") + (f", far model {args.far_model}" if args.far_model else "") + ("" if args.box_model == "auto" else f", {args.box_model} box model")
     label += ", real boxes" if args.box_behaviour == "real" else ""
     label += f" (top spread {args.box_jitter})" if args.box_jitter is not None else ""
     print("| bag | `--imu-rest` | mode | recall < 15 m | 0-4 m | 4-7 m | 7-15 m | 15-25 m | pitch / roll err (deg) | attitude ms | end to end ms |")
@@ -64,7 +68,7 @@ def main() -> None:
     for bag in (b.rstrip("/") for b in args.bags):
         r = rest(bag)
         for mode in modes:
-            s = replay(bag, mode, r, args.far_rows, args.box_model, args.box_behaviour, args.box_jitter)
+            s = replay(bag, mode, r, args.far_rows, args.box_model, args.box_behaviour, args.box_jitter, args.far_model)
             loc = s["localisation"]
             g = [loc["groups"][k] for k in ("near 0-4 m", "mid 4-7 m", "far 7-15 m")]
             recall = sum(x["n_matched"] for x in g) / max(sum(x["n_true"] for x in g), 1)
