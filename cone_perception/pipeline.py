@@ -89,10 +89,8 @@ class Pipeline:
             return None, False
         att = self._strip_attitude
         if self.imu is not None and self.far.plan is not None:
-            # read without counting: the attitude estimator reads the IMU at this stamp too, and counts it there
-            stale = self.imu.counts.stale_at_frame
-            body = self.imu.at(stamp_ns)
-            self.imu.counts.stale_at_frame = stale
+            # not counted here: the attitude estimator reads the IMU at this stamp too, and counts it there
+            body = self.imu.at(stamp_ns, count=False)
             if body is not None and self._strip_body is not None:
                 att = att + (body - self._strip_body)
             self._strip_body = body

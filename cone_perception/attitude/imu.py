@@ -77,17 +77,18 @@ class ImuAttitude:
         self.counts.used += 1
         return True
 
-    def at(self, stamp_ns: int | None) -> np.ndarray | None:
+    def at(self, stamp_ns: int | None, count: bool = True) -> np.ndarray | None:
         """(pitch, roll) degrees at ``stamp_ns``: interpolated between the samples around it, else the
-        newest one before it; None (counted) without a sample within ``max_age_ns``."""
+        newest one before it; None (counted in ``stale_at_frame`` unless ``count`` is False: a second read
+        of the same frame) without a sample within ``max_age_ns``."""
         if stamp_ns is None or not self.stamps:
-            self.counts.stale_at_frame += 1
+            self.counts.stale_at_frame += int(count)
             return None
         i = bisect.bisect_right(self.stamps, stamp_ns)  # first sample after the stamp
         if i == 0:  # every sample is newer than the frame
             if self.stamps[0] - stamp_ns <= self.max_age_ns:
                 return self.values[0].copy()
-            self.counts.stale_at_frame += 1
+            self.counts.stale_at_frame += int(count)
             return None
         t0, v0 = self.stamps[i - 1], self.values[i - 1]
         if i < len(self.stamps):
@@ -95,7 +96,7 @@ class ImuAttitude:
             if t1 - t0 <= 2 * self.max_age_ns and t1 > t0:
                 return v0 + (v1 - v0) * ((stamp_ns - t0) / (t1 - t0))
         if stamp_ns - t0 > self.max_age_ns:
-            self.counts.stale_at_frame += 1
+            self.counts.stale_at_frame += int(count)
             return None
         return v0.copy()
 
