@@ -1,6 +1,7 @@
 """The detector's box model on disk (``<model file name>.box_model.yaml`` beside the model, issue 27): read,
 write, the conservative default for a model without one, and which box model a run uses (:func:`box_model_for`:
-``--box-model`` of ``replay`` / ``map``, the nodes' ``box_model``). Imports no torch (the mapping node reads it).
+``--box-model`` of ``replay`` / ``map``, the nodes' ``box_model``), for the far strip's model too
+(:func:`far_reading_for`, issue 26f). Imports no torch (the mapping node reads it).
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ from pathlib import Path
 import yaml
 
 from ..errors import ConfigError
-from .boxes import DEFAULT_BOX_MODEL, BoxModel
+from .boxes import DEFAULT_BOX_MODEL, RENDERED_TABLES, BoxModel, BoxReading
 
 log = logging.getLogger(__name__)
 
@@ -82,3 +83,42 @@ def box_model_for(choice: str, model_path: str | Path, synthetic: bool) -> tuple
     if bm is DEFAULT_BOX_MODEL:
         return bm, f"default (no {box_model_path(model_path).name}: no shift, spread {bm.sigma_rel:g})"
     return bm, f"measured ({box_model_path(model_path).name}, spread {bm.sigma_rel:g})"
+
+
+def far_reading_for(choice: str, far_model_path: str | Path | None, band_model_path: str | Path,
+                    synthetic: bool) -> tuple[BoxReading | None, str]:
+    """How the image attitude reads the far strip's boxes (:attr:`~cone_perception.attitude.ImageAttitudeConfig.far_reading`)
+    for a :data:`BOX_MODEL_CHOICES` ``choice``: ``(reading, in words)``; the reading is None (its boxes read as the
+    band's) where there is no strip (``far_model_path`` None) or the strip runs the band's own model. Else, as
+    :func:`box_model_for` decides for the band: the far model's rendered table (:data:`~cone_perception.attitude.boxes.RENDERED_TABLES`;
+    a model without one: the band's table, as before) or its measured box model (a model without one: the
+    conservative default, warned). ValueError for an unknown choice."""
+    if choice not in BOX_MODEL_CHOICES:
+        raise ValueError(f"unknown box model choice {choice!r}; known: {', '.join(BOX_MODEL_CHOICES)}")
+    if far_model_path is None:
+        return None, "no far strip"
+    far = Path(far_model_path)
+    if far.resolve() == Path(band_model_path).resolve():
+        return None, "as the band's (the strip runs the band's model)"
+    if choice == "rendered" or (choice == "auto" and synthetic):
+        table = RENDERED_TABLES.get(far.with_suffix(".pt").name)
+        if table is None:
+            return None, f"the band's rendered table ({far.name} has none of its own)"
+        what = f"rendered table of {far.with_suffix('.pt').name}"
+        return BoxReading(None, table, what), what
+    bm, what = box_model_for("model", far, False)
+    return BoxReading(bm, (), what), what
+
+
+def attitude_config_for(choice: str, model_path: str | Path, far_model_path: str | Path | None, synthetic: bool):
+    """``(ImageAttitudeConfig, in words)``: the image fit reading the band model's (``model_path``) boxes by
+    :func:`box_model_for` and the far strip's model's (``far_model_path``; None: no strip, or the band's model
+    in it) by :func:`far_reading_for`, for one :data:`BOX_MODEL_CHOICES` ``choice`` (the nodes' ``box_model``,
+    ``replay --box-model``). ValueError for an unknown choice."""
+    from .image import ImageAttitudeConfig
+
+    bm, what = box_model_for(choice, model_path, synthetic)
+    far, far_what = far_reading_for(choice, far_model_path, model_path, synthetic)
+    if far is not None:
+        what += f"; far strip: {far_what}"
+    return ImageAttitudeConfig(box_model=bm, far_reading=far), what

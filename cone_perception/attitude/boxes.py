@@ -14,7 +14,11 @@ measured on labelled frames (``cone-perception eval --box-model-out``,
 :func:`cone_perception.evaluation.boxfit.measure_box_model`) and stored beside the model file
 (:func:`cone_perception.attitude.box_files.read_box_model`). :meth:`BoxModel.correct` turns detected
 boxes into the label-like boxes the fit's cone model expects. :data:`DEFAULT_BOX_MODEL` (no shift, a wide
-per-cone spread) is the conservative stand-in for a model without one. ROS-free, no I/O.
+per-cone spread) is the conservative stand-in for a model without one.
+
+Each network's boxes are read through that network's own :class:`BoxReading` (issue 26f): the band's model's,
+and, where the far strip runs a model of its own (``far_model``), that model's for the strip's boxes. On
+rendered drives a reading is a box-top table instead (:data:`RENDERED_TABLES`). ROS-free, no I/O.
 """
 
 from __future__ import annotations
@@ -142,3 +146,29 @@ class BoxModel:
 #: 8 % of the box height (above the shipped models' measured 6.6-6.8 %, the fit's own 3 %), so its fits count
 #: for less and fall back to the calibration sooner.
 DEFAULT_BOX_MODEL = BoxModel()
+
+
+@dataclass(frozen=True)
+class BoxReading:
+    """How the image fit reads one network's boxes: through its measured box model ``box_model`` (real frames:
+    boxes corrected to the labels' first), or, where that is None, through the rendered box-top table ``table``
+    (``(box height px, px)`` pairs, full-image px, interpolated, ends held: how far that network's box tops stand
+    above the cones' tips on rendered drives beyond the fit's ``top_bias_px``; empty: not at all). ``what``: in
+    words (logs, ``/diagnostics``)."""
+
+    box_model: BoxModel | None = None
+    table: tuple = ()
+    what: str = ""
+
+
+#: The shipped far model's box-top table on rendered drives (``models/cone_detector_far.pt`` run at full
+#: resolution in the strip; (box height px, px), full-image px): the median top-row residual at the true
+#: attitude per box height (negative: its box tops lie below the cones' tips), measured on tuning drives with
+#: ``docs/experiments/far_box_model.py``, which also scores half of it (the band's table is half of the band
+#: model's residual); figures in docs/benchmarks.md "The far model's box model (issue 26f)".
+FAR_MODEL_TOP_BIAS_EXTRA_PX: tuple = ((14.0, -0.52), (18.0, -0.51), (22.0, -0.28), (28.0, -0.35), (40.0, -0.42),
+                                      (72.0, -0.61))
+
+#: Rendered box-top tables of the shipped models that have their own, by model file name; any other model's
+#: boxes are read through the band's table (``ImageAttitudeConfig.top_bias_extra_px``, the default model's).
+RENDERED_TABLES = {"cone_detector_far.pt": FAR_MODEL_TOP_BIAS_EXTRA_PX}

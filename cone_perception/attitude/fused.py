@@ -42,15 +42,16 @@ def attitude_estimator(mapper, mode: str | None, imu: "ImuAttitude | None" = Non
     return mode, FusedAttitude(mapper.image_attitude(config), imu, use_image=(mode == "fused"))
 
 
-def attitude_for_boxes(estimator, records: np.ndarray, stamp_ns: int | None = None) -> Attitude:
+def attitude_for_boxes(estimator, records: np.ndarray, stamp_ns: int | None = None, far: np.ndarray | None = None) -> Attitude:
     """The attitude to map one frame's ``BOX_DTYPE`` records with (:data:`FIXED` without an estimator);
-    ``stamp_ns``: the frame's capture stamp (for the IMU)."""
+    ``stamp_ns``: the frame's capture stamp (for the IMU); ``far``: (N,) bool, the records the far strip's
+    network drew (read through its own box model, :attr:`~cone_perception.attitude.ImageAttitudeConfig.far_reading`)."""
     if estimator is None:
         return FIXED
     b = np.column_stack([records["u1"], records["v1"], records["u2"], records["v2"]]).astype(np.float64)
     if isinstance(estimator, FusedAttitude):
-        return estimator.update(b, records["class_id"].astype(np.intp), stamp_ns)
-    return estimator.update(b, records["class_id"].astype(np.intp))
+        return estimator.update(b, records["class_id"].astype(np.intp), stamp_ns, far)
+    return estimator.update(b, records["class_id"].astype(np.intp), far)
 
 
 @dataclass(frozen=True)
@@ -148,16 +149,18 @@ class FusedAttitude:
         w = np.maximum(w, self.gate_latch)
         return w * self.g, w * var + w * (1.0 - w) * self.g**2  # the mixture's mean and variance
 
-    def update(self, boxes: np.ndarray, class_ids: np.ndarray, stamp_ns: int | None) -> Attitude:
+    def update(self, boxes: np.ndarray, class_ids: np.ndarray, stamp_ns: int | None,
+               far: np.ndarray | None = None) -> Attitude:
+        """``far``: (N,) bool, the far strip's network's boxes (:meth:`ImageAttitude.fit`)."""
         body = self.imu.at(stamp_ns)
         if body is None:
-            return self.image.update(boxes, class_ids)
+            return self.image.update(boxes, class_ids, far)
         s_imu = self.imu.sigma_deg
         if not self.use_image:
             return Attitude(float(body[0]), float(body[1]), s_imu, s_imu, "imu", 0)
         self.Pg = self.Pg + np.eye(2) * self.q
         bias = np.array([0.0, self.roll_bias])
-        res = self.image.fit(boxes, class_ids, body + self.g + bias)
+        res = self.image.fit(boxes, class_ids, body + self.g + bias, far)
         n, wm = 0, None
         if res is None:
             self.image.counts.too_few += 1

@@ -10,7 +10,8 @@ walk decaying to zero): frames with too few usable cones hold the last estimate,
 fit beyond :data:`~cone_perception.attitude.model.MAX_ABS_DEG`, or whose residuals are larger than
 its cone model explains, is rejected and counted; a frame whose estimate is too uncertain to beat the
 calibrated H is mapped with the calibration (counted). With a measured box model of the detector
-(:mod:`.boxes`) the boxes are first corrected to the labelled cones'. ROS-free.
+(:mod:`.boxes`) the boxes are first corrected to the labelled cones'; the far strip's boxes of a model of its
+own are read through that model's (:attr:`ImageAttitudeConfig.far_reading`). ROS-free.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from ..classes import CONE_SIZE_M, NUM_CLASSES
 from ..geometry.camera import MountPose
 from ..geometry.homography import undistort_pixels
 from ..geometry.linalg import inv2
-from .boxes import BoxModel
+from .boxes import BoxModel, BoxReading
 from .model import MAX_ABS_DEG, Attitude, attitude_rotation
 
 
@@ -81,6 +82,10 @@ class ImageAttitudeConfig:
     #: measured on real frames, stored beside the model file): boxes are corrected to the labels' before the
     #: fit, and ``top_bias_extra_px`` (the rendered drives' table) is not applied. None: the synthetic case
     box_model: BoxModel | None = None
+    #: how the far strip's boxes are read where its network is not the band's (``far_model``; issue 26f): that
+    #: model's box model or rendered table (:class:`~cone_perception.attitude.boxes.BoxReading`); None: as the
+    #: band's boxes (``box_model`` / ``top_bias_extra_px``)
+    far_reading: BoxReading | None = None
     #: per frame, the image attitude is used only where it beats the calibrated H (:meth:`ImageAttitude.trusted`):
     #: at least ``trust_min_cones`` cones in the fit, the fit's residuals no more than ``trust_max_scale``
     #: times their expected size (1.4826 times the median absolute normalised residual), and the estimate's
@@ -88,6 +93,13 @@ class ImageAttitudeConfig:
     trust_min_cones: int = 3
     trust_max_scale: float = 2.5
     trust_max_sigma_deg: float = 1.0
+
+    def reading(self, far: bool = False) -> BoxReading:
+        """The :class:`~cone_perception.attitude.boxes.BoxReading` of the band's boxes, or (``far``) of the far
+        strip's (:attr:`far_reading`, else the band's)."""
+        if far and self.far_reading is not None:
+            return self.far_reading
+        return BoxReading(self.box_model, self.top_bias_extra_px if self.box_model is None else ())
 
 
 @dataclass
@@ -201,12 +213,33 @@ class ImageAttitude:
         inside = (b[:, 0] > m) & (b[:, 2] < self.W - m) & (b[:, 1] > self.band[0] + m) & (b[:, 3] < self.band[1] - m)
         return known & aspect_ok & (h >= c.min_height_px) & inside & near
 
-    def _prepare(self, boxes: np.ndarray, class_ids: np.ndarray):
+    def _read(self, boxes: np.ndarray, far: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Each box through the :class:`~cone_perception.attitude.boxes.BoxReading` of the network that drew it
+        (``far``: (N,) bool, the far strip's boxes; None: all the band's): ``(boxes corrected by a measured box
+        model, (N,) px their tops stand above the cones' by a rendered table, (N,) relative per-cone sigma)``."""
+        c = self.cfg
+        out, extra, rel = boxes.copy(), np.zeros(len(boxes)), np.full(len(boxes), c.sigma_rel)
+        parts = [(c.reading(False), np.ones(len(boxes), bool))]
+        if far is not None and c.far_reading is not None:
+            far = np.asarray(far, dtype=bool).ravel()
+            parts = [(c.reading(False), ~far), (c.far_reading, far)]
+        for rd, m in parts:
+            if not m.any():
+                continue
+            if rd.box_model is not None:
+                out[m] = rd.box_model.correct(boxes[m])
+                rel[m] = max(c.sigma_rel, rd.box_model.sigma_rel)
+            else:
+                extra[m] = box_top_extra_px(boxes[m, 3] - boxes[m, 1], rd.table)
+        return out, extra, rel
+
+    def _prepare(self, boxes: np.ndarray, class_ids: np.ndarray, top_extra: np.ndarray | None = None):
+        """``top_extra``: (N,) px each box top stands above its cone's (:meth:`_read`); None: the band's reading."""
         u = 0.5 * (boxes[:, 0] + boxes[:, 2]) - 0.5  # pixel-edge -> pixel-centre coordinates
         foot = np.column_stack([u, boxes[:, 3] - 0.5])
-        table = self.cfg.top_bias_extra_px if self.cfg.box_model is None else ()
-        top = np.column_stack([u, boxes[:, 1] - 0.5 + self.cfg.top_bias_px
-                               + box_top_extra_px(boxes[:, 3] - boxes[:, 1], table)])
+        if top_extra is None:
+            top_extra = box_top_extra_px(boxes[:, 3] - boxes[:, 1], self.cfg.reading(False).table)
+        top = np.column_stack([u, boxes[:, 1] - 0.5 + self.cfg.top_bias_px + top_extra])
         if self.dist is not None:
             foot = undistort_pixels(foot, self.K, self.dist)
             top = undistort_pixels(top, self.K, self.dist)
@@ -239,24 +272,22 @@ class ImageAttitude:
         return np.where(hits, v - v_top, np.nan)
 
     # -- fit --------------------------------------------------------------------------------------
-    def fit(self, boxes: np.ndarray, class_ids: np.ndarray, start_deg: np.ndarray | None = None
-            ) -> tuple[np.ndarray, np.ndarray, int] | None:
+    def fit(self, boxes: np.ndarray, class_ids: np.ndarray, start_deg: np.ndarray | None = None,
+            far: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, int] | None:
         """One frame's robust fit: ``(theta (2,) deg, covariance (2, 2) deg^2, cones used)``, or None
         with fewer than ``min_cones`` usable cones. ``boxes`` (N, 4) full-image px (pixel edges);
-        ``start_deg``: where to linearise first (the filter's prediction; default zero)."""
+        ``start_deg``: where to linearise first (the filter's prediction; default zero); ``far``: (N,) bool,
+        the boxes of the far strip's network (read through :attr:`ImageAttitudeConfig.far_reading`; None: none)."""
         c = self.cfg
-        boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
-        if c.box_model is not None:
-            boxes = c.box_model.correct(boxes)
+        boxes, top_extra, rel = self._read(np.asarray(boxes, dtype=np.float64).reshape(-1, 4), far)
         class_ids = np.asarray(class_ids, dtype=np.intp).ravel()
         self.last_scale = np.inf
         sel = self._select(boxes, class_ids)
         if int(sel.sum()) < c.min_cones:
             return None
-        rays, v_top, cls = self._prepare(boxes[sel], class_ids[sel])
+        rays, v_top, cls = self._prepare(boxes[sel], class_ids[sel], top_extra[sel])
         h = boxes[sel, 3] - boxes[sel, 1]
-        rel = c.sigma_rel if c.box_model is None else max(c.sigma_rel, c.box_model.sigma_rel)
-        sigma = np.sqrt(2.0 * c.sigma_px**2 + (rel * h) ** 2)
+        sigma = np.sqrt(2.0 * c.sigma_px**2 + (rel[sel] * h) ** 2)
         theta = np.zeros(2) if start_deg is None else np.clip(np.asarray(start_deg, dtype=np.float64), -2.0, 2.0)
         eps = 0.05
         lam = np.eye(2) / c.prior_sigma_deg**2
@@ -309,11 +340,11 @@ class ImageAttitude:
         s0 = self.cfg.prior_sigma_deg
         return Attitude(0.0, 0.0, s0, s0, "calibration", n_cones)
 
-    def single_frame(self, boxes: np.ndarray, class_ids: np.ndarray) -> Attitude:
+    def single_frame(self, boxes: np.ndarray, class_ids: np.ndarray, far: np.ndarray | None = None) -> Attitude:
         """The attitude of one frame on its own (no history): the fit with its covariance, or the
         calibration's H (zero, the prior's uncertainty) when the fit has too few cones, is rejected or
-        is not trusted (:meth:`trusted`; all counted)."""
-        res = self.fit(boxes, class_ids)
+        is not trusted (:meth:`trusted`; all counted). ``far``: as :meth:`fit`."""
+        res = self.fit(boxes, class_ids, far=far)
         if res is None:
             self.counts.too_few += 1
             return self.calibration_fallback()
@@ -326,16 +357,17 @@ class ImageAttitude:
             return self.calibration_fallback(res[2])
         return Attitude(float(res[0][0]), float(res[0][1]), float(sd[0]), float(sd[1]), "image", res[2])
 
-    def update(self, boxes: np.ndarray, class_ids: np.ndarray) -> Attitude:
+    def update(self, boxes: np.ndarray, class_ids: np.ndarray, far: np.ndarray | None = None) -> Attitude:
         """Fit this frame, fold it into the filter, return the attitude to map this frame with.
 
         A fit whose residuals or cones fail :meth:`trusted` (its own 1-sigma aside: the filter averages
         fits) is not folded in (counted as ``rejected``); a frame whose filtered estimate's 1-sigma exceeds
-        ``trust_max_sigma_deg`` is mapped with the calibration's H (counted as ``used_calibration``)."""
+        ``trust_max_sigma_deg`` is mapped with the calibration's H (counted as ``used_calibration``). ``far``: as
+        :meth:`fit`."""
         c = self.cfg
         self.x = self.x * c.decay  # predict: random walk decaying to zero
         self.P = self.P * c.decay**2 + np.eye(2) * c.process_sigma_deg**2
-        res = self.fit(boxes, class_ids, self.x + self.bias)
+        res = self.fit(boxes, class_ids, self.x + self.bias, far)
         source, n = "hold", 0
         if res is None:
             self.counts.too_few += 1

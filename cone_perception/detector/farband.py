@@ -154,6 +154,16 @@ def merge_boxes(band_boxes: np.ndarray, far_boxes: np.ndarray, iou: float = DEFA
     return both[keep]
 
 
+def drawn_by_far(merged: np.ndarray, far_boxes: np.ndarray) -> np.ndarray:
+    """(N,) bool: which of the :func:`merge_boxes` boxes ``merged`` are the far band's (``far_boxes``, its input):
+    the merge keeps rows of its inputs as they are, so a box is the far band's where its record is one of
+    ``far_boxes``'s. The image attitude reads those through the far network's box model (issue 26f)."""
+    if len(merged) == 0 or len(far_boxes) == 0:
+        return np.zeros(len(merged), bool)
+    far = {r.tobytes() for r in np.asarray(far_boxes, dtype=merged.dtype)}
+    return np.fromiter((r.tobytes() in far for r in merged), bool, len(merged))
+
+
 def check_far_classes(band_detector, far_detector, source: str = "far_model") -> None:
     """ConfigError naming ``source`` (the far model's option) unless the far band's model finds the same
     cone classes as the band's: their boxes merge into one set, and a class only one of them knows would
@@ -232,5 +242,5 @@ class FarBand:
         return merge_boxes(band_boxes, self.detect(strip_bgr, crop), iou)
 
 
-__all__ = ["EDGE_PX", "FAR_ROWS_AUTO", "FAR_ROWS_OFF", "FarBand", "FarRows", "check_far_classes", "far_rows_for",
+__all__ = ["EDGE_PX", "FAR_ROWS_AUTO", "FAR_ROWS_OFF", "FarBand", "FarRows", "check_far_classes", "drawn_by_far", "far_rows_for",
            "seen_by_far", "same_cone", "drop_cut_boxes", "far_band_crop", "merge_boxes"]

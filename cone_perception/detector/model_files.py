@@ -12,7 +12,8 @@ from pathlib import Path
 import yaml
 
 from ..attitude.box_files import (  # noqa: F401 (the box model's files: re-exported, their home is attitude/)
-    BOX_MODEL_CHOICES, box_model_for, box_model_or_default, box_model_path, read_box_model, write_box_model,
+    BOX_MODEL_CHOICES, attitude_config_for, box_model_for, box_model_or_default, box_model_path, far_reading_for,
+    read_box_model, write_box_model,
 )
 from ..errors import ConfigError
 from ..resources import DEFAULT_MODEL_NAME, default_model_path  # noqa: F401 (re-exported)

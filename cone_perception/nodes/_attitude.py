@@ -11,7 +11,7 @@ from collections.abc import Mapping
 from sensor_msgs.msg import Imu
 
 from ..attitude import ImageAttitudeConfig, ImuAttitude, QUAT_NORM_TOL
-from ..attitude.box_files import box_model_for
+from ..attitude.box_files import attitude_config_for
 from . import _msgs
 from ..errors import ConfigError, FrameError
 from ..resources import default_model_path
@@ -42,15 +42,16 @@ def declare_attitude(node) -> tuple[str, ImuAttitude | None]:
     return mode, imu
 
 
-def declare_box_model(node, calib, model_path) -> tuple[ImageAttitudeConfig, str]:
+def declare_box_model(node, calib, model_path, far_model_path=None) -> tuple[ImageAttitudeConfig, str]:
     """Declare ``box_model``; the image fit's config reading the boxes of the model file ``model_path``
-    (None: the shipped default) that way, and the box model in words (``attitude:box_model`` on ``/diagnostics``)."""
+    (None: the shipped default) that way, and those of the far strip's model ``far_model_path`` (None: no strip,
+    or the band's model in it) through that model's own, and the box model in words (``attitude:box_model`` on
+    ``/diagnostics``)."""
     choice = str(declare(node, "box_model"))
     try:
-        bm, what = box_model_for(choice, model_path or default_model_path(), calib.camera == "synth")
+        return attitude_config_for(choice, model_path or default_model_path(), far_model_path, calib.camera == "synth")
     except ValueError as e:
         raise ConfigError("parameter", "box_model", str(e)) from None
-    return ImageAttitudeConfig(box_model=bm), what
 
 
 class AttitudeCountsView(Mapping):

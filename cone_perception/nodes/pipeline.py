@@ -34,6 +34,7 @@ import time
 from sensor_msgs.msg import CompressedImage, Image, PointCloud2
 
 from ..detector.farband import far_rows_for
+from ..resources import far_model_for
 from ..geometry.calib import load_calibration
 from ..errors import FrameError
 from ..pipeline import FrameResult, Pipeline
@@ -46,16 +47,15 @@ from ._tracking import NodeTracking
 
 
 class PipelineNode(PerceptionNode):
-    def _far_band(self, fr):
+    def _far_band(self, fr, model):
         """The far band of ``far_rows`` resolved (:func:`~cone_perception.detector.farband.far_rows_for`; ``auto``:
-        the calibration's strip) with a detector built for its size, or None when off; which it is goes to the log."""
+        the calibration's strip) with a detector of ``model`` (None: the band's) built for its size, or None when
+        off; which it is goes to the log."""
         from ..detector.farband import FarBand
-        from ..resources import far_model_for
 
         self.get_logger().info(fr.what)
         if fr.crop is None:
             return None
-        model = far_model_for(declare(self, "far_model"), None)  # None: the band's model
         # warmed like the band's; the Pipeline refuses a far model of other classes before the first frame
         det = self.loader.load((fr.crop.out_width, fr.crop.out_height), model)
         return FarBand(fr.crop, det, "parameter far_model", fr.plan)
@@ -76,8 +76,11 @@ class PipelineNode(PerceptionNode):
         detector = self.loader.load((calib.crop.out_width, calib.crop.out_height))
         self.advertise_cones(calib.frame_id, markers)
         mode, imu = declare_attitude(self)
-        att_config, box_model = declare_box_model(self, calib, self.loader.model)  # the detector's box model
-        self.pipeline = Pipeline(calib, detector, mode, imu, self._far_band(far_rows),
+        far_model = far_model_for(declare(self, "far_model"), None)  # None: the band's model
+        # the box model of each network: the band's, and the far strip's own model's for its boxes
+        att_config, box_model = declare_box_model(self, calib, self.loader.model,
+                                                  far_model if far_rows.crop is not None else None)
+        self.pipeline = Pipeline(calib, detector, mode, imu, self._far_band(far_rows, far_model),
                                  attitude_config=att_config, concurrent=plan.concurrent)
         report_attitude(self, self.pipeline.attitude_mode, self.pipeline.attitude, box_model)
         if self.pipeline.far is not None:  # /diagnostics: frames with the strip, those clamped to the image (WARN)

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from ..attitude.box_files import attitude_config_for
 from ..data.bags import read_ground_truth
 from ..resources import far_model_for
 from ..detector import Detector, default_model_path
@@ -63,8 +64,11 @@ def run_demo(args: argparse.Namespace) -> int:
 
         det = Detector.load(model)
         det.warmup()
-        far = FarBand.for_calibration(far_model_for(None, model), None, calib, say=lambda t: print(f"  {t}"))  # as the node: the strip
-        res = offline_replay(bag, Pipeline(calib, det, far=far), progress=progress)
+        far_model = far_model_for(None, model)
+        far = FarBand.for_calibration(far_model, None, calib, say=lambda t: print(f"  {t}"))  # as the node: the strip
+        # as the node's box_model auto: each network's boxes through its own box model or rendered table
+        att_cfg, _ = attitude_config_for("auto", model, far_model if far else None, calib.camera == "synth")
+        res = offline_replay(bag, Pipeline(calib, det, far=far, attitude_config=att_cfg), progress=progress)
         cones, boxes, wall = res.cones, res.boxes, res.wall_s
         latency = res.timer.summary().get("end_to_end", {"n": 0})
         sent, lost = res.stats.ok + res.stats.dropped_total, res.stats.dropped_total

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from ..attitude import ImageAttitudeConfig, ImuAttitude
+from ..attitude import ImuAttitude
 from ..data.bagio import bag_topics, check_new_output
 from ..data.bags import read_attitude_truth, read_ground_truth, read_twists
 from ..data.outfiles import print_written, refuse_existing, remove_bag
@@ -24,7 +24,7 @@ from ..resources import far_model_for, far_model_given
 from ..detector import Detector, default_model_path
 from ..detector.farband import FarBand, far_rows_for
 from ..detector.parallel import ForwardPlan
-from ..detector.model_files import box_model_or_default
+from ..detector.model_files import attitude_config_for, box_model_or_default, far_reading_for
 from ..errors import ConfigError
 from ..evaluation import GT_MIN_VISIBLE, LocalisationReport, format_localisation
 from ..evaluation.attitude import attitude_plot, format_attitude_report
@@ -106,15 +106,18 @@ def _run_offline(args, calib) -> dict:
     det = Detector.load_for_band(args.model or default_model_path(), (calib.crop.out_width, calib.crop.out_height),
                                  backend=args.backend, conf=conf, threads=plan.network_threads or None, bf16=args.bf16)
     det.warmup()
-    far = FarBand.for_calibration(far_model_for(args.far_model, det.source), args.far_rows, calib, "--far-rows", "--far-model",
+    far_model = far_model_for(args.far_model, det.source)
+    far = FarBand.for_calibration(far_model, args.far_rows, calib, "--far-rows", "--far-model",
                                   say=lambda t: print(f"replay: {t}"), backend=args.backend, conf=conf,
                                   threads=plan.network_threads or None, bf16=args.bf16)
     imu = _imu_source(args, calib)
-    if args.box_behaviour == "real":  # the real frames' boxes on a rendered drive (band and far band alike)
-        det, far = real_box_behaviour(det, far, box_model_or_default(det.source), args.box_jitter)
-    att_cfg = None
-    if args.box_model == "model" or (args.box_model == "auto" and (not args.gt_topic or args.box_behaviour == "real")):
-        att_cfg = ImageAttitudeConfig(box_model=box_model_or_default(det.source))
+    # the fit reads each network's boxes through its own box model (the far strip's of a far model: issue 26f)
+    use_model = args.box_model == "model" or (args.box_model == "auto" and (not args.gt_topic or args.box_behaviour == "real"))
+    att_cfg, _ = attitude_config_for("model" if use_model else "rendered", det.source, far_model if far else None, True)
+    if args.box_behaviour == "real":  # the real frames' boxes on a rendered drive, each network's as its box model says
+        far_real = far_reading_for("model", far_model if far else None, det.source, False)[0]
+        det, far = real_box_behaviour(det, far, box_model_or_default(det.source), args.box_jitter,
+                                      far_real.box_model if far_real is not None else None)
     pipeline = Pipeline(calib, det, args.attitude, imu, far, cones_conf=args.conf if args.track_conf is not None else None,
                         attitude_config=att_cfg, concurrent=plan.concurrent)
     with pipeline:  # joins the strip's worker thread, if one ran

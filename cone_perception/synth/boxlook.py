@@ -66,12 +66,14 @@ class BehavingDetector:
         setattr(self._detector, name, value)
 
 
-def real_box_behaviour(detector, far, box_model: BoxModel, top_jitter: float | None = None, seed: int = 0):
+def real_box_behaviour(detector, far, box_model: BoxModel, top_jitter: float | None = None,
+                       far_box_model: BoxModel | None = None, seed: int = 0):
     """``(detector, far)`` with their boxes given the real behaviour of ``box_model`` (:class:`BehavingDetector`;
-    ``far``: a :class:`~cone_perception.detector.farband.FarBand` or None, its detector wrapped with the next seed)."""
+    ``far``: a :class:`~cone_perception.detector.farband.FarBand` or None, its detector wrapped with the next seed,
+    with ``far_box_model``'s behaviour: the far strip's own model's; None: ``box_model``'s)."""
     if top_jitter is not None and not top_jitter >= 0:
         raise ConfigError("--box-jitter", None, f"must be a fraction >= 0 of the box height, got {top_jitter}")
     detector = BehavingDetector(detector, BoxBehaviour(box_model, top_jitter, seed=seed))
     if far is not None:
-        far.detector = BehavingDetector(far.detector, BoxBehaviour(box_model, top_jitter, seed=seed + 1))
+        far.detector = BehavingDetector(far.detector, BoxBehaviour(far_box_model or box_model, top_jitter, seed=seed + 1))
     return detector, far

@@ -1,0 +1,142 @@
+"""Each network's boxes through its own box model (issue 26f): the far strip's model draws its boxes differently
+from the band's model, so the image fit reads the strip's boxes through the far model's box model (or rendered
+table) and the band's through the band model's; which boxes are the strip's follows them through the merge."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cone_perception.attitude import BoxModel, ImageAttitudeConfig
+from cone_perception.attitude.box_files import far_reading_for, write_box_model
+from cone_perception.attitude.boxes import FAR_MODEL_TOP_BIAS_EXTRA_PX, BoxReading
+from cone_perception.detector.farband import FarBand, drawn_by_far, far_band_crop, merge_boxes
+from cone_perception.mapping import ConeMapper
+from cone_perception.pipeline import Pipeline
+from cone_perception.records import boxes_from_arrays
+from cone_perception.resources import default_far_model_path, default_model_path
+
+from test_attitude import CONES_CLS, CONES_XY, _calib, _cone_boxes, _tilted_camera
+from test_box_model import _shrunk
+
+PITCH, ROLL = 0.8, -0.4
+FAR = CONES_XY[:, 0] >= 12.0  # the cones the strip's network draws
+#: the strip's network: tops 6 % of the height low, bottoms 2 % high (the band's: exact)
+FAR_BM = BoxModel(height_ratio=(0.92,) * 4, top_low=(0.06,) * 4, bottom_high=(0.02,) * 4, counts=(1, 1, 1, 1),
+                  sigma_rel=0.03, input_scale=1.0, source="measured")
+EXACT_BM = BoxModel(counts=(1, 1, 1, 1), sigma_rel=0.03, source="measured")  # no shift: the band's boxes are the labels
+
+
+def _labels() -> np.ndarray:
+    return _cone_boxes(_tilted_camera(PITCH, ROLL), CONES_XY, CONES_CLS)
+
+
+def _boxes() -> np.ndarray:
+    """The band's exact boxes of the near cones and the strip network's shrunk boxes of the far ones."""
+    labels = _labels()
+    return np.where(FAR[:, None], _shrunk(labels, 0.06, 0.02), labels)
+
+
+def _estimator(far_reading):
+    return ConeMapper(_calib()).image_attitude(ImageAttitudeConfig(box_model=EXACT_BM, far_reading=far_reading))
+
+
+def test_fit_reads_the_strip_boxes_through_the_far_model_box_model():
+    boxes = _boxes()
+    on_labels = _estimator(None).fit(_labels(), CONES_CLS)[0]  # the fit on the labelled cones themselves
+    assert abs(on_labels[0] - PITCH) < 0.15
+    off = {}
+    for name, reading, far in (("own", BoxReading(FAR_BM), FAR), ("band's", None, FAR), ("unmarked", BoxReading(FAR_BM), None),
+                               ("swapped", BoxReading(FAR_BM), ~FAR)):
+        res = _estimator(reading).fit(boxes, CONES_CLS, far=far)
+        off[name] = abs(res[0][0] - on_labels[0])
+    assert off["own"] < 1e-6  # each box through its network's box model: as if the labels had been seen
+    # read through the band's box model (no far reading, or the strip's boxes not marked) the far model's low
+    # tops pull the pitch off by 0.2 degree; the wrong boxes marked, by a third of that
+    assert off["band's"] == off["unmarked"] > 0.15 and off["swapped"] > 0.03
+
+
+def test_rendered_readings_apply_each_network_its_own_table():
+    """With rendered tables (no measured box model) the strip's tops move by the far table, the band's by the band's."""
+    est = ConeMapper(_calib()).image_attitude(ImageAttitudeConfig(far_reading=BoxReading(None, ((10.0, -0.5), (50.0, -0.5)))))
+    boxes = np.array([[100.0, 500.0, 112.0, 520.0], [300.0, 500.0, 312.0, 520.0]])
+    _, extra, rel = est._read(boxes, np.array([False, True]))
+    band = est.cfg.top_bias_extra_px
+    assert extra[0] == pytest.approx(np.interp(20.0, [h for h, _ in band], [v for _, v in band])) and extra[0] > 0
+    assert extra[1] == pytest.approx(-0.5)
+    np.testing.assert_array_equal(rel, est.cfg.sigma_rel)
+
+
+def test_merge_keeps_track_of_the_strip_boxes():
+    band = boxes_from_arrays(np.array([[100, 400, 110, 415], [500, 400, 510, 414], [900, 300, 940, 360]]),
+                             np.array([0.9, 0.3, 0.8]), np.array([0, 1, 0]))
+    far = boxes_from_arrays(np.array([[100.5, 400.4, 110.2, 415.3], [500.2, 400.1, 510.4, 414.2], [1500, 400, 1508, 411]]),
+                            np.array([0.6, 0.9, 0.5]), np.array([0, 1, 1]))
+    merged = merge_boxes(band, far)
+    mask = drawn_by_far(merged, far)
+    # whatever the merge rule keeps of each pair: a box is the strip's where it is one of the strip's boxes; the
+    # lone 40 px band box and the lone strip box are kept as they are
+    fields = ("u1", "v1", "u2", "v2", "score")
+    def same(a, b):
+        return all(np.isclose(a[f], b[f]) for f in fields) and a["class_id"] == b["class_id"]
+    expect = [any(same(m, f) for f in far) for m in merged]
+    assert list(mask) == expect and any(expect) and not all(expect)
+    lone = {round(float(b["u1"]), 1): bool(m) for b, m in zip(merged, mask)}
+    assert lone[900.0] is False and lone[1500.0] is True
+    assert not drawn_by_far(merged, far[:0]).any() and len(drawn_by_far(merged[:0], far)) == 0
+
+
+class _Fixed:
+    """A detector that returns the same boxes every frame."""
+
+    timing: dict = {}
+
+    def __init__(self, boxes: np.ndarray, cls: np.ndarray):
+        self.boxes = boxes_from_arrays(boxes, np.full(len(boxes), 0.9), cls)
+
+    def detect(self, bgr, crop):
+        return self.boxes.copy()
+
+
+def test_pipeline_reads_the_strip_boxes_through_the_far_model_box_model():
+    """Through the Pipeline: band and strip detectors, the merge, the image attitude. With the far model's box
+    model the first frame's pitch is the one of the labelled boxes; read as the band's, it is pulled off."""
+    calib = _calib()
+    boxes = _boxes()
+    v0 = int(np.floor(boxes[FAR, 1].min())) - 8
+    crop = far_band_crop((v0, v0 + max(32, int(np.ceil(boxes[FAR, 3].max())) + 8 - v0)), calib.image_width,
+                         calib.image_height, calib.crop)
+    frame = np.zeros((calib.image_height, calib.image_width, 3), np.uint8)
+    pitch = {}
+    for name, reading, far_boxes in (("labels", None, _labels()[FAR]), ("own", BoxReading(FAR_BM), boxes[FAR]),
+                                     ("band's", None, boxes[FAR])):
+        far = FarBand(crop, _Fixed(far_boxes, CONES_CLS[FAR]))
+        pipe = Pipeline(calib, _Fixed(boxes[~FAR], CONES_CLS[~FAR]), "image", far=far,
+                        attitude_config=ImageAttitudeConfig(box_model=EXACT_BM, far_reading=reading))
+        res = pipe.process_raw("bgr8", calib.image_width, calib.image_height, 3 * calib.image_width, frame.tobytes())
+        assert len(res.boxes) == len(boxes)
+        pitch[name] = res.attitude.pitch_deg
+    assert abs(pitch["labels"] - PITCH) < 0.15
+    assert abs(pitch["own"] - pitch["labels"]) < 1e-6 and abs(pitch["band's"] - pitch["labels"]) > 0.15
+
+
+def test_far_reading_follows_the_box_model_choice(tmp_path, caplog):
+    band = default_model_path()
+    assert far_reading_for("auto", None, band, True)[0] is None  # no strip
+    assert far_reading_for("model", band, band, False)[0] is None  # the strip runs the band's model
+    far = default_far_model_path()
+    r, what = far_reading_for("auto", far, band, True)  # a synthetic camera: the far model's rendered table
+    assert r.box_model is None and r.table == FAR_MODEL_TOP_BIAS_EXTRA_PX and "rendered" in what
+    r, what = far_reading_for("model", far, band, True)  # its measured box model (models/cone_detector_far.pt.box_model.yaml)
+    assert r.box_model is not None and r.box_model.source == "measured" and r.box_model.input_scale == 1.0
+    other = tmp_path / "m.pt"
+    other.write_bytes(b"")
+    r, what = far_reading_for("rendered", other, band, False)  # no table of its own: the band's, as before
+    assert r is None and "band's rendered table" in what
+    with caplog.at_level("WARNING"):
+        r, what = far_reading_for("model", other, band, False)  # no box model: the conservative default, warned
+    assert r.box_model.source == "default" and "m.pt has no box model" in caplog.text
+    write_box_model(tmp_path / "m.pt.box_model.yaml", FAR_BM)
+    assert far_reading_for("auto", other, band, False)[0].box_model == FAR_BM
+    with pytest.raises(ValueError, match="unknown box model choice"):
+        far_reading_for("nope", far, band, False)
