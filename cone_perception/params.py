@@ -211,11 +211,11 @@ _PIPELINE = (
        "cones 15-40 m ahead stand, moved each frame with the attitude; none where the calibration has no "
        "camera_matrix); V0,V1 = these rows, fixed; none or empty = no far band (not off: ROS reads off as a "
        "boolean)", values="auto, none, or V0,V1"),
-    _p("far_model", "band", "the far band's model: band or empty = the band's own model (the default: the image attitude "
-       "reads every box through the band model's box table); auto = the shipped far-strip model "
-       "(models/cone_detector_far.pt, trained for its full-resolution scale: more small cones, but a worse image "
-       "attitude on the rendered drives); else a model file. Its classes "
-       "must be the band model's (refused at start-up otherwise)", values="auto, band, or a model file"),
+    _p("far_model", "auto", "the far band's model: auto = the shipped far-strip model (models/cone_detector_far.pt, "
+       "trained for its full-resolution scale: more small cones; the image attitude reads its boxes through its own "
+       "box model, box_model); band or empty = the band's own model; else a model file (its box model: "
+       "MODEL.box_model.yaml). Its classes must be the band model's (refused at start-up otherwise)",
+       values="auto, band, or a model file"),
     _p("track", False, "also the tracker stage: /cones/tracked out (the parameters of cone_tracker); it gets each "
        "frame's attitude, which a separate cone_tracker does not"),
 )

@@ -58,10 +58,10 @@ DEFAULT_FAR_MODEL_NAME = "cone_detector_far.pt"
 #: the band's own model; anything else is a model file.
 FAR_MODEL_AUTO = "auto"
 FAR_MODEL_BAND = ("", "band")
-#: ``far_model`` when not given: the band's own model. The shipped far model finds more small cones, but the
-#: image attitude reads its boxes through the band model's box table, and on the rendered jitter drives that
-#: made 7-15 m worse (docs/benchmarks.md, "The far model and the image attitude").
-FAR_MODEL_DEFAULT = "band"
+#: ``far_model`` when not given: the shipped far model (it finds more small cones; the image attitude reads its
+#: boxes through its own box model, :func:`cone_perception.attitude.box_files.far_reading_for`: docs/benchmarks.md,
+#: "The far model's box model (issue 26f)").
+FAR_MODEL_DEFAULT = "auto"
 
 
 def default_far_model_path() -> Path:

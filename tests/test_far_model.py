@@ -68,10 +68,10 @@ def test_shipped_far_model_beats_the_band_model_in_the_strip():
     assert d_far <= d_base + 0.02 * n, (d_far, d_base)  # not by firing at the background
 
 
-def test_far_model_choices_and_the_band_model_default(tmp_path):
-    """``far_model`` / ``--far-model``: auto = models/cone_detector_far.pt; band or empty (the default, and
-    None: not given) = the band's own model (whatever the caller passes for it); else that file. The node's
-    parameter table says band."""
+def test_far_model_choices_and_the_far_model_default(tmp_path):
+    """``far_model`` / ``--far-model``: auto (the default, and None: not given) = models/cone_detector_far.pt;
+    band or empty = the band's own model (whatever the caller passes for it); else that file. The node's
+    parameter table says auto (issue 26f: the image attitude reads its boxes through its own box model)."""
     from pathlib import Path
 
     from cone_perception.params import PARAMS
@@ -79,10 +79,10 @@ def test_far_model_choices_and_the_band_model_default(tmp_path):
 
     assert default_far_model_path() == models_dir() / "cone_detector_far.pt" and default_far_model_path().exists()
     band = tmp_path / "band.pt"
-    for choice in ("auto", " AUTO "):
+    for choice in (None, "auto", " AUTO "):
         assert far_model_for(choice, band) == default_far_model_path() and not far_model_given(choice)
-    for choice in (None, "", "band", "Band"):
+    for choice in ("", "band", "Band"):
         assert far_model_for(choice, band) == band and not far_model_given(choice)
-    assert far_model_for("", None) is None and far_model_for(None, None) is None  # the node: the band's loaded model
+    assert far_model_for("", None) is None and far_model_for("band", None) is None  # the node: the band's loaded model
     assert far_model_for("x/m.pt", band) == Path("x/m.pt") and far_model_given("x/m.pt")
-    assert PARAMS["far_model"].default == "band"
+    assert PARAMS["far_model"].default == "auto"

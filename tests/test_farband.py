@@ -98,6 +98,7 @@ def test_far_band_finds_far_cones_the_halved_band_misses():
     from cone_perception.detector import Detector, default_model_path
     from cone_perception.geometry.calib import load_calibration
     from cone_perception.pipeline import Pipeline
+    from cone_perception.resources import default_far_model_path
     from cone_perception.synth.config import SynthConfig
     from cone_perception.synth.scene import random_pose
 
@@ -138,7 +139,7 @@ def test_far_band_finds_far_cones_the_halved_band_misses():
 
 def test_pipeline_node_with_far_rows_publishes_the_merged_boxes(ros, tmp_path):  # noqa: F811 (ros is a fixture)
     """The node's ``far_rows`` parameter: its boxes are those of the core pipeline with the same far band (the
-    band's model: ``far_model``'s default);
+    shipped far model: ``far_model`` auto);
     a bad value stops the node naming the parameter, and so does a ``far_model`` of other classes."""
     from rclpy.parameter import Parameter
     from sensor_msgs.msg import Image, PointCloud2
@@ -149,6 +150,7 @@ def test_pipeline_node_with_far_rows_publishes_the_merged_boxes(ros, tmp_path): 
     from cone_perception.nodes import _msgs
     from cone_perception.nodes.pipeline import PipelineNode
     from cone_perception.pipeline import Pipeline
+    from cone_perception.resources import default_far_model_path
 
     from rosutil import Inbox
 
@@ -156,7 +158,7 @@ def test_pipeline_node_with_far_rows_publishes_the_merged_boxes(ros, tmp_path): 
     node = ros.add(PipelineNode(context=ros.context, parameter_overrides=[Parameter("far_rows", value="384,576")]))
     assert node.pipeline.far is not None and node.pipeline.far.crop == CropSpec(384, 576, 0, 1920, 1)
     det = Detector.load_for_band(default_model_path(), (BAND.out_width, BAND.out_height))
-    far = FarBand.load(default_model_path(), "384,576", 1920, 1080, BAND)  # far_model's default: the band's model
+    far = FarBand.load(default_far_model_path(), "384,576", 1920, 1080, BAND)  # far_model's default: auto
     with_far, alone = Pipeline(calib, det, far=far), Pipeline(calib, det)
     # a frame where the far band adds boxes
     data, want = next((d, w) for d in rendered_frames(calib, 8)
