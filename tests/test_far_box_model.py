@@ -86,6 +86,19 @@ def test_merge_keeps_track_of_the_strip_boxes():
     assert not drawn_by_far(merged, far[:0]).any() and len(drawn_by_far(merged[:0], far)) == 0
 
 
+def test_strip_boxes_are_found_whatever_their_padding_bytes():
+    """A record copied field by field may carry other bytes in BOX_DTYPE's 3 padding bytes: the strip's boxes are
+    recognised by their fields (the first version compared raw bytes and missed such copies)."""
+    far = boxes_from_arrays(np.array([[10, 400, 18, 412], [40, 402, 47, 413]]), np.array([0.5, 0.6]), np.array([0, 1]))
+    copied = np.frombuffer(bytearray(b"\xff" * far.dtype.itemsize * 3), dtype=far.dtype).copy()
+    for name in far.dtype.names:
+        copied[name][:2] = far[name]
+    copied[2] = far[0]
+    copied["u1"][2] += 1.0  # a box of another place
+    assert copied.tobytes() != np.concatenate([far, far[:1]]).tobytes()  # the padding differs
+    np.testing.assert_array_equal(drawn_by_far(copied, far), [True, True, False])
+
+
 class _Fixed:
     """A detector that returns the same boxes every frame."""
 

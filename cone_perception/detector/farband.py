@@ -156,12 +156,16 @@ def merge_boxes(band_boxes: np.ndarray, far_boxes: np.ndarray, iou: float = DEFA
 
 def drawn_by_far(merged: np.ndarray, far_boxes: np.ndarray) -> np.ndarray:
     """(N,) bool: which of the :func:`merge_boxes` boxes ``merged`` are the far band's (``far_boxes``, its input):
-    the merge keeps rows of its inputs as they are, so a box is the far band's where its record is one of
-    ``far_boxes``'s. The image attitude reads those through the far network's box model (issue 26f)."""
+    the merge keeps rows of its inputs as they are, so a box is the far band's where its record (every field)
+    is one of ``far_boxes``'s. The image attitude reads those through the far network's box model (issue 26f)."""
     if len(merged) == 0 or len(far_boxes) == 0:
         return np.zeros(len(merged), bool)
-    far = {r.tobytes() for r in np.asarray(far_boxes, dtype=merged.dtype)}
-    return np.fromiter((r.tobytes() in far for r in merged), bool, len(merged))
+
+    def fields(r: np.ndarray) -> np.ndarray:  # every field's value, compared exactly (not the padding bytes)
+        return np.column_stack([r[name].astype(np.float64) for name in r.dtype.names])
+
+    m, f = fields(merged), fields(far_boxes)
+    return (m[:, None, :] == f[None, :, :]).all(axis=2).any(axis=1)
 
 
 def check_far_classes(band_detector, far_detector, source: str = "far_model") -> None:
