@@ -99,14 +99,12 @@ class Pipeline:
     def _run(self, band: np.ndarray, t_adapter_s: float, strip: np.ndarray | None, stamp_ns: int | None,
              far_crop=None, clamped: bool = False) -> FrameResult:
         timing = {"adapter": t_adapter_s * 1e3}
-        far_drawn = None  # which boxes the far strip's network drew (the image attitude reads them through its box model)
+        far_boxes = None  # the far strip's boxes: the image attitude reads those kept through the far model's box model
         if self.far is not None and strip is not None:  # two forwards, at once with a concurrent plan
             boxes, far_boxes, t = self._pair.run(lambda: self.detector.detect(band, self.calib.crop),
                                                  lambda: self.far.detect(strip, far_crop))
             t0 = time.perf_counter()
             boxes = merge_boxes(boxes, far_boxes, getattr(self.far.detector, "iou", DEFAULT_IOU))
-            if self.attitude is not None:
-                far_drawn = drawn_by_far(boxes, far_boxes)
             t_merge = (time.perf_counter() - t0) * 1e3
             timing.update({k.removesuffix("_ms"): v for k, v in self.detector.timing.items()})
             if "forward_ms" in getattr(self.far.detector, "timing", {}):
@@ -123,11 +121,11 @@ class Pipeline:
         if self.cones_conf is not None:
             strong = boxes["score"] >= self.cones_conf
             boxes, weak = boxes[strong], boxes[~strong]
-            far_drawn = far_drawn[strong] if far_drawn is not None else None
         att = FIXED
         if self.attitude is not None:
             t0 = time.perf_counter()
-            att = attitude_for_boxes(self.attitude, boxes, stamp_ns, far_drawn)
+            far = drawn_by_far(boxes, far_boxes) if far_boxes is not None else None  # of the boxes kept, the strip's
+            att = attitude_for_boxes(self.attitude, boxes, stamp_ns, far)
             timing["attitude"] = (time.perf_counter() - t0) * 1e3
         t0 = time.perf_counter()
         self._strip_attitude = np.array([att.pitch_deg, att.roll_deg])

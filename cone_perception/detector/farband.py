@@ -155,9 +155,10 @@ def merge_boxes(band_boxes: np.ndarray, far_boxes: np.ndarray, iou: float = DEFA
 
 
 def drawn_by_far(merged: np.ndarray, far_boxes: np.ndarray) -> np.ndarray:
-    """(N,) bool: which of the :func:`merge_boxes` boxes ``merged`` are the far band's (``far_boxes``, its input):
-    the merge keeps rows of its inputs as they are, so a box is the far band's where its record (every field)
-    is one of ``far_boxes``'s. The image attitude reads those through the far network's box model (issue 26f)."""
+    """(N,) bool: which of the boxes ``merged`` (what :func:`merge_boxes` kept, or any subset of it) are the far
+    band's (``far_boxes``, its input): the merge keeps rows of its inputs as they are, so a box is the far band's
+    where its record (every field) is one of ``far_boxes``'s. The image attitude reads those through the far
+    network's box model (issue 26f)."""
     if len(merged) == 0 or len(far_boxes) == 0:
         return np.zeros(len(merged), bool)
 
