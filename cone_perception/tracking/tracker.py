@@ -80,8 +80,6 @@ class TrackerConfig:
     spawn_max_m: float = 2.0  # ... unless it is farther than this (m) from that track: far cones' covariance
     # is metres long along the ray, so the next cone of a row 4-5 m behind would otherwise never get a track;
     # two tracks farther apart than this are not merged either
-    spawn_max_frac: float = 0.0  # the spawn distance grows with the track's range: max(spawn_max_m, this x range)
-    process_std_frac: float = 0.0  # per frame, extra position noise as a fraction of the track's range
     merge_chi2: float = 6.0  # two tracks this near (and of one class) are merged into the older one
     # the attitude part of the cones' covariance (given the frame's Attitude) is one error common to the frame,
     # correlated over attitude_tau_s, not independent noise (docs/tracking.md, "Attitude"); False: as before
@@ -203,11 +201,8 @@ class ConeTracker:
         # the attitude error of this frame is correlated with the last one's by exp(-dt / tau)
         self.C = Rt[None] @ self.C * (np.exp(-dt_s / cfg.attitude_tau_s) if cfg.attitude_tau_s > 0 else 0.0)
         q = cfg.process_std_m**2 + (cfg.motion_std_frac * motion.translation_m) ** 2 + extra_std_m**2
-        if cfg.process_std_frac > 0:
-            q = q + (cfg.process_std_frac * np.hypot(self.xy[:, 0], self.xy[:, 1])) ** 2
-        q = np.broadcast_to(np.asarray(q, np.float64), (len(self),))
         perp = np.stack([-self.xy[:, 1], self.xy[:, 0]], axis=1)  # yaw error moves a point along its normal
-        self.P += q[:, None, None] * np.eye(2)[None] + cfg.motion_std_rad**2 * perp[:, :, None] * perp[:, None, :]
+        self.P += q * np.eye(2)[None] + cfg.motion_std_rad**2 * perp[:, :, None] * perp[:, None, :]
 
     # ---- one frame ----------------------------------------------------------------------------
     def update(self, stamp_ns: int, cones: np.ndarray, motion: Motion2D | None = None,
@@ -298,7 +293,7 @@ class ConeTracker:
             near = d2 <= cfg.spawn_chi2
             if np.isfinite(cfg.spawn_max_m):  # and within spawn_max_m metres (far cones: wide covariance along the ray)
                 dist = np.hypot(z[:, None, 0] - self.xy[None, :, 0], z[:, None, 1] - self.xy[None, :, 1])
-                near &= dist <= self._spawn_max(self.xy)[None, :]
+                near &= dist <= cfg.spawn_max_m
             gated_any = near.any(axis=1)
             pc = self.class_p[:, zc].T  # (n_z, n_t): p(track is the detected class)
             unknown = zc == UNKNOWN
@@ -371,14 +366,6 @@ class ConeTracker:
         info.new = len(new)
         return info
 
-    def _spawn_max(self, xy: np.ndarray) -> np.ndarray:
-        """(n,) m: the spawn (and merge) distance at each track: ``spawn_max_m``, or ``spawn_max_frac`` of its range."""
-        cfg = self.config
-        lim = np.full(len(xy), cfg.spawn_max_m, np.float64)
-        if cfg.spawn_max_frac > 0:
-            lim = np.maximum(lim, cfg.spawn_max_frac * np.hypot(xy[:, 0], xy[:, 1]))
-        return lim
-
     def _duplicates(self) -> np.ndarray:
         """(n,) bool: tracks that duplicate an older track (one class, within :attr:`TrackerConfig.merge_chi2`);
         the older one keeps its id and takes the younger one's hits."""
@@ -386,9 +373,8 @@ class ConeTracker:
         cls = self._classes()
         close = (d2 <= self.config.merge_chi2) & (cls[:, None] == cls[None, :])
         if np.isfinite(self.config.spawn_max_m):  # farther apart than spawn_max_m: two cones, as at spawning
-            lim = self._spawn_max(self.xy)
             close &= np.hypot(self.xy[:, None, 0] - self.xy[None, :, 0], self.xy[:, None, 1] - self.xy[None, :, 1]) \
-                <= np.minimum(lim[:, None], lim[None, :])
+                <= self.config.spawn_max_m
         np.fill_diagonal(close, False)
         dup = np.zeros(len(self), dtype=bool)
         if not close.any():

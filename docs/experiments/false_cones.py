@@ -1,6 +1,7 @@
 """What the false cones within 40 m are (issue 26g): a breakdown per drive of `/cones` and `/cones/tracked`.
 
-    .venv/bin/python docs/experiments/false_cones.py BAG [BAG ...] [--out DIR] [--reuse] [-- REPLAY OPTIONS]
+    .venv/bin/python docs/experiments/false_cones.py BAG [BAG ...] [--out DIR] [--tag T] [--calib-suffix S | --calib C ...] [--reuse]
+        [--no-cross-class] [-- REPLAY OPTIONS]
 
 Each BAG is a `cone-perception synth bag` drive (BAG_calib.yaml, BAG_gt.jsonl beside it). The drive is replayed
 with `cone-perception replay BAG --calib BAG_calib.yaml --gt-topic /cones_gt --track` and the REPLAY OPTIONS
@@ -363,16 +364,23 @@ if __name__ == "__main__":
     ap.add_argument("--out", default="/tmp/26g/false_cones", help="where the recordings go (default %(default)s)")
     ap.add_argument("--tag", default="", help="added to each recording's name (one per set of replay options)")
     ap.add_argument("--calib-suffix", default="_calib.yaml", help="BAG + this is the calibration (default %(default)s)")
+    ap.add_argument("--calib", action="append", default=[], help="the calibration of each BAG in turn (instead of the suffix)")
     ap.add_argument("--reuse", action="store_true", help="read the recordings instead of replaying")
+    ap.add_argument("--no-cross-class", action="store_true",
+                    help="the pipeline without one_box_per_cone (the defaults before issue 26g), to compare back to back")
     args = ap.parse_args(argv)
+    if args.no_cross_class:
+        pipeline_mod.one_box_per_cone = lambda boxes: boxes
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    for bag in args.bags:
+    if args.calib and len(args.calib) != len(args.bags):
+        raise SystemExit("--calib: one per BAG")
+    for k, bag in enumerate(args.bags):
         name = Path(bag).name + (f"_{args.tag}" if args.tag else "")
         pkl = out / f"{name}.pkl"
         if args.reuse and pkl.exists():
             with open(pkl, "rb") as f:
                 data = pickle.load(f)
         else:
-            data = record(bag, f"{bag}{args.calib_suffix}", pkl, rest)
+            data = record(bag, args.calib[k] if args.calib else f"{bag}{args.calib_suffix}", pkl, rest)
         report(name, analyse(data))
