@@ -51,9 +51,15 @@ def validate_boxes(records: np.ndarray) -> None:
 
 #: Boxes of different classes overlapping at least this much (IoU) are taken for one cone seen as two classes:
 #: the lower-scored goes (:func:`one_box_per_cone`). On the tuning drives (docs/benchmarks.md, "False cones
-#: within 40 m (issue 26g)") such pairs were two boxes of one cone 128 times and of two cones twice at IoU >= 0.6
-#: (152 / 14 at 0.5).
+#: within 40 m (issue 26g)") such pairs were two boxes of one cone 200 times and of two cones 4 times at IoU >= 0.6.
 CROSS_CLASS_IOU = 0.6
+#: Small boxes (both under SMALL_BOX_PX tall, full-image px) of one class overlapping at IoU >= SMALL_SAME_IOU, the
+#: weaker scored under SMALL_WEAKER x the stronger: a second box of one far cone (the NMS's IoU 0.45 misses such
+#: pairs: a shift of 2-4 px is a third of a 10 px box), so the weaker goes. Far cones of a row overlap as much,
+#: which is why the score must say so too (docs/benchmarks.md).
+SMALL_BOX_PX = 16.0
+SMALL_SAME_IOU = 0.3
+SMALL_WEAKER = 0.6
 
 
 def box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -67,21 +73,37 @@ def box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.divide(inter, union, out=np.zeros_like(inter), where=union > 0)
 
 
-def one_box_per_cone(records: np.ndarray, iou: float = CROSS_CLASS_IOU) -> np.ndarray:
-    """:data:`BOX_DTYPE` records minus each box that overlaps a better-scored box of ANOTHER class at IoU >= ``iou``
-    (the detector's NMS is per class, so a far cone it is unsure of can come out as a blue and a yellow box on one
-    spot: two cones on ``/cones``, one of them false). Boxes of one class are left to the NMS. Order kept."""
+def one_box_per_cone(records: np.ndarray, iou: float = CROSS_CLASS_IOU, small_px: float = SMALL_BOX_PX,
+                     small_iou: float = SMALL_SAME_IOU, small_weaker: float = SMALL_WEAKER) -> np.ndarray:
+    """:data:`BOX_DTYPE` records minus the boxes that are a second box of a cone a better-scored box already has
+    (greedy, best score first; order kept):
+
+    * a box of ANOTHER class overlapping it at IoU >= ``iou``: the detector's NMS is per class, so a far cone it
+      is unsure of can come out as a blue and a yellow box on one spot (two cones on ``/cones``, one false);
+    * a box of the same class, both under ``small_px`` tall, overlapping it at IoU >= ``small_iou`` and scored
+      under ``small_weaker`` x its score (``small_weaker`` 0: off).
+
+    Everything else is left to the detector's NMS."""
     n = len(records)
     if n < 2:
         return records
-    over = box_iou(records, records) >= iou
-    over &= records["class_id"][:, None] != records["class_id"][None, :]
+    score = np.asarray(records["score"], np.float64)
+    cls = records["class_id"]
+    same = cls[:, None] == cls[None, :]
+    ov = box_iou(records, records)
+    over = (ov >= iou) & ~same
+    if small_weaker > 0:
+        h = np.asarray(records["v2"], np.float64) - np.asarray(records["v1"], np.float64)
+        small = (h[:, None] < small_px) & (h[None, :] < small_px)
+        weaker = np.minimum(score[:, None], score[None, :]) < small_weaker * np.maximum(score[:, None], score[None, :])
+        over |= (ov >= small_iou) & same & small & weaker
+    np.fill_diagonal(over, False)
     if not over.any():
         return records
     keep = np.ones(n, dtype=bool)
-    for i in np.argsort(-np.asarray(records["score"], np.float64), kind="stable"):
+    for i in np.argsort(-score, kind="stable"):
         if keep[i]:
-            keep[over[i] & (np.asarray(records["score"]) <= records["score"][i])] = False
+            keep[over[i] & (score <= score[i])] = False
             keep[i] = True
     return records[keep]
 

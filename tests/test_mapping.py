@@ -223,3 +223,23 @@ def test_pipeline_maps_one_cone_for_a_cone_boxed_in_two_classes() -> None:
     b = Pipeline(calib, TwoClasses(one), "fixed").process_raw("bgr8", 1920, 1080, 5760, frame)
     assert len(a.boxes) == 1 and len(a.cones) == 1 and int(a.cones["class_id"][0]) == BLUE
     np.testing.assert_allclose([a.cones["x"][0], a.cones["y"][0]], [b.cones["x"][0], b.cones["y"][0]])
+
+
+def test_one_box_per_cone_drops_a_much_weaker_small_box_of_one_class_on_one_far_cone() -> None:
+    """Issue 26g: the strip's NMS (IoU 0.45) left two boxes of one 10 px far cone, shifted by 3-4 px (IoU about
+    0.35). A small box of the same class overlapping a better one at IoU >= 0.3 and scored under 0.6x of it goes;
+    a box scored nearly as well (a neighbouring cone of the row), a big box, or one overlapping less stays."""
+    from cone_perception.mapping import SMALL_BOX_PX, SMALL_SAME_IOU, SMALL_WEAKER, box_iou, one_box_per_cone
+
+    assert (SMALL_BOX_PX, SMALL_SAME_IOU, SMALL_WEAKER) == (16.0, 0.3, 0.6)
+    b = _boxes([[100, 400, 110, 410, 0.80, BLUE],
+                [103, 401, 113, 411, 0.40, BLUE],     # IoU 63/137 = 0.46 but 0.5x: the second box of the cone above
+                [300, 400, 310, 410, 0.80, BLUE],
+                [303, 401, 313, 411, 0.60, BLUE],     # 0.75x: another cone of the row, kept
+                [500, 400, 520, 420, 0.80, BLUE],
+                [506, 402, 526, 422, 0.40, BLUE],     # 20 px tall: left to the NMS
+                [700, 400, 710, 410, 0.80, BLUE],
+                [706, 401, 716, 411, 0.30, BLUE]])    # IoU 36/164 = 0.22: kept
+    assert box_iou(b[6:7], b[7:8])[0, 0] < 0.3 <= box_iou(b[:1], b[1:2])[0, 0]
+    np.testing.assert_array_equal(one_box_per_cone(b)["score"], np.array([0.8, 0.8, 0.6, 0.8, 0.4, 0.8, 0.3], np.float32))
+    assert len(one_box_per_cone(b, small_weaker=0.0)) == len(b)  # the small rule off

@@ -25,7 +25,7 @@ from cone_perception.detector import farband  # noqa: E402
 from cone_perception.evaluation import GT_MIN_VISIBLE, LocalisationReport  # noqa: E402
 from cone_perception.evaluation.tracking import DriveEvaluation, load_drive_truth  # noqa: E402
 from cone_perception.geometry.calib import load_calibration  # noqa: E402
-from cone_perception.mapping import ConeMapper  # noqa: E402
+from cone_perception.mapping import ConeMapper, one_box_per_cone  # noqa: E402
 from cone_perception.tracking import TrackerConfig, TrackingStage  # noqa: E402
 
 IOU = 0.45
@@ -60,15 +60,18 @@ def cross_class(t: float):
     return f
 
 
-def small_same(t: float, h_max: float, xt: float | None = None):
-    """Shipped merge (+ cross-class at ``xt``), then same-class boxes both under ``h_max`` px tall overlapping at IoU >= t."""
+def small_same(t: float, h_max: float, xt: float | None = None, ratio: float = 1.0):
+    """Shipped merge (+ cross-class at ``xt``), then same-class boxes both under ``h_max`` px tall overlapping at
+    IoU >= t (and the weaker scored below ``ratio`` x the stronger)."""
     def f(band, far):
         b = cross_class(xt)(band, far) if xt else (farband.merge_boxes(band, far, IOU) if far is not None else band)
         if len(b) < 2:
             return b
         h = (b["v2"] - b["v1"]).astype(float)
         small = (h[:, None] < h_max) & (h[None] < h_max)
-        return suppress(b, (iou_matrix(b) >= t) & (b["class_id"][:, None] == b["class_id"][None]) & small)
+        s = b["score"].astype(float)
+        weaker = np.minimum(s[:, None], s[None]) < ratio * np.maximum(s[:, None], s[None])
+        return suppress(b, (iou_matrix(b) >= t) & (b["class_id"][:, None] == b["class_id"][None]) & small & weaker)
     return f
 
 
@@ -76,7 +79,14 @@ def shipped(band, far):
     return farband.merge_boxes(band, far, IOU) if far is not None else band
 
 
+def one_box(band, far):
+    """The shipped rule since issue 26g: the merge, then mapping.one_box_per_cone (cross-class IoU 0.6, and small
+    same-class boxes at IoU 0.3 scored under 0.6x, in one greedy pass)."""
+    return one_box_per_cone(shipped(band, far))
+
+
 DESIGNS = {
+    "one_box_per_cone (shipped since 26g)": (one_box, {}),
     "shipped": (shipped, {}),  # the merge as before issue 26g (the pipeline now adds one_box_per_cone: cross-class 0.6)
     "cross-class IoU 0.5": (cross_class(0.5), {}),
     "cross-class IoU 0.6": (cross_class(0.6), {}),
@@ -84,6 +94,13 @@ DESIGNS = {
     "small same-class IoU 0.25 (< 16 px)": (small_same(0.25, 16), {}),
     "small same-class IoU 0.3 (< 16 px) + cross 0.6": (small_same(0.3, 16, 0.6), {}),
     "small same-class IoU 0.25 (< 16 px) + cross 0.6": (small_same(0.25, 16, 0.6), {}),
+    "small same-class IoU 0.3 (< 16 px), weaker < 0.6x + cross 0.6": (small_same(0.3, 16, 0.6, 0.6), {}),
+    "small same-class IoU 0.35 (< 16 px), weaker < 0.6x + cross 0.6": (small_same(0.35, 16, 0.6, 0.6), {}),
+    "small same-class IoU 0.25 (< 16 px), weaker < 0.6x + cross 0.6": (small_same(0.25, 16, 0.6, 0.6), {}),
+    "small same-class IoU 0.3 (< 16 px), weaker < 0.5x + cross 0.6": (small_same(0.3, 16, 0.6, 0.5), {}),
+    "small same-class IoU 0.3 (< 16 px), weaker < 0.7x + cross 0.6": (small_same(0.3, 16, 0.6, 0.7), {}),
+    "small same-class IoU 0.3 (< 24 px), weaker < 0.6x + cross 0.6": (small_same(0.3, 24, 0.6, 0.6), {}),
+    "small same-class IoU 0.35 (< 16 px) + cross 0.6": (small_same(0.35, 16, 0.6), {}),
     "shipped, spawn_max_m 2.5": (shipped, {"spawn_max_m": 2.5}),
     "cross-class 0.6, spawn_max_m 2.5": (cross_class(0.6), {"spawn_max_m": 2.5}),
     # the tracker's spawn distance growing with range (spawn_max_frac) and position noise growing with range
