@@ -101,6 +101,11 @@ DESIGNS = {
     "small same-class IoU 0.3 (< 16 px), weaker < 0.7x + cross 0.6": (small_same(0.3, 16, 0.6, 0.7), {}),
     "small same-class IoU 0.3 (< 24 px), weaker < 0.6x + cross 0.6": (small_same(0.3, 24, 0.6, 0.6), {}),
     "small same-class IoU 0.35 (< 16 px) + cross 0.6": (small_same(0.35, 16, 0.6), {}),
+    "one_box_per_cone, publish_min_certainty 0.4": (one_box, {"publish_min_certainty": 0.4}),
+    "one_box_per_cone, publish_min_certainty 0.35": (one_box, {"publish_min_certainty": 0.35}),
+    "one_box_per_cone, score_neutral 0.35": (one_box, {"score_neutral": 0.35}),
+    "one_box_per_cone, score_neutral 0.3": (one_box, {"score_neutral": 0.3}),
+    "one_box_per_cone, certainty_prior 0.4": (one_box, {"certainty_prior": 0.4}),
     "shipped, spawn_max_m 2.5": (shipped, {"spawn_max_m": 2.5}),
     "cross-class 0.6, spawn_max_m 2.5": (cross_class(0.6), {"spawn_max_m": 2.5}),
     # the tracker's spawn distance growing with range (spawn_max_frac) and position noise growing with range
