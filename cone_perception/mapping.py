@@ -14,6 +14,10 @@ wide across the ray. So each box's width, measured on the ground at its foot row
 offset (half of it, clipped to ``s/2 .. s/sqrt(2)``) instead of the class's fixed
 ``foot_offset_m`` (kept for classes of unknown size and boxes whose edges do not map).
 
+Before the mapping, the pipeline and the ``mapping`` node keep one box per cone (:func:`one_box_per_cone`): a
+second box of a cone another, better-scored box already has (another class on the same spot, or a much weaker
+small box of its class) would be a second, false cone (issue 26g).
+
 Pixel conventions: boxes are in pixel-EDGE coordinates (a box around pixel
 columns 10..19 has u1 = 10, u2 = 20, as detectors and YOLO labels use them);
 the calibration, like OpenCV, uses pixel-CENTRE coordinates (pixel 10 spans
@@ -102,9 +106,8 @@ def one_box_per_cone(records: np.ndarray, iou: float = CROSS_CLASS_IOU, small_px
         return records
     keep = np.ones(n, dtype=bool)
     for i in np.argsort(-score, kind="stable"):
-        if keep[i]:
+        if keep[i]:  # a kept box removes the lower-scored (ties: the later) boxes it pairs with
             keep[over[i] & (score <= score[i])] = False
-            keep[i] = True
     return records[keep]
 
 

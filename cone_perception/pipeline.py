@@ -116,7 +116,7 @@ class Pipeline:
         else:
             boxes = self.detector.detect(band, self.calib.crop)
             timing.update({k.removesuffix("_ms"): v for k, v in self.detector.timing.items()})
-        boxes = one_box_per_cone(boxes)  # a cone seen as two classes is one box (mapping.CROSS_CLASS_IOU)
+        boxes = one_box_per_cone(boxes)  # a second box of one cone (two classes, or twice small) goes
         weak = None
         if self.cones_conf is not None:
             strong = boxes["score"] >= self.cones_conf

@@ -58,7 +58,7 @@ class MappingNode(PerceptionNode):
     def on_boxes(self, msg: PointCloud2) -> None:
         boxes = _msgs.boxes_from_msg(msg)
         validate_boxes(boxes)  # a bad message is dropped before it can move the attitude filter
-        boxes = one_box_per_cone(boxes)  # as the fused pipeline does: a cone seen as two classes is one box
+        boxes = one_box_per_cone(boxes)  # as the fused pipeline does: a second box of one cone goes
         att = attitude_for_boxes(self.attitude, boxes, _msgs.stamp_ns(msg.header))
         self.publish_cones(self.mapper.map_boxes(boxes, att), msg.header)
         self.publish_attitude(att, msg.header)

@@ -25,19 +25,10 @@ from cone_perception.detector import farband  # noqa: E402
 from cone_perception.evaluation import GT_MIN_VISIBLE, LocalisationReport  # noqa: E402
 from cone_perception.evaluation.tracking import DriveEvaluation, load_drive_truth  # noqa: E402
 from cone_perception.geometry.calib import load_calibration  # noqa: E402
-from cone_perception.mapping import ConeMapper, one_box_per_cone  # noqa: E402
+from cone_perception.mapping import ConeMapper, box_iou, one_box_per_cone  # noqa: E402
 from cone_perception.tracking import TrackerConfig, TrackingStage  # noqa: E402
 
 IOU = 0.45
-
-
-def iou_matrix(b: np.ndarray) -> np.ndarray:
-    u1, v1, u2, v2 = (b[k].astype(float) for k in ("u1", "v1", "u2", "v2"))
-    iw = np.clip(np.minimum(u2[:, None], u2[None]) - np.maximum(u1[:, None], u1[None]), 0, None)
-    ih = np.clip(np.minimum(v2[:, None], v2[None]) - np.maximum(v1[:, None], v1[None]), 0, None)
-    inter = iw * ih
-    a = (u2 - u1) * (v2 - v1)
-    return inter / np.maximum(a[:, None] + a[None] - inter, 1e-9)
 
 
 def suppress(b: np.ndarray, same: np.ndarray) -> np.ndarray:
@@ -56,7 +47,7 @@ def cross_class(t: float):
         b = farband.merge_boxes(band, far, IOU) if far is not None else band
         if len(b) < 2:
             return b
-        return suppress(b, (iou_matrix(b) >= t) & (b["class_id"][:, None] != b["class_id"][None]))
+        return suppress(b, (box_iou(b, b) >= t) & (b["class_id"][:, None] != b["class_id"][None]))
     return f
 
 
@@ -71,7 +62,7 @@ def small_same(t: float, h_max: float, xt: float | None = None, ratio: float = 1
         small = (h[:, None] < h_max) & (h[None] < h_max)
         s = b["score"].astype(float)
         weaker = np.minimum(s[:, None], s[None]) < ratio * np.maximum(s[:, None], s[None])
-        return suppress(b, (iou_matrix(b) >= t) & (b["class_id"][:, None] == b["class_id"][None]) & small & weaker)
+        return suppress(b, (box_iou(b, b) >= t) & (b["class_id"][:, None] == b["class_id"][None]) & small & weaker)
     return f
 
 
