@@ -1,7 +1,7 @@
 """What the false cones within 40 m are (issue 26g): a breakdown per drive of `/cones` and `/cones/tracked`.
 
     .venv/bin/python docs/experiments/false_cones.py BAG [BAG ...] [--out DIR] [--tag T] [--calib-suffix S | --calib C ...] [--reuse]
-        [--no-cross-class] [-- REPLAY OPTIONS]
+        [--no-one-box] [-- REPLAY OPTIONS]
 
 Each BAG is a `cone-perception synth bag` drive (BAG_calib.yaml, BAG_gt.jsonl beside it). The drive is replayed
 with `cone-perception replay BAG --calib BAG_calib.yaml --gt-topic /cones_gt --track` and the REPLAY OPTIONS
@@ -366,10 +366,10 @@ if __name__ == "__main__":
     ap.add_argument("--calib-suffix", default="_calib.yaml", help="BAG + this is the calibration (default %(default)s)")
     ap.add_argument("--calib", action="append", default=[], help="the calibration of each BAG in turn (instead of the suffix)")
     ap.add_argument("--reuse", action="store_true", help="read the recordings instead of replaying")
-    ap.add_argument("--no-cross-class", action="store_true",
+    ap.add_argument("--no-one-box", action="store_true",
                     help="the pipeline without one_box_per_cone (the defaults before issue 26g), to compare back to back")
     args = ap.parse_args(argv)
-    if args.no_cross_class:
+    if args.no_one_box:
         pipeline_mod.one_box_per_cone = lambda boxes: boxes
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
