@@ -1,13 +1,15 @@
 """The band's rows and ONNX Runtime's spinning against the far strip's cost (issue 26, helper 26h).
 
     .venv/bin/python docs/experiments/band_rows.py --rounds 2 --frames 200 --designs "1:crop:none;1:crop:auto;..."
-    .venv/bin/python docs/experiments/band_rows.py --design 2:auto:auto:spin [--frames 200]
+    .venv/bin/python docs/experiments/band_rows.py --design 2:auto:auto:spin [--frames 200] [--calib C.yaml]
 
 Each design runs `bench pipeline`'s timing (cone_perception.bench.run's loaders and
 cone_perception.bench.pipeline.bench_pipeline: rendered 1920x1080 YUYV frames, the example calibration, the
 default model, ONNX Runtime, the shipped thread rule of detector/parallel.py) in a fresh process; `--rounds`
 interleaves all designs that many times and prints one line per run: frames/s (median end to end), its
-ratio to the round's first design of the same thread count, the load average before the run.
+ratio to the round's first design of the same thread count, the load average before the run, and the
+process's CPU time per frame in the pipeline (``cpu_ms``, median; all threads: on one thread the frame's
+work, which other processes' load barely changes, unlike its wall time).
 
 A design is ``THREADS:BAND:FAR[:FLAG...]``:
 
@@ -26,6 +28,7 @@ import json
 import os
 import subprocess
 import sys
+import time
 
 import numpy as np
 
@@ -35,6 +38,7 @@ from cone_perception.bench.run import forward_plan
 from cone_perception.detector import backends
 from cone_perception.detector.farband import FarBand, band_rows_for, far_rows_for
 from cone_perception.geometry.calib import load_calibration
+from cone_perception.pipeline import Pipeline
 from cone_perception.records import BOX_DTYPE
 
 
@@ -64,11 +68,11 @@ class AlternateFrames:
         return np.zeros(0, dtype=BOX_DTYPE)
 
 
-def run_design(design: str, frames: int) -> dict:
+def run_design(design: str, frames: int, calib_name: str = "example_mainhoop") -> dict:
     threads, band, far_rows, flags = parse(design)
     if "spin" in flags:
         backends.ort_spinning = lambda t: True
-    calib = load_calibration("example_mainhoop")
+    calib = load_calibration(calib_name)
     calib = band_rows_for(band, calib, far_rows, "--band-rows").apply(calib)
     fr = far_rows_for(far_rows, calib, "--far-rows")
     plan = forward_plan(threads, fr.crop is not None, "seq" in flags)
@@ -76,11 +80,23 @@ def run_design(design: str, frames: int) -> dict:
     far = FarBand.for_calibration(det.source, far_rows, calib, "--far-rows", threads=plan.network_threads)
     if far is not None and "alt" in flags:
         far = AlternateFrames(far)
+    cpu_ms = []
+    process_raw = Pipeline.process_raw
+
+    def timed(self, *a, **kw):  # the process's CPU time (all its threads) in the frame: the load barely moves it
+        c0 = time.process_time()
+        out = process_raw(self, *a, **kw)
+        cpu_ms.append((time.process_time() - c0) * 1e3)
+        return out
+
+    Pipeline.process_raw = timed
     r = bench_pipeline(calib, det, rendered_frames(calib, 16), frames, 20, far, plan.concurrent)
     st = r["stages"]
     med = {k: round(st[k]["median_ms"], 2) for k in ("forward", "far_forward", "far_wait", "end_to_end") if k in st}
+    cpu = float(np.median(cpu_ms[20:]))
     return {"design": design, "band": f"{calib.crop.v0},{calib.crop.v1}", "input": r["model_input"],
-            "strip": f"{far.crop.v0},{far.crop.v1}" if far else "", "fps": round(r["fps"], 1), **med}
+            "strip": f"{far.crop.v0},{far.crop.v1}" if far else "", "fps": round(r["fps"], 1), **med,
+            "cpu_ms": round(cpu, 2), "cpu_mean_ms": round(float(np.mean(cpu_ms[20:])), 2)}
 
 
 def main() -> None:
@@ -89,17 +105,18 @@ def main() -> None:
     ap.add_argument("--designs", default="1:crop:none;1:crop:auto;2:crop:none;2:crop:auto",
                     help="designs separated by ;")
     ap.add_argument("--rounds", type=int, default=2)
+    ap.add_argument("--calib", default="example_mainhoop", help="the calibration (default %(default)s)")
     ap.add_argument("--frames", type=int, default=200)
     args = ap.parse_args()
     if args.design:
-        print(json.dumps(run_design(args.design, args.frames)))
+        print(json.dumps(run_design(args.design, args.frames, args.calib)))
         return
     designs = [d.strip() for d in args.designs.split(";") if d.strip()]
     for r in range(1, args.rounds + 1):
         ref: dict[int, float] = {}
         for d in designs:
             load = os.getloadavg()[0]
-            out = subprocess.run([sys.executable, __file__, "--design", d, "--frames", str(args.frames)],
+            out = subprocess.run([sys.executable, __file__, "--design", d, "--frames", str(args.frames), "--calib", args.calib],
                                  capture_output=True, text=True, check=True).stdout.strip().splitlines()[-1]
             res = json.loads(out)
             t = parse(d)[0]
