@@ -98,7 +98,7 @@ def ort_spinning(threads: int | None) -> bool:
     only in a one-thread session, which has no pool. A pool (``threads >= 2``, or 0 / None: one thread a core)
     whose threads spin keeps a core busy between forwards and loses a scheduler tick at each synchronisation
     point whenever other work runs (docs/benchmarks.md, "Band and far strip at once on two threads" and
-    "Band placed from the calibration, ONNX Runtime spinning")."""
+    "Band rows and ONNX Runtime spinning")."""
     return threads == 1
 
 

@@ -180,7 +180,7 @@ def plan_strip(camera: PinholeCamera, spec: FarStripSpec = DEFAULT_STRIP, source
 def foot_distance(camera: PinholeCamera, row: float) -> float:
     """The distance ahead (m, along the mount's heading) whose cone feet reach down to image ``row`` (the
     lowest foot over the columns, as :func:`needed_rows`); ``row`` at or below the image's bottom: the image's
-    bottom row. ConfigError-free: NaN when no foot ahead reaches the row (above the horizon)."""
+    bottom row; NaN when no foot ahead reaches the row (above the horizon)."""
     row = min(float(row), camera.height - 1.0)
 
     def foot(d: float) -> float:
