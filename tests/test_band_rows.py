@@ -62,6 +62,8 @@ def test_auto_band_ending_past_the_image_is_clamped_to_it_and_smaller_than_a_pad
     calib = replace(CALIB, crop=CropSpec(368, 1080, 0, 1920, 2))
     band = band_rows_for("auto", calib, "auto")
     assert band.crop.v1 == 1080 and band.crop.height_full_px == 704 and band.crop.out_height == 352
+    assert "ending at the image's edge" in band.what
+    assert "edge" not in band_rows_for("auto", CALIB, "auto").what  # 368-1008: inside
     assert _rows_in_view(calib, 15.0, TALLEST_CONE_M).min() >= band.crop.v0
 
 

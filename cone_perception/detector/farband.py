@@ -125,9 +125,11 @@ def band_rows_for(rows: str | None, calib, far_rows: str | None = FAR_ROWS_AUTO,
         plan = plan_band(cam, band.v1, top_m, band.downscale, calib.far_strip or DEFAULT_STRIP, calib.source, source)
         crop = replace(band, v0=plan.top0, v1=plan.top0 + plan.height)
         crop.validate(calib.image_width, calib.image_height, source)
+        edge = ", ending at the image's edge" if crop.v0 == 0 or crop.v1 == calib.image_height else ""
         return BandRows(crop, plan, f"band rows {crop.v0}-{crop.v1} placed from the calibration (cones "
                                     f"{plan.spec.near_m:.1f}-{top_m:g} m ahead whole, margins "
-                                    f"{plan.spec.pitch_margin_deg:g} deg pitch / {plan.spec.roll_margin_deg:g} deg roll)")
+                                    f"{plan.spec.pitch_margin_deg:g} deg pitch / {plan.spec.roll_margin_deg:g} deg roll"
+                                    f"{edge})")
     try:
         v0, v1 = (int(t) for t in rows.split(","))
     except ValueError:
