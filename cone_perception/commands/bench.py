@@ -3,6 +3,7 @@
   cone-perception bench adapter  [--frames 300] [--calib CAL] [--encoding yuv422_yuy2] [--json]
   cone-perception bench pipeline [--frames 300] [--calib CAL] [--model M] [--backend B] [--threads N]
                                  [--input full|half|crop|crop_half] [--far-rows V0,V1 [--sequential]]
+                                 [--band-rows crop|auto|V0,V1]
                                  [--repeat N] [--json]
   cone-perception bench tracker [--frames 300] [--rows 8] [--calib CAL] [--json]
   cone-perception bench table --models A.pt[,B.pt] --val DIR --gt-names A,B,.. --band V0,V1 --out DIR [--frames N]
