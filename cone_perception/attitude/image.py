@@ -25,6 +25,7 @@ from ..geometry.homography import undistort_pixels
 from ..geometry.linalg import inv2
 from .boxes import BoxModel
 from .model import MAX_ABS_DEG, Attitude, attitude_rotation
+from .sizes import SizeTrackConfig, SizeTracks
 
 
 def box_top_extra_px(height_px: np.ndarray, table) -> np.ndarray:
@@ -88,6 +89,11 @@ class ImageAttitudeConfig:
     trust_min_cones: int = 3
     trust_max_scale: float = 2.5
     trust_max_sigma_deg: float = 1.0
+    #: each cone's size-based range averaged over the frames it is followed (:mod:`.sizes`): the fit reads its
+    #: box with the height the average implies, so the boxes' scatter averages out across frames (the filter,
+    #: :meth:`ImageAttitude.update`, only; a single frame has no history)
+    size_frames: bool = True
+    size_tracks: SizeTrackConfig = SizeTrackConfig()
 
 
 @dataclass
@@ -135,6 +141,7 @@ class ImageAttitude:
         size = np.array([CONE_SIZE_M.get(c, (np.nan, np.nan, np.nan)) for c in range(NUM_CLASSES)])
         self._height_m, self._base_m, self._tip_r_m = size[:, 0], size[:, 1], size[:, 2]
         self.counts = AttitudeCounts()
+        self.sizes = SizeTracks(self.p0[:2], self.cfg.size_tracks)
         self.reset()
 
     def reset(self) -> None:
@@ -147,6 +154,7 @@ class ImageAttitude:
         self._m2 = np.zeros(2)
         self._mv = np.zeros(2)
         self._n_still = 0
+        self.sizes.reset()
 
     def motion_weight(self, z: np.ndarray | None, Rz: np.ndarray | None) -> float:
         """Fold one fit into the still test; 1 = the body moves (use the estimate), 0 = still (use zero)."""
@@ -213,6 +221,38 @@ class ImageAttitude:
         rays = np.column_stack([foot, np.ones(len(foot))]) @ self.Kinv.T  # (N, 3) optical frame
         return rays, top[:, 1], class_ids
 
+    def _feet_batch(self, thetas_deg: np.ndarray, rays: np.ndarray):
+        """(k, 2) attitudes -> the camera's rotation (k, 3, 3) and position (k, 3) in rear_axle, each foot ray's
+        ground point minus the camera's position (k, N, 2) and whether the ray hits the ground (k, N)."""
+        R_att = np.stack([attitude_rotation(t[0], t[1]) for t in thetas_deg])  # (k, 3, 3)
+        R_F_C = R_att @ self.R_F_C0
+        p = R_att @ self.p0  # (k, 3)
+        d = rays @ R_F_C.transpose(0, 2, 1)  # (k, N, 3) in rear_axle
+        dz = d[:, :, 2]
+        hits = dz < -1e-9
+        t = -p[:, 2:3] / np.where(hits, dz, -1.0)
+        return R_F_C, p, t[:, :, None] * d[:, :, :2], hits
+
+    def model_heights(self, xy_m: np.ndarray, cls: np.ndarray) -> np.ndarray:
+        """(N,) undistorted px from the foot row up to the tip's row of cones of classes ``cls`` (N,) whose foot
+        points stand at rear_axle ``xy_m`` (N, 2) m, at zero attitude (the fit's cone model); NaN behind the camera."""
+        xy = np.asarray(xy_m, dtype=np.float64).reshape(-1, 2)
+        away = xy - self.p0[:2]
+        dist = np.maximum(np.hypot(away[:, 0], away[:, 1]), 1e-6)
+        tip = away * ((dist + self.off[cls] + self._tip_r_m[cls]) / dist)[:, None]
+        P = np.stack([np.column_stack([away, np.full(len(xy), -self.p0[2])]),
+                      np.column_stack([tip, self._height_m[cls] - self.p0[2]])])  # (2, N, 3) minus camera
+        Pc = P @ self.R_F_C0  # optical frame
+        with np.errstate(invalid="ignore", divide="ignore"):
+            v = self.K[1, 1] * Pc[:, :, 1] / Pc[:, :, 2]
+        return np.where(np.all(Pc[:, :, 2] > 1e-6, axis=0), v[0] - v[1], np.nan)
+
+    def ground_feet(self, thetas_deg: np.ndarray, rays: np.ndarray) -> np.ndarray:
+        """(k, 2) attitudes (degrees) -> (k, N, 2) rear_axle ground points (m) of the foot rays (N, 3); NaN
+        where a ray misses the ground."""
+        _, p, away, hits = self._feet_batch(np.asarray(thetas_deg, dtype=np.float64).reshape(-1, 2), rays)
+        return np.where(hits[:, :, None], away + p[:, None, :2], np.nan)
+
     def residuals(self, theta_deg: np.ndarray, rays: np.ndarray, v_top: np.ndarray, cls: np.ndarray) -> np.ndarray:
         """(N,) predicted minus observed top row (px) of each cone for attitude (pitch, roll) in degrees.
 
@@ -222,14 +262,7 @@ class ImageAttitude:
 
     def _residuals_batch(self, thetas_deg: np.ndarray, rays: np.ndarray, v_top: np.ndarray, cls: np.ndarray) -> np.ndarray:
         """(k, 2) attitudes -> (k, N) residuals, all in one vectorised pass."""
-        R_att = np.stack([attitude_rotation(t[0], t[1]) for t in thetas_deg])  # (k, 3, 3)
-        R_F_C = R_att @ self.R_F_C0
-        p = R_att @ self.p0  # (k, 3)
-        d = rays @ R_F_C.transpose(0, 2, 1)  # (k, N, 3) in rear_axle
-        dz = d[:, :, 2]
-        hits = dz < -1e-9
-        t = -p[:, 2:3] / np.where(hits, dz, -1.0)
-        away = t[:, :, None] * d[:, :, :2]  # ground point minus camera, (k, N, 2)
+        R_F_C, p, away, hits = self._feet_batch(thetas_deg, rays)  # away: ground point minus camera, (k, N, 2)
         dist = np.sqrt(np.sum(away * away, axis=2, keepdims=True))
         reach = dist + (self.off[cls] + self._tip_r_m[cls])[None, :, None]
         top = away * (reach / dist)  # tip (xy) minus camera
@@ -239,11 +272,15 @@ class ImageAttitude:
         return np.where(hits, v - v_top, np.nan)
 
     # -- fit --------------------------------------------------------------------------------------
-    def fit(self, boxes: np.ndarray, class_ids: np.ndarray, start_deg: np.ndarray | None = None
+    def fit(self, boxes: np.ndarray, class_ids: np.ndarray, start_deg: np.ndarray | None = None,
+            sizes: SizeTracks | None = None, start_cov_deg2: np.ndarray | None = None
             ) -> tuple[np.ndarray, np.ndarray, int] | None:
         """One frame's robust fit: ``(theta (2,) deg, covariance (2, 2) deg^2, cones used)``, or None
         with fewer than ``min_cones`` usable cones. ``boxes`` (N, 4) full-image px (pixel edges);
-        ``start_deg``: where to linearise first (the filter's prediction; default zero)."""
+        ``start_deg``: where to linearise first (the filter's prediction; default zero). ``sizes``: the cones
+        followed over frames (:class:`~cone_perception.attitude.sizes.SizeTracks`; None: this frame's boxes
+        alone): each box is read with its cone's averaged size, ``start_cov_deg2`` (2, 2) saying how far off
+        ``start_deg`` may be (default: the prior's)."""
         c = self.cfg
         boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
         if c.box_model is not None:
@@ -259,6 +296,8 @@ class ImageAttitude:
         sigma = np.sqrt(2.0 * c.sigma_px**2 + (rel * h) ** 2)
         theta = np.zeros(2) if start_deg is None else np.clip(np.asarray(start_deg, dtype=np.float64), -2.0, 2.0)
         eps = 0.05
+        if sizes is not None:
+            v_top, sigma = self._average_sizes(sizes, theta, rays, v_top, cls, rel, start_cov_deg2)
         lam = np.eye(2) / c.prior_sigma_deg**2
         for outer in range(self.cfg.outer_iterations):
             rr = self._residuals_batch(theta + np.array([[0.0, 0.0], [eps, 0.0], [0.0, eps]]), rays, v_top, cls)
@@ -283,6 +322,8 @@ class ImageAttitude:
             theta = theta + delta
             if np.max(np.abs(delta)) < 0.3:  # small step: the linearisation holds (error ~1e-3 deg)
                 break
+        if sizes is not None:  # the followed cones' places, with this frame's attitude
+            sizes.relocate(self.ground_feet(theta, rays)[0])
         e = (r0o + Jo @ delta) / so
         w = 1.0 / (1.0 + (e / c.cauchy_c) ** 2)
         inl = np.abs(e) <= 3.0 * c.cauchy_c
@@ -294,6 +335,24 @@ class ImageAttitude:
         # the residuals' robust spread in sigmas (1: as the cone model expects; all cones, outliers too): trusted()
         self.last_scale = 1.4826 * float(np.median(np.abs(e)))
         return theta, inv2(A) * scale, n_used
+
+    def _average_sizes(self, sizes: SizeTracks, theta: np.ndarray, rays: np.ndarray, v_top: np.ndarray,
+                       cls: np.ndarray, rel: float, cov_deg2: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """The usable cones' top rows (N,) px as their averaged sizes say (:class:`SizeTracks`) and their 1-sigma
+        (N,) px: the foot row's and the averaged size's. ``theta``: the predicted attitude, ``cov_deg2`` its
+        covariance (None: the prior's); ``rel``: a box height's relative 1-sigma this frame."""
+        c = self.cfg
+        v_foot = self.K[1, 1] * rays[:, 1] / rays[:, 2] + self.K[1, 2]
+        hu = np.maximum(v_foot - v_top, 1e-3)  # undistorted height, box model applied
+        log_h = np.log(hu)
+        var = rel**2 + (c.sigma_px / hu) ** 2  # the top row's scatter, relative
+        eps = 0.1
+        g = self.ground_feet(np.array([theta, theta + (eps, 0.0), theta + (0.0, eps)]), rays)
+        jac = np.nan_to_num(np.stack([g[1] - g[0], g[2] - g[0]], axis=2) / eps)  # (N, 2, 2) m/deg
+        cov = np.eye(2) * c.prior_sigma_deg**2 if cov_deg2 is None else np.asarray(cov_deg2, dtype=np.float64)
+        avg, var_avg = sizes.average(g[0], cls, log_h, var, jac, cov, self.model_heights)
+        h = np.exp(avg)
+        return v_foot - h, np.sqrt(c.sigma_px**2 + h**2 * var_avg)
 
     def trusted(self, n_cones: int, sd_deg: np.ndarray) -> bool:
         """Whether this frame's image attitude (from a fit of ``n_cones`` cones whose residual scale is
@@ -335,7 +394,7 @@ class ImageAttitude:
         c = self.cfg
         self.x = self.x * c.decay  # predict: random walk decaying to zero
         self.P = self.P * c.decay**2 + np.eye(2) * c.process_sigma_deg**2
-        res = self.fit(boxes, class_ids, self.x + self.bias)
+        res = self.fit(boxes, class_ids, self.x + self.bias, self.sizes if c.size_frames else None, self.P)
         source, n = "hold", 0
         if res is None:
             self.counts.too_few += 1

@@ -1,0 +1,136 @@
+"""Each cone's size-based range averaged over frames (:class:`SizeTracks`), for the image fit (issue 27).
+
+A box's height says its cone's range, but on real detectors only to about 7 % per box, drawn anew each
+frame; its foot row says the range precisely, given the attitude. The image fit (:mod:`.image`) weighs the
+two against each other, so a frame's pitch carries the scatter of its dozen box heights (0.15-0.2 degree).
+A cone stands still on the ground: followed from frame to frame, its size-based ranges of all frames are
+one measurement, moved by the car's motion in between. :class:`SizeTracks` keeps, per cone seen, the log of
+its size-based range (the camera's horizontal distance) and its variance; each frame it
+
+1. maps the frame's feet to the ground with the attitude the filter predicts and registers them against the
+   previous frame's cones (:func:`~cone_perception.tracking.egomotion.register_cones`: the car's planar
+   motion and which cone is which; the frame's common attitude error is estimated alongside and dropped,
+   with the attitude Jacobians of the feet);
+2. moves each followed cone's log range by the motion (the log ratio of its camera distances after and
+   before), adding the motion's error ``motion_sigma_m`` over its distance to the variance;
+3. folds in this frame's size-based range (inverse variances) and returns each cone's average and its
+   variance (at least the per-box variance over ``max_frames``: old frames are forgotten; a static part,
+   ``floor_rel``, is added on top: the cone's own build does not average out).
+
+The fit then reads each box with the height its cone's averaged range implies. ROS-free, no I/O.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class SizeTrackConfig:
+    """Tuning of :class:`SizeTracks` (m, frames)."""
+
+    motion_sigma_m: float = 0.03  # 1-sigma of the registered motion per frame (translation)
+    max_frames: float = 30.0  # at most this many frames' worth of boxes in a cone's average (forgetting)
+    floor_rel: float = 0.015  # static part of a cone's size-range error (its build): not averaged
+    max_missed: int = 2  # frames a cone may be missed before it is forgotten
+    inlier_m: float = 0.5  # registration: a cone within this of its predicted place is the same cone
+    search_m: float = 1.5  # registration: candidate pairs within this after the prior motion
+
+
+class SizeTracks:
+    """The followed cones of an image fit (module doc); ``camera_xy``: the camera's ground position in
+    ``rear_axle`` (m), from which ranges are measured. :attr:`matched` / :attr:`cones` count the cones that
+    were followed from an earlier frame / all cones given (since the last :meth:`reset`)."""
+
+    def __init__(self, camera_xy: np.ndarray, config: SizeTrackConfig | None = None):
+        self.cam = np.asarray(camera_xy, dtype=np.float64).reshape(2)
+        self.cfg = config or SizeTrackConfig()
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget every cone and the motion (a new drive)."""
+        self.xy = np.zeros((0, 2))  # ground positions of the cones kept, in the last frame's rear_axle (m)
+        self.cls = np.zeros(0, dtype=np.intp)
+        self.log_h = np.zeros(0)  # averaged log box height (log px), at ``xy``
+        self.var = np.zeros(0)  # its variance (the averaged part only)
+        self.missed = np.zeros(0, dtype=np.intp)
+        from ..tracking.egomotion import Motion2D  # here: tracking imports the mapping, which imports attitude
+
+        self._fin = np.zeros(0, dtype=bool)
+        self.motion = Motion2D()  # the last frame's motion: the next one's prior (constant velocity)
+        self.matched = 0
+        self.cones = 0
+        self.frames = 0
+
+    def _dist(self, xy: np.ndarray) -> np.ndarray:
+        return np.maximum(np.hypot(xy[:, 0] - self.cam[0], xy[:, 1] - self.cam[1]), 1e-3)
+
+    def average(self, xy: np.ndarray, cls: np.ndarray, log_h: np.ndarray, var: np.ndarray,
+                att_jac: np.ndarray | None = None, att_cov_deg2: np.ndarray | None = None,
+                height_of=None) -> tuple[np.ndarray, np.ndarray]:
+        """One frame's cones: ground feet ``xy`` (N, 2) m (mapped with the predicted attitude; a NaN row: its
+        foot ray misses the ground), classes ``cls`` (N,), log box heights ``log_h`` (N,) (px, the box model
+        applied) and their per-box variances ``var`` (N,); ``att_jac`` (N, 2, 2) m/deg and ``att_cov_deg2``
+        (2, 2): how the feet move with the attitude and how uncertain the prediction is; ``height_of(xy, cls)``:
+        the box height (px) of a cone standing at ``xy`` (None: the camera distance's inverse, a pinhole
+        looking level). Returns each cone's averaged log height and its variance (N,), ``floor_rel`` included.
+        The state moves to this frame: call once per frame."""
+        from ..tracking.egomotion import register_cones  # see reset()
+
+        c = self.cfg
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        log_h, var = np.asarray(log_h, np.float64).copy(), np.asarray(var, np.float64).copy()
+        n = len(xy)
+        fin = np.all(np.isfinite(xy), axis=1)
+        self.frames += 1
+        self.cones += n
+        # 1. the motion since the last frame and which kept cone each of this frame's is
+        motion, pairs = self.motion, (np.zeros(0, np.intp), np.zeros(0, np.intp))
+        idx = np.flatnonzero(fin)
+        if len(self.xy) and len(idx):
+            reg = register_cones(xy[idx], cls[idx], self.xy, self.cls, self.motion, search_m=c.search_m,
+                                 inlier_m=c.inlier_m, det_att_jac=None if att_jac is None else att_jac[idx],
+                                 att_cov_deg2=att_cov_deg2)
+            if reg.ok:
+                motion, pairs = reg.motion, (idx[reg.det_index], reg.trk_index)
+        # 2. the kept cones moved to this frame, their log ranges with them
+        moved = motion.to_current(self.xy)
+        d0, d1 = self._dist(self.xy), self._dist(moved)
+        if height_of is None:
+            ratio = d0 / d1
+        else:
+            with np.errstate(invalid="ignore", divide="ignore"):
+                ratio = height_of(moved, self.cls) / height_of(self.xy, self.cls)
+            ratio = np.where(np.isfinite(ratio) & (ratio > 0), ratio, d0 / d1)
+        prev_log = self.log_h + np.log(ratio)
+        prev_var = self.var + (c.motion_sigma_m / d1) ** 2
+        # 3. fold this frame's boxes in
+        di, tj = pairs
+        per_box = var.copy()
+        if len(di):
+            w0, w1 = 1.0 / prev_var[tj], 1.0 / var[di]
+            log_h[di] = (w0 * prev_log[tj] + w1 * log_h[di]) / (w0 + w1)
+            var[di] = np.maximum(1.0 / (w0 + w1), per_box[di] / c.max_frames)
+        self.matched += len(di)
+        # keep: this frame's cones (with a foot on the ground) and the unmatched kept ones not missed too long
+        keep_old = np.ones(len(self.xy), dtype=bool)
+        keep_old[tj] = False
+        keep_old &= self.missed < c.max_missed
+        self.xy = np.concatenate([xy[fin], moved[keep_old]])
+        self.cls = np.concatenate([np.asarray(cls, np.intp)[fin], self.cls[keep_old]])
+        self.log_h = np.concatenate([log_h[fin], prev_log[keep_old]])
+        self.var = np.concatenate([var[fin], prev_var[keep_old]])
+        self.missed = np.concatenate([np.zeros(int(fin.sum()), np.intp), self.missed[keep_old] + 1])
+        self._fin = fin
+        self.motion = motion
+        return log_h, var + c.floor_rel**2
+
+    def relocate(self, xy: np.ndarray) -> None:
+        """Replace the ground positions of the cones :meth:`average` was last given (N, 2 m; NaN rows kept
+        where they were) with better ones (mapped with the frame's fitted attitude)."""
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)[self._fin]
+        ok = np.all(np.isfinite(xy), axis=1)
+        k = len(xy)
+        self.xy[:k][ok] = xy[ok]

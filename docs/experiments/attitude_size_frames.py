@@ -1,0 +1,109 @@
+"""Each cone's size averaged over frames in the image fit (issue 27, `size_frames`), on tuning drives with the
+held-out camera's lens and the real frames' box behaviour: each drive's boxes are cached once (the shipped model
+in the band and, as `replay` does by default, in the calibration's far strip, placed at zero attitude; the boxes
+do not depend on the attitude otherwise), given the real behaviour of the model's box model (synth/boxlook.py,
+seeded per drive; `--jitter F`: the top's spread), then each design re-runs the image attitude (through the
+model's box model) and the mapping; scored as `replay --gt-topic` scores (median error of the cones at 7-15 m
+and 15-25 m, median |pitch| / |roll| error against /attitude_gt), plus the followed share (cones matched to a
+cone of the frame before).
+
+    for s in 351 352; do
+      .venv/bin/cone-perception synth bag --seed $s --seconds 10 --stand 2 --k1 -0.126 --out /tmp/27b/djit$s
+    done
+    .venv/bin/cone-perception synth bag --seed 351 --seconds 10 --stand 2 --k1 -0.126 --no-jitter --out /tmp/27b/dflat351
+    .venv/bin/python docs/experiments/attitude_size_frames.py /tmp/27b/djit351 /tmp/27b/djit352 /tmp/27b/dflat351
+"""
+import argparse
+import pickle
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from cone_perception.attitude import ImageAttitudeConfig, attitude_for_boxes
+from cone_perception.attitude.box_files import read_box_model
+from cone_perception.attitude.sizes import SizeTrackConfig
+from cone_perception.evaluation import LocalisationReport
+from cone_perception.geometry.calib import load_calibration
+from cone_perception.mapping import ConeMapper
+from cone_perception.resources import default_model_path
+from cone_perception.synth.boxlook import BoxBehaviour
+
+SIZES = SizeTrackConfig()
+DESIGNS = [
+    ("per frame (size_frames off, as before)", {"size_frames": False}),
+    ("sizes over frames (shipped)", {}),
+]
+
+
+def cached(bag: str, strip: bool) -> dict:
+    path = Path(bag + (".strip" if strip else "") + ".boxes.pkl")
+    if not path.is_file():
+        from cone_perception.data.bags import find_image_topic, iter_frames, read_attitude_truth, read_ground_truth
+        from cone_perception.detector import Detector
+        from cone_perception.detector.farband import FarBand
+        from cone_perception.pipeline import Pipeline
+        from cone_perception.replay import process_frame
+        from cone_perception.resources import far_model_for
+
+        cal = load_calibration(bag + "_calib.yaml")
+        det = Detector.load_for_band(default_model_path(), (cal.crop.out_width, cal.crop.out_height))
+        far = FarBand.for_calibration(far_model_for(None, det.source), None, cal) if strip else None
+        pipe = Pipeline(cal, det, "fixed", None, far)
+        frames = [(fr.stamp_ns, process_frame(pipe, fr).boxes) for fr in iter_frames(bag, find_image_topic(bag)[0])]
+        path.write_bytes(pickle.dumps({"frames": frames, "truth": read_ground_truth(bag, "/cones_gt"),
+                                       "att": read_attitude_truth(bag)}))
+        print(f"cached {bag}: {len(frames)} frames", file=sys.stderr)
+    return pickle.loads(path.read_bytes())
+
+
+def run_drive(bag: str, d: dict, config) -> tuple:
+    m = ConeMapper(load_calibration(bag + "_calib.yaml"))
+    est = m.image_attitude(config)
+    rep, ep, er = LocalisationReport(max_range_m=m.calib.max_range_m), [], []
+    for st, boxes in d["frames"]:
+        a = attitude_for_boxes(est, boxes, st)
+        rep.add_frame(m.map_boxes(boxes, a), d["truth"][st])
+        ep.append(abs(a.pitch_deg - d["att"][st][0]))
+        er.append(abs(a.roll_deg - d["att"][st][1]))
+    s = rep.summary()
+    followed = est.sizes.matched / max(est.sizes.cones, 1)
+    return (s["groups"]["far 7-15 m"]["median_err_m"], s["extra_groups"]["15-25 m"]["median_err_m"], float(np.median(ep)),
+            float(np.median(er)), followed, est.counts.calibration)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("bags", nargs="+")
+    ap.add_argument("--jitter", type=float, default=None, help="top spread (default: the box model's)")
+    ap.add_argument("--no-strip", action="store_true", help="the band alone (no far strip)")
+    ap.add_argument("--designs", default="", help="comma-separated design numbers (default all)")
+    args = ap.parse_args()
+    bm = read_box_model(default_model_path())
+    bags = [b.rstrip("/") for b in args.bags]
+    data = {}
+    for i, b in enumerate(bags):
+        d = dict(cached(b, not args.no_strip))
+        look = BoxBehaviour(bm, args.jitter, seed=i)
+        d["frames"] = [(st, look(boxes)) for st, boxes in d["frames"]]
+        data[b] = d
+    print(f"drives {', '.join(Path(b).name for b in bags)}; real boxes, top spread "
+          f"{bm.sigma_rel if args.jitter is None else args.jitter}; {'no strip' if args.no_strip else 'strip'}")
+    print("| design | 7-15 m per drive | 15-25 m per drive | pitch / roll err (deg) | followed | frames to the calibration |")
+    print("|---|---|---|---|---|---|")
+    pick = {int(x) for x in args.designs.split(",") if x}
+    for k, (name, cfg) in enumerate(DESIGNS):
+        if pick and k not in pick:
+            continue
+        cfg = dict(cfg)
+        st = cfg.pop("sizes", {})
+        config = replace(ImageAttitudeConfig(box_model=bm), size_tracks=replace(SIZES, **st), **cfg)
+        r = np.array([run_drive(b, data[b], config) for b in bags])
+        print(f"| {name} | " + " / ".join(f"{x:.3f}" for x in r[:, 0]) + " | " + " / ".join(f"{x:.3f}" for x in r[:, 1])
+              + " | " + " / ".join(f"{p:.3f}/{q:.3f}" for p, q in r[:, 2:4]) + " | "
+              + " / ".join(f"{x:.2f}" for x in r[:, 4]) + " | " + " / ".join(f"{int(x)}" for x in r[:, 5]) + " |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
