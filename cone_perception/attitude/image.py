@@ -350,7 +350,7 @@ class ImageAttitude:
         g = self.ground_feet(np.array([theta, theta + (eps, 0.0), theta + (0.0, eps)]), rays)
         jac = np.nan_to_num(np.stack([g[1] - g[0], g[2] - g[0]], axis=2) / eps)  # (N, 2, 2) m/deg
         cov = np.eye(2) * c.prior_sigma_deg**2 if cov_deg2 is None else np.asarray(cov_deg2, dtype=np.float64)
-        avg, var_avg = sizes.average(g[0], cls, log_h, var, jac, cov, self.model_heights)
+        avg, var_avg = sizes.average(g[0], cls, log_h, var, self.model_heights, jac, cov)
         h = np.exp(avg)
         return v_foot - h, np.sqrt(c.sigma_px**2 + h**2 * var_avg)
 

@@ -35,8 +35,20 @@ class SizeTrackConfig:
     max_frames: float = 30.0  # at most this many frames' worth of boxes in a cone's average (forgetting)
     floor_rel: float = 0.015  # static part of a cone's size-range error (its build): not averaged
     max_missed: int = 2  # frames a cone may be missed before it is forgotten
-    inlier_m: float = 0.5  # registration: a cone within this of its predicted place is the same cone
+    #: a pair whose box height differs from the kept cone's moved average by more than this many sigmas is two
+    #: cones (the box starts a new average); 0 = off
+    gate_sigmas: float = 3.0
+    #: moving a cone's height with the car: from the distance its averaged height says (True) or from its foot
+    #: mapped with the fitted attitude (False)
+    place_by_size: bool = False
+    inlier_m: float = 0.3  # registration: a cone within this of its predicted place is the same cone
     search_m: float = 1.5  # registration: candidate pairs within this after the prior motion
+    #: before registering: the frame's common pitch error searched within +-``pitch_search_sigmas`` of the
+    #: prediction's 1-sigma (at most ``pitch_search_max_deg``) in ``pitch_search_steps`` steps, the one under which
+    #: most feet lie near a kept cone moved by the prior motion (a Gaussian score of ``inlier_m``)
+    pitch_search_sigmas: float = 3.0
+    pitch_search_max_deg: float = 1.5
+    pitch_search_steps: int = 31
 
 
 class SizeTracks:
@@ -68,14 +80,13 @@ class SizeTracks:
         return np.maximum(np.hypot(xy[:, 0] - self.cam[0], xy[:, 1] - self.cam[1]), 1e-3)
 
     def average(self, xy: np.ndarray, cls: np.ndarray, log_h: np.ndarray, var: np.ndarray,
-                att_jac: np.ndarray | None = None, att_cov_deg2: np.ndarray | None = None,
-                height_of=None) -> tuple[np.ndarray, np.ndarray]:
+                height_of, att_jac: np.ndarray | None = None, att_cov_deg2: np.ndarray | None = None
+                ) -> tuple[np.ndarray, np.ndarray]:
         """One frame's cones: ground feet ``xy`` (N, 2) m (mapped with the predicted attitude; a NaN row: its
         foot ray misses the ground), classes ``cls`` (N,), log box heights ``log_h`` (N,) (px, the box model
-        applied) and their per-box variances ``var`` (N,); ``att_jac`` (N, 2, 2) m/deg and ``att_cov_deg2``
-        (2, 2): how the feet move with the attitude and how uncertain the prediction is; ``height_of(xy, cls)``:
-        the box height (px) of a cone standing at ``xy`` (None: the camera distance's inverse, a pinhole
-        looking level). Returns each cone's averaged log height and its variance (N,), ``floor_rel`` included.
+        applied) and their per-box variances ``var`` (N,); ``height_of(xy, cls)``: the box height (px) of cones of
+        classes ``cls`` standing at ``xy`` (the fit's cone model); ``att_jac`` (N, 2, 2) m/deg and
+        ``att_cov_deg2`` (2, 2): how the feet move with the attitude and how uncertain the prediction is. Returns each cone's averaged log height and its variance (N,), ``floor_rel`` included.
         The state moves to this frame: call once per frame."""
         from ..tracking.egomotion import register_cones  # see reset()
 
@@ -90,24 +101,34 @@ class SizeTracks:
         motion, pairs = self.motion, (np.zeros(0, np.intp), np.zeros(0, np.intp))
         idx = np.flatnonzero(fin)
         if len(self.xy) and len(idx):
-            reg = register_cones(xy[idx], cls[idx], self.xy, self.cls, self.motion, search_m=c.search_m,
+            xs = xy[idx]
+            if att_jac is not None and att_cov_deg2 is not None:
+                xs = xs - att_jac[idx, :, 0] * self._pitch_offset(xs, cls[idx], att_jac[idx, :, 0], att_cov_deg2)
+            reg = register_cones(xs, cls[idx], self.xy, self.cls, self.motion, search_m=c.search_m,
                                  inlier_m=c.inlier_m, det_att_jac=None if att_jac is None else att_jac[idx],
                                  att_cov_deg2=att_cov_deg2)
             if reg.ok:
                 motion, pairs = reg.motion, (idx[reg.det_index], reg.trk_index)
-        # 2. the kept cones moved to this frame, their log ranges with them
+        # 2. the kept cones moved to this frame, their heights with them. Each is placed at the distance its
+        #    averaged height says (along its foot's bearing; a height goes as one over the distance), not at its
+        #    foot: the feet carry the attitude's error, which would feed back into the heights. A height's
+        #    relative error grows as the cone comes nearer (the distance's ratio).
         moved = motion.to_current(self.xy)
-        d0, d1 = self._dist(self.xy), self._dist(moved)
-        if height_of is None:
-            ratio = d0 / d1
-        else:
-            with np.errstate(invalid="ignore", divide="ignore"):
-                ratio = height_of(moved, self.cls) / height_of(self.xy, self.cls)
-            ratio = np.where(np.isfinite(ratio) & (ratio > 0), ratio, d0 / d1)
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+            scale = height_of(self.xy, self.cls) / np.exp(self.log_h)
+            scale = np.where(np.isfinite(scale) & (scale > 0) & c.place_by_size, scale, 1.0)
+            p_s = self.cam + (self.xy - self.cam) * scale[:, None]
+            m_s = motion.to_current(p_s)
+            ratio = height_of(m_s, self.cls) / height_of(p_s, self.cls)
+        d0, d1 = self._dist(p_s), self._dist(m_s)
+        ratio = np.where(np.isfinite(ratio) & (ratio > 0), ratio, d0 / d1)
         prev_log = self.log_h + np.log(ratio)
-        prev_var = self.var + (c.motion_sigma_m / d1) ** 2
+        prev_var = self.var * ((d0 / d1) ** 2 if c.place_by_size else 1.0) + (c.motion_sigma_m / d1) ** 2
         # 3. fold this frame's boxes in
         di, tj = pairs
+        if c.gate_sigmas > 0 and len(di):
+            same = (log_h[di] - prev_log[tj]) ** 2 <= c.gate_sigmas**2 * (prev_var[tj] + var[di] + c.floor_rel**2)
+            di, tj = di[same], tj[same]
         per_box = var.copy()
         if len(di):
             w0, w1 = 1.0 / prev_var[tj], 1.0 / var[di]
@@ -126,6 +147,25 @@ class SizeTracks:
         self._fin = fin
         self.motion = motion
         return log_h, var + c.floor_rel**2
+
+    def _pitch_offset(self, xy: np.ndarray, cls: np.ndarray, jac_pitch: np.ndarray, cov_deg2: np.ndarray) -> float:
+        """The frame's common pitch error (degrees) under which the feet ``xy`` (N, 2) (moving by ``jac_pitch``
+        (N, 2) m/deg) best meet the kept cones moved by the prior motion (config ``pitch_search_*``)."""
+        from ..classes import UNKNOWN
+
+        c = self.cfg
+        span = min(c.pitch_search_sigmas * float(np.sqrt(max(cov_deg2[0, 0], 0.0))), c.pitch_search_max_deg)
+        if span <= 0 or c.pitch_search_steps < 2:
+            return 0.0
+        offs = np.linspace(-span, span, c.pitch_search_steps)
+        pred = self.motion.to_current(self.xy)
+        p = xy[None, :, :] - offs[:, None, None] * jac_pitch[None]  # (S, N, 2)
+        d2 = np.sum((p[:, :, None, :] - pred[None, None, :, :]) ** 2, axis=3)  # (S, N, M)
+        dc, tc = cls[:, None], self.cls[None, :]
+        d2[:, (dc != tc) & (dc != UNKNOWN) & (tc != UNKNOWN)] = np.inf
+        score = np.exp(-0.5 * np.min(d2, axis=2) / c.inlier_m**2).sum(axis=1)
+        best = np.flatnonzero(score >= score.max() - 1e-9)
+        return float(offs[best[np.argmin(np.abs(offs[best]))]])  # ties: the one nearest the prediction
 
     def relocate(self, xy: np.ndarray) -> None:
         """Replace the ground positions of the cones :meth:`average` was last given (N, 2 m; NaN rows kept

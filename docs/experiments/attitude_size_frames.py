@@ -34,6 +34,24 @@ SIZES = SizeTrackConfig()
 DESIGNS = [
     ("per frame (size_frames off, as before)", {"size_frames": False}),
     ("sizes over frames (shipped)", {}),
+    ("max_frames 60", {"sizes": {"max_frames": 60.0}}),
+    ("max_frames 15", {"sizes": {"max_frames": 15.0}}),
+    ("motion sigma 0.01 m", {"sizes": {"motion_sigma_m": 0.01}}),
+    ("motion sigma 0.08 m", {"sizes": {"motion_sigma_m": 0.08}}),
+    ("floor 0", {"sizes": {"floor_rel": 0.0}}),
+    ("floor 0.03", {"sizes": {"floor_rel": 0.03}}),
+    ("inlier 0.3 m", {"sizes": {"inlier_m": 0.3}}),
+    ("inlier 0.8 m", {"sizes": {"inlier_m": 0.8}}),
+    ("missed 5", {"sizes": {"max_missed": 5}}),
+    ("process sigma 1.0 deg", {"process_sigma_deg": 1.0}),
+    ("process sigma 0.4 deg", {"process_sigma_deg": 0.4}),
+    ("range 25 m", {"max_range_m": 25.0}),
+    ("gate off", {"sizes": {"gate_sigmas": 0.0}}),
+    ("gate 2.5", {"sizes": {"gate_sigmas": 2.5}}),
+    ("gate 4", {"sizes": {"gate_sigmas": 4.0}}),
+    ("inlier 0.3 m, gate 2.5", {"sizes": {"inlier_m": 0.3, "gate_sigmas": 2.5}}),
+    ("moved from the feet", {"sizes": {"place_by_size": False}}),
+    ("moved from the feet, inlier 0.3 m", {"sizes": {"place_by_size": False, "inlier_m": 0.3}}),
 ]
 
 
