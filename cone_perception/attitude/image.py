@@ -279,8 +279,10 @@ class ImageAttitude:
         with fewer than ``min_cones`` usable cones. ``boxes`` (N, 4) full-image px (pixel edges);
         ``start_deg``: where to linearise first (the filter's prediction; default zero). ``sizes``: the cones
         followed over frames (:class:`~cone_perception.attitude.sizes.SizeTracks`; None: this frame's boxes
-        alone): each box is read with its cone's averaged size, ``start_cov_deg2`` (2, 2) saying how far off
-        ``start_deg`` may be (default: the prior's)."""
+        alone): the feet, mapped with ``start_deg`` (``start_cov_deg2`` (2, 2): how far off it may be; None: the
+        prior's), are followed from the frame before, then each box is read with its cone's averaged size.
+        (Mapping the feet with the frame's own fit instead, or with the fit and the prediction combined, costs a
+        second fit and measured worse on tuning drives: docs/benchmarks.md.)"""
         c = self.cfg
         boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
         if c.box_model is not None:
@@ -289,15 +291,31 @@ class ImageAttitude:
         self.last_scale = np.inf
         sel = self._select(boxes, class_ids)
         if int(sel.sum()) < c.min_cones:
+            if sizes is not None:
+                sizes.miss()
             return None
         rays, v_top, cls = self._prepare(boxes[sel], class_ids[sel])
         h = boxes[sel, 3] - boxes[sel, 1]
         rel = c.sigma_rel if c.box_model is None else max(c.sigma_rel, c.box_model.sigma_rel)
         sigma = np.sqrt(2.0 * c.sigma_px**2 + (rel * h) ** 2)
         theta = np.zeros(2) if start_deg is None else np.clip(np.asarray(start_deg, dtype=np.float64), -2.0, 2.0)
+        if sizes is None:
+            return self._solve(rays, v_top, cls, sigma, theta)
+        # the box model's spread averages over frames, the cone model's own (sigma_rel) not
+        v_top, sigma = self._average_sizes(sizes, theta, rays, v_top, cls,
+                                           0.0 if c.box_model is None else c.box_model.sigma_rel, start_cov_deg2)
+        res = self._solve(rays, v_top, cls, sigma, theta)
+        if res is not None:  # the followed cones' places, with this frame's attitude
+            sizes.relocate(self.ground_feet(res[0], rays)[0])
+        return res
+
+    def _solve(self, rays: np.ndarray, v_top: np.ndarray, cls: np.ndarray, sigma: np.ndarray, theta: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, int] | None:
+        """The robust fit of :meth:`fit` on prepared cones (foot rays, top rows, classes, 1-sigma px), linearised
+        first at ``theta``; sets :attr:`last_scale`."""
+        c = self.cfg
+        self.last_scale = np.inf
         eps = 0.05
-        if sizes is not None:
-            v_top, sigma = self._average_sizes(sizes, theta, rays, v_top, cls, rel, start_cov_deg2)
         lam = np.eye(2) / c.prior_sigma_deg**2
         for outer in range(self.cfg.outer_iterations):
             rr = self._residuals_batch(theta + np.array([[0.0, 0.0], [eps, 0.0], [0.0, eps]]), rays, v_top, cls)
@@ -322,8 +340,6 @@ class ImageAttitude:
             theta = theta + delta
             if np.max(np.abs(delta)) < 0.3:  # small step: the linearisation holds (error ~1e-3 deg)
                 break
-        if sizes is not None:  # the followed cones' places, with this frame's attitude
-            sizes.relocate(self.ground_feet(theta, rays)[0])
         e = (r0o + Jo @ delta) / so
         w = 1.0 / (1.0 + (e / c.cauchy_c) ** 2)
         inl = np.abs(e) <= 3.0 * c.cauchy_c
@@ -339,8 +355,9 @@ class ImageAttitude:
     def _average_sizes(self, sizes: SizeTracks, theta: np.ndarray, rays: np.ndarray, v_top: np.ndarray,
                        cls: np.ndarray, rel: float, cov_deg2: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         """The usable cones' top rows (N,) px as their averaged sizes say (:class:`SizeTracks`) and their 1-sigma
-        (N,) px: the foot row's and the averaged size's. ``theta``: the predicted attitude, ``cov_deg2`` its
-        covariance (None: the prior's); ``rel``: a box height's relative 1-sigma this frame."""
+        (N,) px: the foot row's, the averaged size's and the cone model's own (``sigma_rel``, not averaged).
+        ``theta``: the predicted attitude, ``cov_deg2`` its covariance (None: the prior's); ``rel``: a box
+        height's relative scatter from frame to frame (1-sigma; the box model's)."""
         c = self.cfg
         v_foot = self.K[1, 1] * rays[:, 1] / rays[:, 2] + self.K[1, 2]
         hu = np.maximum(v_foot - v_top, 1e-3)  # undistorted height, box model applied
@@ -352,7 +369,7 @@ class ImageAttitude:
         cov = np.eye(2) * c.prior_sigma_deg**2 if cov_deg2 is None else np.asarray(cov_deg2, dtype=np.float64)
         avg, var_avg = sizes.average(g[0], cls, log_h, var, self.model_heights, jac, cov)
         h = np.exp(avg)
-        return v_foot - h, np.sqrt(c.sigma_px**2 + h**2 * var_avg)
+        return v_foot - h, np.sqrt(c.sigma_px**2 + h**2 * (var_avg + c.sigma_rel**2))
 
     def trusted(self, n_cones: int, sd_deg: np.ndarray) -> bool:
         """Whether this frame's image attitude (from a fit of ``n_cones`` cones whose residual scale is

@@ -13,9 +13,9 @@ its size-based range (the camera's horizontal distance) and its variance; each f
    with the attitude Jacobians of the feet);
 2. moves each followed cone's log range by the motion (the log ratio of its camera distances after and
    before), adding the motion's error ``motion_sigma_m`` over its distance to the variance;
-3. folds in this frame's size-based range (inverse variances) and returns each cone's average and its
-   variance (at least the per-box variance over ``max_frames``: old frames are forgotten; a static part,
-   ``floor_rel``, is added on top: the cone's own build does not average out).
+3. folds in this frame's box height (inverse variances) and returns each cone's average and its variance (at
+   least the per-box variance over ``max_frames``: old frames are forgotten). The caller adds what does not
+   average out (the cone's own build, the cone model's error).
 
 The fit then reads each box with the height its cone's averaged range implies. ROS-free, no I/O.
 """
@@ -33,7 +33,6 @@ class SizeTrackConfig:
 
     motion_sigma_m: float = 0.03  # 1-sigma of the registered motion per frame (translation)
     max_frames: float = 30.0  # at most this many frames' worth of boxes in a cone's average (forgetting)
-    floor_rel: float = 0.015  # static part of a cone's size-range error (its build): not averaged
     max_missed: int = 2  # frames a cone may be missed before it is forgotten
     #: a pair whose box height differs from the kept cone's moved average by more than this many sigmas is two
     #: cones (the box starts a new average); 0 = off
@@ -86,7 +85,7 @@ class SizeTracks:
         foot ray misses the ground), classes ``cls`` (N,), log box heights ``log_h`` (N,) (px, the box model
         applied) and their per-box variances ``var`` (N,); ``height_of(xy, cls)``: the box height (px) of cones of
         classes ``cls`` standing at ``xy`` (the fit's cone model); ``att_jac`` (N, 2, 2) m/deg and
-        ``att_cov_deg2`` (2, 2): how the feet move with the attitude and how uncertain the prediction is. Returns each cone's averaged log height and its variance (N,), ``floor_rel`` included.
+        ``att_cov_deg2`` (2, 2): how the feet move with the attitude and how uncertain the prediction is. Returns each cone's averaged log height and its variance (N,).
         The state moves to this frame: call once per frame."""
         from ..tracking.egomotion import register_cones  # see reset()
 
@@ -127,7 +126,7 @@ class SizeTracks:
         # 3. fold this frame's boxes in
         di, tj = pairs
         if c.gate_sigmas > 0 and len(di):
-            same = (log_h[di] - prev_log[tj]) ** 2 <= c.gate_sigmas**2 * (prev_var[tj] + var[di] + c.floor_rel**2)
+            same = (log_h[di] - prev_log[tj]) ** 2 <= c.gate_sigmas**2 * (prev_var[tj] + var[di])
             di, tj = di[same], tj[same]
         per_box = var.copy()
         if len(di):
@@ -146,7 +145,7 @@ class SizeTracks:
         self.missed = np.concatenate([np.zeros(int(fin.sum()), np.intp), self.missed[keep_old] + 1])
         self._fin = fin
         self.motion = motion
-        return log_h, var + c.floor_rel**2
+        return log_h, var
 
     def _pitch_offset(self, xy: np.ndarray, cls: np.ndarray, jac_pitch: np.ndarray, cov_deg2: np.ndarray) -> float:
         """The frame's common pitch error (degrees) under which the feet ``xy`` (N, 2) (moving by ``jac_pitch``
@@ -166,6 +165,16 @@ class SizeTracks:
         score = np.exp(-0.5 * np.min(d2, axis=2) / c.inlier_m**2).sum(axis=1)
         best = np.flatnonzero(score >= score.max() - 1e-9)
         return float(offs[best[np.argmin(np.abs(offs[best]))]])  # ties: the one nearest the prediction
+
+    def miss(self) -> None:
+        """A frame without cones to follow: the kept ones move by the prior motion and count as missed."""
+        self.frames += 1
+        moved = self.motion.to_current(self.xy)
+        keep = self.missed < self.cfg.max_missed
+        self.log_h = self.log_h[keep] + np.log(self._dist(self.xy[keep]) / self._dist(moved[keep]))
+        self.var = self.var[keep] + (self.cfg.motion_sigma_m / self._dist(moved[keep])) ** 2
+        self.xy, self.cls, self.missed = moved[keep], self.cls[keep], self.missed[keep] + 1
+        self._fin = np.zeros(0, dtype=bool)
 
     def relocate(self, xy: np.ndarray) -> None:
         """Replace the ground positions of the cones :meth:`average` was last given (N, 2 m; NaN rows kept
