@@ -5,8 +5,6 @@ attitude's pitch error drops against the per-frame fit."""
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 import pytest
 
@@ -25,9 +23,10 @@ TRACK_CLS = np.array([BLUE if y > 0 else YELLOW for _, y in TRACK_XY])
 SCATTER = 0.07  # the box top's 1-sigma, of the box height (the shipped model's measured spread: 0.071)
 
 
-def _drive(frames: int, speed_m: float, pitch_sd: float, seed: int = 0):
+def _drive(frames: int, speed_m: float, pitch_deg: float, seed: int = 0):
     """Per frame: (boxes of the cones 2-22 m ahead, with their tops scattered; their classes; true (pitch, roll);
-    the cones' true rear_axle positions). The body pitch is drawn afresh each frame (1-sigma ``pitch_sd`` deg).
+    the cones' true rear_axle positions). The body pitches as the rendered drives' jitter does (two sines of 1.3 and
+    2.9 Hz at 20 frames/s, amplitudes ``pitch_deg`` and half of it; the roll half the pitch).
     Each box's top row is first put where the fit's cone model has it at the true attitude (the exact boxes of
     ``_cone_boxes`` are off it by up to a pixel: rounding), so what is left is the drawn scatter alone."""
     rng = np.random.default_rng(seed)
@@ -37,7 +36,9 @@ def _drive(frames: int, speed_m: float, pitch_sd: float, seed: int = 0):
     for k in range(frames):
         x0 = k * speed_m
         ahead = (TRACK_XY[:, 0] - x0 > 2.0) & (TRACK_XY[:, 0] - x0 < 22.0)
-        pitch, roll = float(rng.normal(0.0, pitch_sd)), float(rng.normal(0.0, 0.5 * pitch_sd))
+        t = k / 20.0
+        pitch = pitch_deg * (np.sin(2 * np.pi * 1.3 * t) + 0.5 * np.sin(2 * np.pi * 2.9 * t + 1.0))
+        roll = 0.5 * pitch_deg * np.sin(2 * np.pi * 0.9 * t + 2.0)
         sc = SceneCamera(cam, CarPose(x0, 0.0, 0.0, pitch, roll))
         boxes = _cone_boxes(sc, TRACK_XY[ahead], TRACK_CLS[ahead])
         boxes[:, 1] += model.residuals(np.array([pitch, roll]), *model._prepare(boxes, TRACK_CLS[ahead]))
@@ -78,19 +79,20 @@ def test_averaged_heights_follow_the_cones_with_less_scatter():
     assert np.std(averaged) < 0.45 * np.std(single), (np.std(averaged), np.std(single))
 
 
-@pytest.mark.parametrize("speed_m", [0.0, 0.4])
+@pytest.mark.parametrize("speed_m", [0.0, 0.2, 0.4])
 def test_sizes_over_frames_cut_the_pitch_error_of_scattered_boxes(speed_m):
-    """The image attitude on a drive whose body pitch jumps each frame (so the filter across frames cannot average
-    the fits: only the cones' sizes can be): the median pitch error with each cone's size averaged over frames is
-    well under the per-frame fit's, standing and driving."""
+    """The image attitude on a drive whose body pitches by up to 0.6 degree at 1-3 Hz (the filter across frames
+    can average the fits only a little): the median pitch error with each cone's size averaged over frames is
+    under the per-frame fit's, standing and driving (0.2 and 0.4 m a frame: 4 and 8 m/s)."""
     drive = _drive(80, speed_m, 0.4, seed=3)
     errs = {}
     for on in (False, True):
-        est = ConeMapper(_calib()).image_attitude(replace(_config(on), process_sigma_deg=2.0))
+        est = ConeMapper(_calib()).image_attitude(_config(on))
         e = [est.update(boxes, cls).pitch_deg - truth[0] for boxes, cls, truth, _ in drive]
         errs[on] = float(np.median(np.abs(e[20:])))
-    assert errs[True] < 0.7 * errs[False], errs
-    assert errs[True] < 0.1, errs
+    # measured when written: 0.054 -> 0.032 standing, 0.057 -> 0.017 at 4 m/s, 0.048 -> 0.035 at 8 m/s
+    assert errs[True] < 0.8 * errs[False], errs
+    assert errs[True] < 0.05, errs
 
 
 def test_a_single_frame_has_no_history():

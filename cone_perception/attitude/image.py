@@ -105,10 +105,14 @@ class AttitudeCounts:
     rejected: int = 0
     #: frames mapped with the calibration's H because the image attitude did not beat it (any outcome above)
     calibration: int = 0
+    #: cones whose box heights went into an average over frames (``size_frames``), and of them those followed
+    #: from an earlier frame (the rest start their average)
+    size_cones: int = 0
+    size_followed: int = 0
 
     def as_dict(self) -> dict[str, int]:
         return {"fitted": self.fitted, "too_few_cones": self.too_few, "rejected_beyond_limit": self.rejected,
-                "used_calibration": self.calibration}
+                "used_calibration": self.calibration, "size_cones": self.size_cones, "size_followed": self.size_followed}
 
 
 class ImageAttitude:
@@ -367,7 +371,10 @@ class ImageAttitude:
         g = self.ground_feet(np.array([theta, theta + (eps, 0.0), theta + (0.0, eps)]), rays)
         jac = np.nan_to_num(np.stack([g[1] - g[0], g[2] - g[0]], axis=2) / eps)  # (N, 2, 2) m/deg
         cov = np.eye(2) * c.prior_sigma_deg**2 if cov_deg2 is None else np.asarray(cov_deg2, dtype=np.float64)
+        before = sizes.matched
         avg, var_avg = sizes.average(g[0], cls, log_h, var, self.model_heights, jac, cov)
+        self.counts.size_cones += len(cls)
+        self.counts.size_followed += sizes.matched - before
         h = np.exp(avg)
         return v_foot - h, np.sqrt(c.sigma_px**2 + h**2 * (var_avg + c.sigma_rel**2))
 
