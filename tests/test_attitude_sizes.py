@@ -54,26 +54,25 @@ def _config(size_frames: bool) -> ImageAttitudeConfig:
 
 
 def test_averaged_heights_follow_the_cones_with_less_scatter():
-    """The heights SizeTracks returns against each cone's true box height (the fit's cone model at its place):
-    no more bias than the boxes' own while the car drives at 0.5 m a frame (the heights grow by up to 25 % a frame), and a scatter well under
-    one box's once the cones have been followed for a while."""
+    """The heights SizeTracks returns against each cone's true box height (the fit's cone model at its true place):
+    within 1 % of the boxes' own median while the car drives at 0.5 m a frame (a cone's height grows by up to 25 %
+    a frame), and a scatter well under one box's once the cones have been followed for a while (measured when
+    written: medians +0.3 % / +0.8 %, spreads 0.070 / 0.030)."""
     est = ConeMapper(_calib()).image_attitude(_config(True))
     single, averaged = [], []
     for k, (boxes, cls, truth, true_xy) in enumerate(_drive(60, 0.5, 0.0)):
-        sel = est._select(boxes, cls)
+        sel = est._select(boxes, cls, by_size=False) & (np.hypot(*true_xy.T) < 20.0)  # as fit() cuts: by the feet
         rays, v_top, c = est._prepare(boxes[sel], cls[sel])
         v_top_avg, _ = est._average_sizes(est.sizes, np.zeros(2), rays, v_top, c, SCATTER, None)
-        est.sizes.relocate(est.ground_feet(np.zeros(2), rays)[0])
+        est.sizes.relocate(est.centres(est.ground_feet(np.zeros(2), rays)[0], c))
         v_foot = est.K[1, 1] * rays[:, 1] + est.K[1, 2]
-        feet = est.ground_feet(np.zeros(2), rays)[0]
-        true_h = est.model_heights(feet, c)
+        true_h = est.model_heights(true_xy[sel], c)  # the cones' true places
         if k >= 20:
             single.append(np.log(v_foot - v_top) - np.log(true_h))
             averaged.append(np.log(v_foot - v_top_avg) - np.log(true_h))
     single, averaged = np.concatenate(single), np.concatenate(averaged)
     assert est.sizes.matched / est.sizes.cones > 0.85  # the cones are followed
-    # moved with the car without a lag: the same median as the boxes' own (the cone model's -2 % against these
-    # exact boxes is in both)
+    # moved with the car without a lag or a lead: the boxes' own median
     assert abs(np.median(averaged) - np.median(single)) < 0.01, (np.median(averaged), np.median(single))
     assert np.std(single) > 0.06  # the boxes scatter as drawn
     assert np.std(averaged) < 0.45 * np.std(single), (np.std(averaged), np.std(single))
@@ -90,7 +89,7 @@ def test_sizes_over_frames_cut_the_pitch_error_of_scattered_boxes(speed_m):
         est = ConeMapper(_calib()).image_attitude(_config(on))
         e = [est.update(boxes, cls).pitch_deg - truth[0] for boxes, cls, truth, _ in drive]
         errs[on] = float(np.median(np.abs(e[20:])))
-    # measured when written: 0.054 -> 0.032 standing, 0.057 -> 0.017 at 4 m/s, 0.048 -> 0.035 at 8 m/s
+    # measured when written: 0.054 -> 0.040 standing, 0.057 -> 0.028 at 4 m/s, 0.048 -> 0.038 at 8 m/s
     assert errs[True] < 0.8 * errs[False], errs
     assert errs[True] < 0.05, errs
 
@@ -119,3 +118,15 @@ def test_size_tracks_forget_cones_missed_too_long_and_reset():
     assert len(t.xy) == 0  # missed twice: forgotten
     t.reset()
     assert t.cones == t.matched == 0
+
+
+def test_the_rendered_table_is_read_per_frame():
+    """Boxes read through the rendered table (no box model: a synthetic camera's detector, within tenths of a pixel)
+    have no scatter to average: `update` gives what it gave per frame, and no cone is averaged."""
+    drive = _drive(30, 0.3, 0.4, seed=7)
+    out = []
+    for on in (False, True):
+        est = ConeMapper(_calib()).image_attitude(ImageAttitudeConfig(size_frames=on))
+        out.append([est.update(boxes, cls) for boxes, cls, _, _ in drive])
+        assert est.counts.size_cones == 0
+    assert out[0] == out[1]

@@ -91,7 +91,9 @@ class ImageAttitudeConfig:
     trust_max_sigma_deg: float = 1.0
     #: each cone's size-based range averaged over the frames it is followed (:mod:`.sizes`): the fit reads its
     #: box with the height the average implies, so the boxes' scatter averages out across frames (the filter,
-    #: :meth:`ImageAttitude.update`, only; a single frame has no history)
+    #: :meth:`ImageAttitude.update`, only; a single frame has no history). With a measured ``box_model`` only:
+    #: the rendered table's boxes have no scatter to average, and the average would carry a box's bias at one
+    #: range to the next (docs/benchmarks.md, "Sizes over frames")
     size_frames: bool = True
     size_tracks: SizeTrackConfig = SizeTrackConfig()
 
@@ -198,8 +200,9 @@ class ImageAttitude:
         return z - self.bias
 
     # -- model ------------------------------------------------------------------------------------
-    def _select(self, boxes: np.ndarray, class_ids: np.ndarray) -> np.ndarray:
-        """(N,) bool: boxes that may be standing, whole cones of a known size."""
+    def _select(self, boxes: np.ndarray, class_ids: np.ndarray, by_size: bool = True) -> np.ndarray:
+        """(N,) bool: boxes that may be standing, whole cones of a known size (``by_size``: within ``max_range_m`` by
+        their height)."""
         c = self.cfg
         b = boxes
         known = (class_ids >= 0) & (class_ids < NUM_CLASSES)
@@ -208,7 +211,7 @@ class ImageAttitude:
         w = np.maximum(b[:, 2] - b[:, 0], 1e-6)
         h = np.maximum(b[:, 3] - b[:, 1], 1e-6)
         aspect_ok = np.abs(np.log(w / h * (hm / self._base_m[cls]))) <= c.aspect_tol  # NaN (unknown size): False
-        near = self.K[1, 1] * hm <= c.max_range_m * h
+        near = self.K[1, 1] * hm <= c.max_range_m * h if by_size else True
         m = c.edge_margin_px
         inside = (b[:, 0] > m) & (b[:, 2] < self.W - m) & (b[:, 1] > self.band[0] + m) & (b[:, 3] < self.band[1] - m)
         return known & aspect_ok & (h >= c.min_height_px) & inside & near
@@ -238,18 +241,27 @@ class ImageAttitude:
         return R_F_C, p, t[:, :, None] * d[:, :, :2], hits
 
     def model_heights(self, xy_m: np.ndarray, cls: np.ndarray) -> np.ndarray:
-        """(N,) undistorted px from the foot row up to the tip's row of cones of classes ``cls`` (N,) whose foot
-        points stand at rear_axle ``xy_m`` (N, 2) m, at zero attitude (the fit's cone model); NaN behind the camera."""
-        xy = np.asarray(xy_m, dtype=np.float64).reshape(-1, 2)
-        away = xy - self.p0[:2]
+        """(N,) undistorted px from the foot row up to the tip's row of cones of classes ``cls`` (N,) whose centres
+        stand at rear_axle ``xy_m`` (N, 2) m (:meth:`centres`), at zero attitude (the fit's cone model); NaN behind
+        the camera."""
+        away = np.asarray(xy_m, dtype=np.float64).reshape(-1, 2) - self.p0[:2]
         dist = np.maximum(np.hypot(away[:, 0], away[:, 1]), 1e-6)
-        tip = away * ((dist + self.off[cls] + self._tip_r_m[cls]) / dist)[:, None]
-        P = np.stack([np.column_stack([away, np.full(len(xy), -self.p0[2])]),
+        foot = away * ((dist - self.off[cls]) / dist)[:, None]
+        tip = away * ((dist + self._tip_r_m[cls]) / dist)[:, None]
+        P = np.stack([np.column_stack([foot, np.full(len(foot), -self.p0[2])]),
                       np.column_stack([tip, self._height_m[cls] - self.p0[2]])])  # (2, N, 3) minus camera
         Pc = P @ self.R_F_C0  # optical frame
         with np.errstate(invalid="ignore", divide="ignore"):
             v = self.K[1, 1] * Pc[:, :, 1] / Pc[:, :, 2]
         return np.where(np.all(Pc[:, :, 2] > 1e-6, axis=0), v[0] - v[1], np.nan)
+
+    def centres(self, feet_m: np.ndarray, cls: np.ndarray) -> np.ndarray:
+        """(..., N, 2) rear_axle ground points of the cones' feet -> their centres (m): each moved away from the
+        camera by its class's foot offset, as the fit's cone model (and the mapping) places them. A box's foot is
+        the cone's nearest edge, which turns with the cone's bearing as the car passes; the centre stands still."""
+        away = np.asarray(feet_m, dtype=np.float64) - self.p0[:2]
+        dist = np.maximum(np.hypot(away[..., 0], away[..., 1]), 1e-6)
+        return self.p0[:2] + away * ((dist + self.off[cls]) / dist)[..., None]
 
     def ground_feet(self, thetas_deg: np.ndarray, rays: np.ndarray) -> np.ndarray:
         """(k, 2) attitudes (degrees) -> (k, N, 2) rear_axle ground points (m) of the foot rays (N, 3); NaN
@@ -293,24 +305,32 @@ class ImageAttitude:
             boxes = c.box_model.correct(boxes)
         class_ids = np.asarray(class_ids, dtype=np.intp).ravel()
         self.last_scale = np.inf
-        sel = self._select(boxes, class_ids)
+        # the rendered table (no box model): boxes within tenths of a pixel, no scatter to average over frames
+        averaging = sizes is not None and c.box_model is not None
+        theta = np.zeros(2) if start_deg is None else np.clip(np.asarray(start_deg, dtype=np.float64), -2.0, 2.0)
+        # averaging: cones cut at max_range_m by their feet, not by their heights (a cut by the scattered height lets
+        # in the cones whose boxes came out tall, and their averages would start tall)
+        sel = self._select(boxes, class_ids, by_size=not averaging)
+        if averaging and int(sel.sum()) >= c.min_cones:
+            rays, _, _ = self._prepare(boxes[sel], class_ids[sel])
+            away = self.ground_feet(theta, rays)[0] - self.p0[:2]
+            with np.errstate(invalid="ignore"):
+                sel[sel] = np.hypot(away[:, 0], away[:, 1]) <= c.max_range_m  # NaN (misses the ground): out
         if int(sel.sum()) < c.min_cones:
-            if sizes is not None:
+            if averaging:
                 sizes.miss()
             return None
         rays, v_top, cls = self._prepare(boxes[sel], class_ids[sel])
         h = boxes[sel, 3] - boxes[sel, 1]
         rel = c.sigma_rel if c.box_model is None else max(c.sigma_rel, c.box_model.sigma_rel)
         sigma = np.sqrt(2.0 * c.sigma_px**2 + (rel * h) ** 2)
-        theta = np.zeros(2) if start_deg is None else np.clip(np.asarray(start_deg, dtype=np.float64), -2.0, 2.0)
-        if sizes is None:
+        if not averaging:
             return self._solve(rays, v_top, cls, sigma, theta)
         # the box model's spread averages over frames, the cone model's own (sigma_rel) not
-        v_top, sigma = self._average_sizes(sizes, theta, rays, v_top, cls,
-                                           0.0 if c.box_model is None else c.box_model.sigma_rel, start_cov_deg2)
+        v_top, sigma = self._average_sizes(sizes, theta, rays, v_top, cls, c.box_model.sigma_rel, start_cov_deg2)
         res = self._solve(rays, v_top, cls, sigma, theta)
         if res is not None:  # the followed cones' places, with this frame's attitude
-            sizes.relocate(self.ground_feet(res[0], rays)[0])
+            sizes.relocate(self.centres(self.ground_feet(res[0], rays)[0], cls))
         return res
 
     def _solve(self, rays: np.ndarray, v_top: np.ndarray, cls: np.ndarray, sigma: np.ndarray, theta: np.ndarray
@@ -368,7 +388,7 @@ class ImageAttitude:
         log_h = np.log(hu)
         var = rel**2 + (c.sigma_px / hu) ** 2  # the top row's scatter, relative
         eps = 0.1
-        g = self.ground_feet(np.array([theta, theta + (eps, 0.0), theta + (0.0, eps)]), rays)
+        g = self.centres(self.ground_feet(np.array([theta, theta + (eps, 0.0), theta + (0.0, eps)]), rays), cls)
         jac = np.nan_to_num(np.stack([g[1] - g[0], g[2] - g[0]], axis=2) / eps)  # (N, 2, 2) m/deg
         cov = np.eye(2) * c.prior_sigma_deg**2 if cov_deg2 is None else np.asarray(cov_deg2, dtype=np.float64)
         before = sizes.matched

@@ -33,13 +33,17 @@ class SizeTrackConfig:
 
     motion_sigma_m: float = 0.03  # 1-sigma of the registered motion per frame (translation)
     max_frames: float = 30.0  # at most this many frames' worth of boxes in a cone's average (forgetting)
+    #: forgetting as the cone's height changes: the average's variance grows by exp(|change of log height| /
+    #: this) per frame, so boxes of a cone seen at another range weigh less (a detector's box bias changes with
+    #: the box's size); 0 = off
+    forget_log_h: float = 0.0
     max_missed: int = 2  # frames a cone may be missed before it is forgotten
     #: a pair whose box height differs from the kept cone's moved average by more than this many sigmas is two
     #: cones (the box starts a new average); 0 = off
     gate_sigmas: float = 3.0
     #: moving a cone's height with the car: from the distance its averaged height says (True) or from its foot
     #: mapped with the fitted attitude (False)
-    place_by_size: bool = False
+    place_by_size: bool = True
     inlier_m: float = 0.3  # registration: a cone within this of its predicted place is the same cone
     search_m: float = 1.5  # registration: candidate pairs within this after the prior motion
     #: before registering: the frame's common pitch error searched within +-``pitch_search_sigmas`` of the
@@ -123,6 +127,8 @@ class SizeTracks:
         ratio = np.where(np.isfinite(ratio) & (ratio > 0), ratio, d0 / d1)
         prev_log = self.log_h + np.log(ratio)
         prev_var = self.var * ((d0 / d1) ** 2 if c.place_by_size else 1.0) + (c.motion_sigma_m / d1) ** 2
+        if c.forget_log_h > 0:
+            prev_var = prev_var * np.exp(np.abs(np.log(ratio)) / c.forget_log_h)
         # 3. fold this frame's boxes in
         di, tj = pairs
         if c.gate_sigmas > 0 and len(di):

@@ -50,8 +50,10 @@ DESIGNS = [
     ("gate 2.5", {"sizes": {"gate_sigmas": 2.5}}),
     ("gate 4", {"sizes": {"gate_sigmas": 4.0}}),
     ("inlier 0.3 m, gate 2.5", {"sizes": {"inlier_m": 0.3, "gate_sigmas": 2.5}}),
+    ("forget by height change 0.1", {"sizes": {"forget_log_h": 0.1}}),
+    ("forget by height change 0.25", {"sizes": {"forget_log_h": 0.25}}),
+    ("forget by height change 0.5", {"sizes": {"forget_log_h": 0.5}}),
     ("moved from the feet", {"sizes": {"place_by_size": False}}),
-    ("moved from the feet, inlier 0.3 m", {"sizes": {"place_by_size": False, "inlier_m": 0.3}}),
 ]
 
 
@@ -96,6 +98,7 @@ def main() -> None:
     ap.add_argument("bags", nargs="+")
     ap.add_argument("--jitter", type=float, default=None, help="top spread (default: the box model's)")
     ap.add_argument("--no-strip", action="store_true", help="the band alone (no far strip)")
+    ap.add_argument("--as-is", action="store_true", help="boxes as rendered, read with the rendered table (issue 26's case)")
     ap.add_argument("--designs", default="", help="comma-separated design numbers (default all)")
     args = ap.parse_args()
     bm = read_box_model(default_model_path())
@@ -103,11 +106,12 @@ def main() -> None:
     data = {}
     for i, b in enumerate(bags):
         d = dict(cached(b, not args.no_strip))
-        look = BoxBehaviour(bm, args.jitter, seed=i)
-        d["frames"] = [(st, look(boxes)) for st, boxes in d["frames"]]
+        if not args.as_is:
+            look = BoxBehaviour(bm, args.jitter, seed=i)
+            d["frames"] = [(st, look(boxes)) for st, boxes in d["frames"]]
         data[b] = d
-    print(f"drives {', '.join(Path(b).name for b in bags)}; real boxes, top spread "
-          f"{bm.sigma_rel if args.jitter is None else args.jitter}; {'no strip' if args.no_strip else 'strip'}")
+    boxes = "as rendered" if args.as_is else f"real boxes, top spread {bm.sigma_rel if args.jitter is None else args.jitter}"
+    print(f"drives {', '.join(Path(b).name for b in bags)}; {boxes}; {'no strip' if args.no_strip else 'strip'}")
     print("| design | 7-15 m per drive | 15-25 m per drive | pitch / roll err (deg) | followed | frames to the calibration |")
     print("|---|---|---|---|---|---|")
     pick = {int(x) for x in args.designs.split(",") if x}
@@ -116,7 +120,7 @@ def main() -> None:
             continue
         cfg = dict(cfg)
         st = cfg.pop("sizes", {})
-        config = replace(ImageAttitudeConfig(box_model=bm), size_tracks=replace(SIZES, **st), **cfg)
+        config = replace(ImageAttitudeConfig(box_model=None if args.as_is else bm), size_tracks=replace(SIZES, **st), **cfg)
         r = np.array([run_drive(b, data[b], config) for b in bags])
         print(f"| {name} | " + " / ".join(f"{x:.3f}" for x in r[:, 0]) + " | " + " / ".join(f"{x:.3f}" for x in r[:, 1])
               + " | " + " / ".join(f"{p:.3f}/{q:.3f}" for p, q in r[:, 2:4]) + " | "
