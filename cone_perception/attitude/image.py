@@ -95,6 +95,7 @@ class ImageAttitudeConfig:
     #: the rendered table's boxes have no scatter to average, and the average would carry a box's bias at one
     #: range to the next (docs/benchmarks.md, "Sizes over frames")
     size_frames: bool = True
+    size_rendered: bool = False  # average the rendered table's boxes too (measured worse, see above)
     size_tracks: SizeTrackConfig = SizeTrackConfig()
 
 
@@ -306,7 +307,7 @@ class ImageAttitude:
         class_ids = np.asarray(class_ids, dtype=np.intp).ravel()
         self.last_scale = np.inf
         # the rendered table (no box model): boxes within tenths of a pixel, no scatter to average over frames
-        averaging = sizes is not None and c.box_model is not None
+        averaging = sizes is not None and (c.box_model is not None or c.size_rendered)
         theta = np.zeros(2) if start_deg is None else np.clip(np.asarray(start_deg, dtype=np.float64), -2.0, 2.0)
         # averaging: cones cut at max_range_m by their feet, not by their heights (a cut by the scattered height lets
         # in the cones whose boxes came out tall, and their averages would start tall)
@@ -327,7 +328,8 @@ class ImageAttitude:
         if not averaging:
             return self._solve(rays, v_top, cls, sigma, theta)
         # the box model's spread averages over frames, the cone model's own (sigma_rel) not
-        v_top, sigma = self._average_sizes(sizes, theta, rays, v_top, cls, c.box_model.sigma_rel, start_cov_deg2)
+        v_top, sigma = self._average_sizes(sizes, theta, rays, v_top, cls,
+                                           0.0 if c.box_model is None else c.box_model.sigma_rel, start_cov_deg2)
         res = self._solve(rays, v_top, cls, sigma, theta)
         if res is not None:  # the followed cones' places, with this frame's attitude
             sizes.relocate(self.centres(self.ground_feet(res[0], rays)[0], cls))
