@@ -390,9 +390,14 @@ class ImageAttitude:
         log_h = np.log(hu)
         var = rel**2 + (c.sigma_px / hu) ** 2  # the top row's scatter, relative
         eps = 0.1
-        g = self.centres(self.ground_feet(np.array([theta, theta + (eps, 0.0), theta + (0.0, eps)]), rays), cls)
-        jac = np.nan_to_num(np.stack([g[1] - g[0], g[2] - g[0]], axis=2) / eps)  # (N, 2, 2) m/deg
         cov = np.eye(2) * c.prior_sigma_deg**2 if cov_deg2 is None else np.asarray(cov_deg2, dtype=np.float64)
+        for k in range(2):  # the cones mapped with the prediction, then with the frame's common pitch error taken off
+            g = self.centres(self.ground_feet(np.array([theta, theta + (eps, 0.0), theta + (0.0, eps)]), rays), cls)
+            jac = np.nan_to_num(np.stack([g[1] - g[0], g[2] - g[0]], axis=2) / eps)  # (N, 2, 2) m/deg
+            off = sizes.pitch_offset(g[0], cls, jac[:, :, 0], cov) if k == 0 else 0.0
+            if off == 0.0:
+                break
+            theta = theta - (off, 0.0)  # pitch_offset: the cones as they would lie at theta - off
         before = sizes.matched
         avg, var_avg = sizes.average(g[0], cls, log_h, var, self.model_heights, jac, cov)
         self.counts.size_cones += len(cls)

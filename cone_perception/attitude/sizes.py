@@ -44,7 +44,7 @@ class SizeTrackConfig:
     #: moving a cone's height with the car: from the distance its averaged height says (True) or from its foot
     #: mapped with the fitted attitude (False)
     place_by_size: bool = True
-    inlier_m: float = 0.3  # registration: a cone within this of its predicted place is the same cone
+    inlier_m: float = 0.5  # registration: a cone within this of its predicted place is the same cone
     search_m: float = 1.5  # registration: candidate pairs within this after the prior motion
     #: before registering: the frame's common pitch error searched within +-``pitch_search_sigmas`` of the
     #: prediction's 1-sigma (at most ``pitch_search_max_deg``) in ``pitch_search_steps`` steps, the one under which
@@ -104,10 +104,7 @@ class SizeTracks:
         motion, pairs = self.motion, (np.zeros(0, np.intp), np.zeros(0, np.intp))
         idx = np.flatnonzero(fin)
         if len(self.xy) and len(idx):
-            xs = xy[idx]
-            if att_jac is not None and att_cov_deg2 is not None:
-                xs = xs - att_jac[idx, :, 0] * self._pitch_offset(xs, cls[idx], att_jac[idx, :, 0], att_cov_deg2)
-            reg = register_cones(xs, cls[idx], self.xy, self.cls, self.motion, search_m=c.search_m,
+            reg = register_cones(xy[idx], cls[idx], self.xy, self.cls, self.motion, search_m=c.search_m,
                                  inlier_m=c.inlier_m, det_att_jac=None if att_jac is None else att_jac[idx],
                                  att_cov_deg2=att_cov_deg2)
             if reg.ok:
@@ -153,24 +150,36 @@ class SizeTracks:
         self.motion = motion
         return log_h, var
 
-    def _pitch_offset(self, xy: np.ndarray, cls: np.ndarray, jac_pitch: np.ndarray, cov_deg2: np.ndarray) -> float:
-        """The frame's common pitch error (degrees) under which the feet ``xy`` (N, 2) (moving by ``jac_pitch``
-        (N, 2) m/deg) best meet the kept cones moved by the prior motion (config ``pitch_search_*``)."""
+    def pitch_offset(self, xy: np.ndarray, cls: np.ndarray, jac_pitch: np.ndarray, cov_deg2: np.ndarray) -> float:
+        """The frame's common pitch error (degrees) under which its cones ``xy`` (N, 2) (moving by ``jac_pitch``
+        (N, 2) m/deg; NaN rows ignored), classes ``cls``, best meet the kept cones moved by the prior motion (config
+        ``pitch_search_*``; ``cov_deg2``: the prediction's covariance): the caller maps them again with it before
+        :meth:`average` (the registration then starts near the truth; a linear correction was not enough for far
+        cones). 0 without kept cones."""
         from ..classes import UNKNOWN
 
         c = self.cfg
+        fin = np.all(np.isfinite(xy), axis=1)
+        if not len(self.xy) or not fin.any():
+            return 0.0
+        xy, cls, jac_pitch = xy[fin], np.asarray(cls)[fin], jac_pitch[fin]
         span = min(c.pitch_search_sigmas * float(np.sqrt(max(cov_deg2[0, 0], 0.0))), c.pitch_search_max_deg)
         if span <= 0 or c.pitch_search_steps < 2:
             return 0.0
-        offs = np.linspace(-span, span, c.pitch_search_steps)
         pred = self.motion.to_current(self.xy)
-        p = xy[None, :, :] - offs[:, None, None] * jac_pitch[None]  # (S, N, 2)
-        d2 = np.sum((p[:, :, None, :] - pred[None, None, :, :]) ** 2, axis=3)  # (S, N, M)
         dc, tc = cls[:, None], self.cls[None, :]
-        d2[:, (dc != tc) & (dc != UNKNOWN) & (tc != UNKNOWN)] = np.inf
-        score = np.exp(-0.5 * np.min(d2, axis=2) / c.inlier_m**2).sum(axis=1)
-        best = np.flatnonzero(score >= score.max() - 1e-9)
-        return float(offs[best[np.argmin(np.abs(offs[best]))]])  # ties: the one nearest the prediction
+        other = (dc != tc) & (dc != UNKNOWN) & (tc != UNKNOWN)
+        centre, step, kernel = 0.0, 2.0 * span / (c.pitch_search_steps - 1), c.inlier_m
+        for offs in (np.linspace(-span, span, c.pitch_search_steps), None):
+            if offs is None:  # then finer around the best, with a narrower kernel
+                offs, kernel = centre + np.linspace(-step, step, 11), 0.5 * c.inlier_m
+            p = xy[None, :, :] - offs[:, None, None] * jac_pitch[None]  # (S, N, 2)
+            d2 = np.sum((p[:, :, None, :] - pred[None, None, :, :]) ** 2, axis=3)  # (S, N, M)
+            d2[:, other] = np.inf
+            score = np.exp(-0.5 * np.min(d2, axis=2) / kernel**2).sum(axis=1)
+            best = np.flatnonzero(score >= score.max() - 1e-9)
+            centre = float(offs[best[np.argmin(np.abs(offs[best] - centre))]])  # ties: the one nearest the last
+        return centre
 
     def miss(self) -> None:
         """A frame without cones to follow: the kept ones move by the prior motion and count as missed."""

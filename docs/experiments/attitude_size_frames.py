@@ -41,7 +41,7 @@ DESIGNS = [
     ("max_frames 60", {"sizes": {"max_frames": 60.0}}),
     ("motion sigma 0.01 m", {"sizes": {"motion_sigma_m": 0.01}}),
     ("motion sigma 0.08 m", {"sizes": {"motion_sigma_m": 0.08}}),
-    ("inlier 0.5 m", {"sizes": {"inlier_m": 0.5}}),
+    ("inlier 0.3 m", {"sizes": {"inlier_m": 0.3}}),
     ("no pitch search", {"sizes": {"pitch_search_steps": 0}}),
     ("gate off", {"sizes": {"gate_sigmas": 0.0}}),
     ("missed 5", {"sizes": {"max_missed": 5}}),
@@ -53,6 +53,8 @@ DESIGNS = [
     ("process sigma 1.0 deg", {"process_sigma_deg": 1.0}),
     ("range 25 m", {"max_range_m": 25.0}),
     ("rendered table averaged too (with --as-is)", {"size_rendered": True}),
+    ("inlier 0.8 m", {"sizes": {"inlier_m": 0.8}}),
+    ("inlier 0.5 m, process sigma 1.0 deg", {"sizes": {"inlier_m": 0.5}, "process_sigma_deg": 1.0}),
 ]
 
 
