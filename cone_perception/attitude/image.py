@@ -10,7 +10,8 @@ walk decaying to zero): frames with too few usable cones hold the last estimate,
 fit beyond :data:`~cone_perception.attitude.model.MAX_ABS_DEG`, or whose residuals are larger than
 its cone model explains, is rejected and counted; a frame whose estimate is too uncertain to beat the
 calibrated H is mapped with the calibration (counted). With a measured box model of the detector
-(:mod:`.boxes`) the boxes are first corrected to the labelled cones'. ROS-free.
+(:mod:`.boxes`) the boxes are first corrected to the labelled cones', and the filter reads each box with its
+cone's height averaged over the frames it was followed (:mod:`.sizes`, ``size_frames``). ROS-free.
 """
 
 from __future__ import annotations

@@ -1,23 +1,29 @@
-"""Each cone's size-based range averaged over frames (:class:`SizeTracks`), for the image fit (issue 27).
+"""Each cone's box height averaged over frames (:class:`SizeTracks`), for the image fit (issue 27).
 
 A box's height says its cone's range, but on real detectors only to about 7 % per box, drawn anew each
 frame; its foot row says the range precisely, given the attitude. The image fit (:mod:`.image`) weighs the
 two against each other, so a frame's pitch carries the scatter of its dozen box heights (0.15-0.2 degree).
-A cone stands still on the ground: followed from frame to frame, its size-based ranges of all frames are
-one measurement, moved by the car's motion in between. :class:`SizeTracks` keeps, per cone seen, the log of
-its size-based range (the camera's horizontal distance) and its variance; each frame it
+A cone stands still on the ground: followed from frame to frame, its box heights of all frames are one
+measurement, moved by the car's motion in between. :class:`SizeTracks` keeps, per cone seen, its ground
+position (its centre, in the last frame's ``rear_axle``), the log of its averaged box height and that
+average's variance. Each frame the fit (:meth:`~cone_perception.attitude.image.ImageAttitude._average_sizes`)
+maps its cones' centres with the predicted attitude, asks :meth:`SizeTracks.pitch_offset` for the frame's
+common pitch error (a search: under which offset most cones lie near a kept one moved by the last motion)
+and maps them again with it taken off; then :meth:`SizeTracks.average`
 
-1. maps the frame's feet to the ground with the attitude the filter predicts and registers them against the
-   previous frame's cones (:func:`~cone_perception.tracking.egomotion.register_cones`: the car's planar
-   motion and which cone is which; the frame's common attitude error is estimated alongside and dropped,
-   with the attitude Jacobians of the feet);
-2. moves each followed cone's log range by the motion (the log ratio of its camera distances after and
-   before), adding the motion's error ``motion_sigma_m`` over its distance to the variance;
-3. folds in this frame's box height (inverse variances) and returns each cone's average and its variance (at
-   least the per-box variance over ``max_frames``: old frames are forgotten). The caller adds what does not
-   average out (the cone's own build, the cone model's error).
+1. registers them against the kept cones (:func:`~cone_perception.tracking.egomotion.register_cones`: the
+   car's planar motion and which cone is which; the frame's remaining common attitude error is estimated
+   alongside and dropped, with the attitude Jacobians of the cones);
+2. moves each kept cone's log height with the car: the ratio of the cone model's heights (``height_of``)
+   after and before the motion, at the distance its averaged height says (``place_by_size``; at its foot
+   the attitude's error would feed back into the heights), its variance growing as the cone comes nearer
+   (the distances' ratio, squared) and by the motion's error (``motion_sigma_m`` over the distance);
+3. folds in this frame's box height (inverse variances; a pair more than ``gate_sigmas`` apart is two
+   cones) and returns each cone's average and its variance (at least the per-box variance over
+   ``max_frames``). The caller adds what does not average out (the cone's own build, the cone model's
+   error).
 
-The fit then reads each box with the height its cone's averaged range implies. ROS-free, no I/O.
+ROS-free, no I/O.
 """
 
 from __future__ import annotations
@@ -46,9 +52,10 @@ class SizeTrackConfig:
     place_by_size: bool = True
     inlier_m: float = 0.5  # registration: a cone within this of its predicted place is the same cone
     search_m: float = 1.5  # registration: candidate pairs within this after the prior motion
-    #: before registering: the frame's common pitch error searched within +-``pitch_search_sigmas`` of the
-    #: prediction's 1-sigma (at most ``pitch_search_max_deg``) in ``pitch_search_steps`` steps, the one under which
-    #: most feet lie near a kept cone moved by the prior motion (a Gaussian score of ``inlier_m``)
+    #: before registering (:meth:`SizeTracks.pitch_offset`): the frame's common pitch error searched within
+    #: +-``pitch_search_sigmas`` of the prediction's 1-sigma (at most ``pitch_search_max_deg``) in
+    #: ``pitch_search_steps`` steps, the one under which most cones lie near a kept cone moved by the prior motion
+    #: (a Gaussian score of ``inlier_m``), then 11 steps around it (half the kernel); 0 steps = off
     pitch_search_sigmas: float = 3.0
     pitch_search_max_deg: float = 1.5
     pitch_search_steps: int = 31
@@ -66,9 +73,9 @@ class SizeTracks:
 
     def reset(self) -> None:
         """Forget every cone and the motion (a new drive)."""
-        self.xy = np.zeros((0, 2))  # ground positions of the cones kept, in the last frame's rear_axle (m)
+        self.xy = np.zeros((0, 2))  # ground positions (centres) of the cones kept, in the last frame's rear_axle (m)
         self.cls = np.zeros(0, dtype=np.intp)
-        self.log_h = np.zeros(0)  # averaged log box height (log px), at ``xy``
+        self.log_h = np.zeros(0)  # averaged log box height (log px, undistorted), at ``xy``
         self.var = np.zeros(0)  # its variance (the averaged part only)
         self.missed = np.zeros(0, dtype=np.intp)
         from ..tracking.egomotion import Motion2D  # here: tracking imports the mapping, which imports attitude
@@ -85,12 +92,13 @@ class SizeTracks:
     def average(self, xy: np.ndarray, cls: np.ndarray, log_h: np.ndarray, var: np.ndarray,
                 height_of, att_jac: np.ndarray | None = None, att_cov_deg2: np.ndarray | None = None
                 ) -> tuple[np.ndarray, np.ndarray]:
-        """One frame's cones: ground feet ``xy`` (N, 2) m (mapped with the predicted attitude; a NaN row: its
-        foot ray misses the ground), classes ``cls`` (N,), log box heights ``log_h`` (N,) (px, the box model
-        applied) and their per-box variances ``var`` (N,); ``height_of(xy, cls)``: the box height (px) of cones of
-        classes ``cls`` standing at ``xy`` (the fit's cone model); ``att_jac`` (N, 2, 2) m/deg and
-        ``att_cov_deg2`` (2, 2): how the feet move with the attitude and how uncertain the prediction is. Returns each cone's averaged log height and its variance (N,).
-        The state moves to this frame: call once per frame."""
+        """One frame's cones: ground positions ``xy`` (N, 2) m (centres, mapped with the frame's best attitude guess;
+        a NaN row: its foot ray misses the ground), classes ``cls`` (N,), log box heights ``log_h`` (N,) (px, the box
+        model applied) and their per-box variances ``var`` (N,); ``height_of(xy, cls)``: the box height (px) of cones
+        of classes ``cls`` standing at ``xy`` (the fit's cone model); ``att_jac`` (N, 2, 2) m/deg and
+        ``att_cov_deg2`` (2, 2): how the positions move with the attitude and how uncertain the guess is. Returns
+        each cone's averaged log height and its variance (N,). The state moves to this frame: call once per
+        frame."""
         from ..tracking.egomotion import register_cones  # see reset()
 
         c = self.cfg
