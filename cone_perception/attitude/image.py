@@ -73,7 +73,10 @@ class ImageAttitudeConfig:
     #: ``still_ratio`` (pitch and roll) the body is taken as still and the estimate returns to zero,
     #: fully at ``still_ratio - still_ramp``; 0 frames = off
     still_frames: float = 40.0
-    still_min_frames: float = 10.0  # fits before the test judges (until then: moving)
+    still_min_frames: float = 10.0  # fits before the test judges (until then: moving, or see still_start_sigmas)
+    #: until the test judges, a fit within this many of its own sigmas of zero (pitch and roll) is taken as a still
+    #: body (the calibration's zero), fully moving one sigma further; 0 = off (moving)
+    still_start_sigmas: float = 1.0
     still_ratio: float = 1.3
     still_ramp: float = 0.4
     #: ... and only while the fits' mean stays within this (degrees, pitch and roll; ramp of half of it):
@@ -176,7 +179,10 @@ class ImageAttitude:
             self._m2 += a * (z * z - self._m2)
             self._mv += a * (np.diag(Rz) - self._mv)
         if self._n_still < c.still_min_frames:
-            return 1.0
+            if c.still_start_sigmas <= 0 or z is None:
+                return 1.0
+            # not judged yet: this fit's own evidence that the body is off zero (a ramp of one sigma)
+            return float(np.clip(np.max(np.abs(z) / np.sqrt(np.maximum(np.diag(Rz), 1e-12))) - c.still_start_sigmas, 0.0, 1.0))
         spread = np.sqrt(np.maximum(self._m2 - self._m1**2, 0.0) / np.maximum(self._mv, 1e-12))
         moving = (np.max(spread) - (c.still_ratio - c.still_ramp)) / c.still_ramp
         sloped = (np.max(np.abs(self._m1)) - c.still_max_mean_deg) / (0.5 * c.still_max_mean_deg)

@@ -55,6 +55,8 @@ DESIGNS = [
     ("rendered table averaged too (with --as-is)", {"size_rendered": True}),
     ("inlier 0.8 m", {"sizes": {"inlier_m": 0.8}}),
     ("inlier 0.5 m, process sigma 1.0 deg", {"sizes": {"inlier_m": 0.5}, "process_sigma_deg": 1.0}),
+    ("still test undecided: moving (still_start_sigmas 0, as before)", {"still_start_sigmas": 0.0}),
+    ("still test undecided: zero within 2 sigmas", {"still_start_sigmas": 2.0}),
 ]
 
 
