@@ -165,7 +165,7 @@ class FusedAttitude:
             self.image.counts.rejected += 1
         else:
             z, Rz, n = res
-            wm = self.image.motion_weight(z, Rz)
+            wm = self.image.motion_weight(z, Rz, start_from_fit=False)
             z = z - self.debias_roll(float(z[1] - body[1]))
             S = self.Pg + Rz + np.eye(2) * s_imu**2
             G = self.Pg @ inv2(S)

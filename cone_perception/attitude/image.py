@@ -167,8 +167,10 @@ class ImageAttitude:
         self._n_still = 0
         self.sizes.reset()
 
-    def motion_weight(self, z: np.ndarray | None, Rz: np.ndarray | None) -> float:
-        """Fold one fit into the still test; 1 = the body moves (use the estimate), 0 = still (use zero)."""
+    def motion_weight(self, z: np.ndarray | None, Rz: np.ndarray | None, start_from_fit: bool = True) -> float:
+        """Fold one fit into the still test; 1 = the body moves (use the estimate), 0 = still (use zero).
+        ``start_from_fit``: before the test judges, the fit's own distance from zero decides
+        (``still_start_sigmas``; False: moving, as ``fused`` wants it, whose IMU sees the body anyway)."""
         c = self.cfg
         if c.still_frames <= 0:
             return 1.0
@@ -179,7 +181,7 @@ class ImageAttitude:
             self._m2 += a * (z * z - self._m2)
             self._mv += a * (np.diag(Rz) - self._mv)
         if self._n_still < c.still_min_frames:
-            if c.still_start_sigmas <= 0 or z is None:
+            if c.still_start_sigmas <= 0 or z is None or not start_from_fit:
                 return 1.0
             # not judged yet: this fit's own evidence that the body is off zero (a ramp of one sigma)
             return float(np.clip(np.max(np.abs(z) / np.sqrt(np.maximum(np.diag(Rz), 1e-12))) - c.still_start_sigmas, 0.0, 1.0))
