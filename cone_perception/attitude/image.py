@@ -305,10 +305,10 @@ class ImageAttitude:
         with fewer than ``min_cones`` usable cones. ``boxes`` (N, 4) full-image px (pixel edges);
         ``start_deg``: where to linearise first (the filter's prediction; default zero). ``sizes``: the cones
         followed over frames (:class:`~cone_perception.attitude.sizes.SizeTracks`; None: this frame's boxes
-        alone): the feet, mapped with ``start_deg`` (``start_cov_deg2`` (2, 2): how far off it may be; None: the
-        prior's), are followed from the frame before, then each box is read with its cone's averaged size.
-        (Mapping the feet with the frame's own fit instead, or with the fit and the prediction combined, costs a
-        second fit and measured worse on tuning drives: docs/benchmarks.md.)"""
+        alone, and so without a measured box model unless ``size_rendered``): the cones, mapped with ``start_deg``
+        (``start_cov_deg2`` (2, 2): how far off it may be; None: the prior's) and cut at ``max_range_m`` by their
+        feet, are followed from the frame before (:meth:`_average_sizes`), then each box is read with its cone's
+        averaged height."""
         c = self.cfg
         boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
         if c.box_model is not None:
