@@ -130,3 +130,24 @@ def test_the_rendered_table_is_read_per_frame():
         out.append([est.update(boxes, cls) for boxes, cls, _, _ in drive])
         assert est.counts.size_cones == 0
     assert out[0] == out[1]
+
+
+def test_map_boxes_of_a_sequence_averages_the_sizes_as_the_node_does(tmp_path, capsys):
+    """`map --boxes PRED.jsonl` with the model's box model runs the very filter the nodes run (`update`, frame after
+    frame): the cones' heights are averaged, and its counts say how many cones were followed."""
+    import json
+
+    from cone_perception.cli import main
+    from cone_perception.geometry.calib import save_calibration
+
+    cal_path = save_calibration(_calib(), tmp_path / "cal.yaml")
+    lines = []
+    for k, (boxes, cls, _, _) in enumerate(_drive(8, 0.3, 0.3, seed=2)):
+        rows = [[*map(float, b), 0.9, int(c)] for b, c in zip(boxes, cls)]
+        lines.append(json.dumps({"image": f"f{k}", "width": 1920, "height": 1080, "boxes": rows}))
+    pred = tmp_path / "p.jsonl"
+    pred.write_text("\n".join(lines) + "\n")
+    assert main(["map", "--calib", str(cal_path), "--boxes", str(pred), "--attitude", "image", "--box-model", "model"]) == 0
+    err = capsys.readouterr().err
+    counts = dict(kv.split() for kv in err.split("attitude fits: ")[1].splitlines()[0].split(", "))
+    assert int(counts["size_cones"]) > 50 and int(counts["size_followed"]) > 0.6 * int(counts["size_cones"]), counts
