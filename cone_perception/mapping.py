@@ -14,6 +14,10 @@ wide across the ray. So each box's width, measured on the ground at its foot row
 offset (half of it, clipped to ``s/2 .. s/sqrt(2)``) instead of the class's fixed
 ``foot_offset_m`` (kept for classes of unknown size and boxes whose edges do not map).
 
+Before the mapping, the pipeline and the ``mapping`` node keep one box per cone (:func:`one_box_per_cone`): a
+second box of a cone another, better-scored box already has (another class on the same spot, or a much weaker
+small box of its class) would be a second, false cone (issue 26g).
+
 Pixel conventions: boxes are in pixel-EDGE coordinates (a box around pixel
 columns 10..19 has u1 = 10, u2 = 20, as detectors and YOLO labels use them);
 the calibration, like OpenCV, uses pixel-CENTRE coordinates (pixel 10 spans
@@ -47,6 +51,64 @@ def validate_boxes(records: np.ndarray) -> None:
     bad = np.flatnonzero(c >= NUM_CLASSES)
     if bad.size:
         raise FrameError("bad_class", f"box {int(bad[0])} has unknown class id {int(c[bad[0]])} (0..{NUM_CLASSES - 1})")
+
+
+#: Boxes of different classes overlapping at least this much (IoU) are taken for one cone seen as two classes:
+#: the lower-scored goes (:func:`one_box_per_cone`). On the tuning drives (docs/benchmarks.md, "False cones
+#: within 40 m (issue 26g)") such pairs were two boxes of one cone 200 times and of two cones 4 times at IoU >= 0.6.
+CROSS_CLASS_IOU = 0.6
+#: Small boxes (both under SMALL_BOX_PX tall, full-image px) of one class overlapping at IoU >= SMALL_SAME_IOU, the
+#: weaker scored under SMALL_WEAKER x the stronger: a second box of one far cone (the NMS's IoU 0.45 misses such
+#: pairs: a shift of 2-4 px is a third of a 10 px box), so the weaker goes. Far cones of a row overlap as much,
+#: which is why the score must say so too (docs/benchmarks.md).
+SMALL_BOX_PX = 16.0
+SMALL_SAME_IOU = 0.3
+SMALL_WEAKER = 0.6
+
+
+def box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(N, M) IoU of :data:`BOX_DTYPE` records ``a`` and ``b`` (pixel-edge boxes)."""
+    au1, av1, au2, av2 = (np.asarray(a[k], np.float64) for k in ("u1", "v1", "u2", "v2"))
+    bu1, bv1, bu2, bv2 = (np.asarray(b[k], np.float64) for k in ("u1", "v1", "u2", "v2"))
+    iw = np.clip(np.minimum(au2[:, None], bu2[None]) - np.maximum(au1[:, None], bu1[None]), 0.0, None)
+    ih = np.clip(np.minimum(av2[:, None], bv2[None]) - np.maximum(av1[:, None], bv1[None]), 0.0, None)
+    inter = iw * ih
+    union = ((au2 - au1) * (av2 - av1))[:, None] + ((bu2 - bu1) * (bv2 - bv1))[None] - inter
+    return np.divide(inter, union, out=np.zeros_like(inter), where=union > 0)
+
+
+def one_box_per_cone(records: np.ndarray, iou: float = CROSS_CLASS_IOU, small_px: float = SMALL_BOX_PX,
+                     small_iou: float = SMALL_SAME_IOU, small_weaker: float = SMALL_WEAKER) -> np.ndarray:
+    """:data:`BOX_DTYPE` records minus the boxes that are a second box of a cone a better-scored box already has
+    (greedy, best score first; order kept):
+
+    * a box of ANOTHER class overlapping it at IoU >= ``iou``: the detector's NMS is per class, so a far cone it
+      is unsure of can come out as a blue and a yellow box on one spot (two cones on ``/cones``, one false);
+    * a box of the same class, both under ``small_px`` tall, overlapping it at IoU >= ``small_iou`` and scored
+      under ``small_weaker`` x its score (``small_weaker`` 0: off).
+
+    Everything else is left to the detector's NMS."""
+    n = len(records)
+    if n < 2:
+        return records
+    score = np.asarray(records["score"], np.float64)
+    cls = records["class_id"]
+    same = cls[:, None] == cls[None, :]
+    ov = box_iou(records, records)
+    over = (ov >= iou) & ~same
+    if small_weaker > 0:
+        h = np.asarray(records["v2"], np.float64) - np.asarray(records["v1"], np.float64)
+        small = (h[:, None] < small_px) & (h[None, :] < small_px)
+        weaker = np.minimum(score[:, None], score[None, :]) < small_weaker * np.maximum(score[:, None], score[None, :])
+        over |= (ov >= small_iou) & same & small & weaker
+    np.fill_diagonal(over, False)
+    if not over.any():
+        return records
+    keep = np.ones(n, dtype=bool)
+    for i in np.argsort(-score, kind="stable"):
+        if keep[i]:  # a kept box removes the lower-scored (ties: the later) boxes it pairs with
+            keep[over[i] & (score <= score[i])] = False
+    return records[keep]
 
 
 class ConeMapper:

@@ -16,7 +16,7 @@ from .attitude import FIXED, Attitude, attitude_estimator, attitude_for_boxes
 from .detector.farband import FarBand, merge_boxes
 from .detector.parallel import PairRunner
 from .geometry.calib import Calibration
-from .mapping import ConeMapper
+from .mapping import ConeMapper, one_box_per_cone
 from .params import DEFAULT_IOU
 
 STAGES = ("adapter", "preprocess", "forward", "postprocess", "far_forward", "far_band", "far_wait", "attitude", "mapping")
@@ -116,6 +116,7 @@ class Pipeline:
         else:
             boxes = self.detector.detect(band, self.calib.crop)
             timing.update({k.removesuffix("_ms"): v for k, v in self.detector.timing.items()})
+        boxes = one_box_per_cone(boxes)  # a second box of one cone (two classes, or twice small) goes
         weak = None
         if self.cones_conf is not None:
             strong = boxes["score"] >= self.cones_conf

@@ -170,3 +170,76 @@ def test_bad_boxes_drop_the_frame(box, cls, reason) -> None:
 def test_no_boxes_no_cones() -> None:
     mapper = ConeMapper(load_calibration("example_mainhoop"))
     assert mapper.map_boxes(boxes_from_arrays(np.zeros((0, 4)), [], [])).shape == (0,)
+
+
+def _boxes(rows):
+    """rows of (u1, v1, u2, v2, score, class_id) -> BOX_DTYPE records."""
+    a = np.asarray(rows, float).reshape(-1, 6)
+    return boxes_from_arrays(a[:, :4], a[:, 4], a[:, 5].astype(int))
+
+
+def test_one_box_per_cone_drops_the_weaker_class_of_one_spot_only() -> None:
+    """Issue 26g: the detector's NMS is per class, so a far cone came out as a blue and a yellow box on one spot
+    (two cones on /cones, one false). Of boxes of different classes overlapping at IoU >= 0.6 the better-scored
+    stays; one class's boxes, other classes overlapping less, and the order are left alone."""
+    from cone_perception.mapping import CROSS_CLASS_IOU, box_iou, one_box_per_cone
+
+    b = _boxes([[100, 400, 110, 420, 0.40, YELLOW],   # the weaker class of the blue cone below: goes
+                [300, 400, 320, 440, 0.70, BLUE],     # another blue box of the cone at 300: one class, kept (NMS's)
+                [100, 401, 110, 421, 0.55, BLUE],     # IoU 0.9 with the first
+                [302, 400, 322, 440, 0.90, BLUE],
+                [500, 400, 510, 420, 0.80, BLUE],
+                [500, 407, 510, 427, 0.60, YELLOW]])  # IoU 13/27 = 0.48 < 0.6: two cones, kept
+    assert CROSS_CLASS_IOU == 0.6
+    assert box_iou(b[:1], b[2:3])[0, 0] == pytest.approx(19 / 21)
+    out = one_box_per_cone(b)
+    np.testing.assert_array_equal(out["score"], np.array([0.70, 0.55, 0.90, 0.80, 0.60], np.float32))
+    # a chain: a box suppressed by a better one suppresses nothing itself
+    c = _boxes([[0, 0, 10, 20, 0.9, BLUE], [0, 3, 10, 23, 0.8, YELLOW], [0, 6, 10, 26, 0.7, BLUE]])
+    assert box_iou(c[:1], c[2:3])[0, 0] < 0.6 <= box_iou(c[1:2], c[2:3])[0, 0]
+    np.testing.assert_array_equal(one_box_per_cone(c)["score"], np.array([0.9, 0.7], np.float32))
+    assert len(one_box_per_cone(b[:0])) == 0 and len(one_box_per_cone(b[:1])) == 1
+
+
+def test_pipeline_maps_one_cone_for_a_cone_boxed_in_two_classes() -> None:
+    """The fused pipeline keeps one box per spot before the attitude and the mapping: a detector that boxes a cone
+    as blue 0.8 and yellow 0.5 gives one blue cone (and one box); without the yellow box the same cone."""
+    from cone_perception.pipeline import Pipeline
+
+    calib = load_calibration("example_mainhoop")
+
+    class TwoClasses:
+        timing: dict = {}
+
+        def __init__(self, rows):
+            self.rows = rows
+
+        def detect(self, band, crop):
+            return _boxes(self.rows)
+
+    one = [[950, 600, 980, 640, 0.8, BLUE]]
+    frame = np.zeros((1080, 1920, 3), np.uint8).tobytes()
+    a = Pipeline(calib, TwoClasses(one + [[951, 601, 981, 641, 0.5, YELLOW]]), "fixed").process_raw("bgr8", 1920, 1080, 5760, frame)
+    b = Pipeline(calib, TwoClasses(one), "fixed").process_raw("bgr8", 1920, 1080, 5760, frame)
+    assert len(a.boxes) == 1 and len(a.cones) == 1 and int(a.cones["class_id"][0]) == BLUE
+    np.testing.assert_allclose([a.cones["x"][0], a.cones["y"][0]], [b.cones["x"][0], b.cones["y"][0]])
+
+
+def test_one_box_per_cone_drops_a_much_weaker_small_box_of_one_class_on_one_far_cone() -> None:
+    """Issue 26g: the strip's NMS (IoU 0.45) left two boxes of one 10 px far cone, shifted by 3-4 px (IoU about
+    0.35). A small box of the same class overlapping a better one at IoU >= 0.3 and scored under 0.6x of it goes;
+    a box scored nearly as well (a neighbouring cone of the row), a big box, or one overlapping less stays."""
+    from cone_perception.mapping import SMALL_BOX_PX, SMALL_SAME_IOU, SMALL_WEAKER, box_iou, one_box_per_cone
+
+    assert (SMALL_BOX_PX, SMALL_SAME_IOU, SMALL_WEAKER) == (16.0, 0.3, 0.6)
+    b = _boxes([[100, 400, 110, 410, 0.80, BLUE],
+                [103, 401, 113, 411, 0.40, BLUE],     # IoU 63/137 = 0.46 but 0.5x: the second box of the cone above
+                [300, 400, 310, 410, 0.80, BLUE],
+                [303, 401, 313, 411, 0.60, BLUE],     # 0.75x: another cone of the row, kept
+                [500, 400, 520, 420, 0.80, BLUE],
+                [506, 402, 526, 422, 0.40, BLUE],     # 20 px tall: left to the NMS
+                [700, 400, 710, 410, 0.80, BLUE],
+                [706, 401, 716, 411, 0.30, BLUE]])    # IoU 36/164 = 0.22: kept
+    assert box_iou(b[6:7], b[7:8])[0, 0] < 0.3 <= box_iou(b[:1], b[1:2])[0, 0]
+    np.testing.assert_array_equal(one_box_per_cone(b)["score"], np.array([0.8, 0.8, 0.6, 0.8, 0.4, 0.8, 0.3], np.float32))
+    assert len(one_box_per_cone(b, small_weaker=0.0)) == len(b)  # the small rule off

@@ -31,7 +31,7 @@ from sensor_msgs.msg import PointCloud2
 
 from ..attitude import attitude_estimator, attitude_for_boxes
 from ..geometry.calib import load_calibration
-from ..mapping import ConeMapper, validate_boxes
+from ..mapping import ConeMapper, one_box_per_cone, validate_boxes
 from . import _msgs
 from ._attitude import declare_attitude, declare_box_model, report_attitude
 from ._params import RuntimeParameters, declare
@@ -58,6 +58,7 @@ class MappingNode(PerceptionNode):
     def on_boxes(self, msg: PointCloud2) -> None:
         boxes = _msgs.boxes_from_msg(msg)
         validate_boxes(boxes)  # a bad message is dropped before it can move the attitude filter
+        boxes = one_box_per_cone(boxes)  # as the fused pipeline does: a second box of one cone goes
         att = attitude_for_boxes(self.attitude, boxes, _msgs.stamp_ns(msg.header))
         self.publish_cones(self.mapper.map_boxes(boxes, att), msg.header)
         self.publish_attitude(att, msg.header)
