@@ -93,13 +93,10 @@ class ImageAttitudeConfig:
     trust_min_cones: int = 3
     trust_max_scale: float = 2.5
     trust_max_sigma_deg: float = 1.0
-    #: each cone's size-based range averaged over the frames it is followed (:mod:`.sizes`): the fit reads its
-    #: box with the height the average implies, so the boxes' scatter averages out across frames (the filter,
-    #: :meth:`ImageAttitude.update`, only; a single frame has no history). With a measured ``box_model`` only:
-    #: the rendered table's boxes have no scatter to average, and the average would carry a box's bias at one
-    #: range to the next (docs/benchmarks.md, "Sizes over frames")
+    #: each cone's box height averaged over the frames it is followed (:mod:`.sizes`; :meth:`ImageAttitude.update`
+    #: only), with a measured ``box_model`` only: the rendered table's boxes have no scatter to average
     size_frames: bool = True
-    size_rendered: bool = False  # average the rendered table's boxes too (measured worse, see above)
+    size_rendered: bool = False  # average the rendered table's boxes too (measured worse: docs/benchmarks.md)
     size_tracks: SizeTrackConfig = SizeTrackConfig()
 
 

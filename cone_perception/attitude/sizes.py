@@ -11,7 +11,7 @@ maps its cones' centres with the predicted attitude, asks :meth:`SizeTracks.pitc
 common pitch error (a search: under which offset most cones lie near a kept one moved by the last motion)
 and maps them again with it taken off; then :meth:`SizeTracks.average`
 
-1. registers them against the kept cones (:func:`~cone_perception.tracking.egomotion.register_cones`: the
+1. registers them against the kept cones (:func:`~cone_perception.geometry.motion.register_cones`: the
    car's planar motion and which cone is which; the frame's remaining common attitude error is estimated
    alongside and dropped, with the attitude Jacobians of the cones);
 2. moves each kept cone's log height with the car: the ratio of the cone model's heights (``height_of``)
@@ -31,6 +31,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from ..classes import UNKNOWN
+from ..geometry.motion import Motion2D, register_cones
 
 
 @dataclass(frozen=True)
@@ -78,8 +81,6 @@ class SizeTracks:
         self.log_h = np.zeros(0)  # averaged log box height (log px, undistorted), at ``xy``
         self.var = np.zeros(0)  # its variance (the averaged part only)
         self.missed = np.zeros(0, dtype=np.intp)
-        from ..tracking.egomotion import Motion2D  # here: tracking imports the mapping, which imports attitude
-
         self._fin = np.zeros(0, dtype=bool)
         self.motion = Motion2D()  # the last frame's motion: the next one's prior (constant velocity)
         self.matched = 0
@@ -99,8 +100,6 @@ class SizeTracks:
         ``att_cov_deg2`` (2, 2): how the positions move with the attitude and how uncertain the guess is. Returns
         each cone's averaged log height and its variance (N,). The state moves to this frame: call once per
         frame."""
-        from ..tracking.egomotion import register_cones  # see reset()
-
         c = self.cfg
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
         log_h, var = np.asarray(log_h, np.float64).copy(), np.asarray(var, np.float64).copy()
@@ -164,8 +163,6 @@ class SizeTracks:
         ``pitch_search_*``; ``cov_deg2``: the prediction's covariance): the caller maps them again with it before
         :meth:`average` (the registration then starts near the truth; a linear correction was not enough for far
         cones). 0 without kept cones."""
-        from ..classes import UNKNOWN
-
         c = self.cfg
         fin = np.all(np.isfinite(xy), axis=1)
         if not len(self.xy) or not fin.any():
