@@ -211,6 +211,11 @@ _PIPELINE = (
        "cones 15-40 m ahead stand, moved each frame with the attitude; none where the calibration has no "
        "camera_matrix); V0,V1 = these rows, fixed; none or empty = no far band (not off: ROS reads off as a "
        "boolean)", values="auto, none, or V0,V1"),
+    _p("band_rows", "crop", "the band's image rows (its columns and downscale stay the calibration's): crop = the "
+       "calibration's crop (the default); auto = placed from the calibration: from the tops of cones as far as the "
+       "far strip's near end (without a strip: max_range_m) to the crop's bottom, with the strip's attitude margins, "
+       "a multiple of 32 rows at the band's scale (docs/detector.md, Band rows; on the shipped calibrations it is not "
+       "smaller than their crop); V0,V1 = these rows", values="crop, auto, or V0,V1"),
     _p("far_model", "band", "the far band's model: band or empty = the band's own model (the default: the image attitude "
        "reads every box through the band model's box table); auto = the shipped far-strip model "
        "(models/cone_detector_far.pt, trained for its full-resolution scale: more small cones, but a worse image "

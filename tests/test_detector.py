@@ -51,6 +51,27 @@ def test_backends_give_eager_boxes(trained, backend):
 
 
 
+def _spinning(det) -> str:
+    """The ``session.intra_op.allow_spinning`` entry of an ONNX Runtime detector's session ("" if unset)."""
+    opts = det._run.session.get_session_options()
+    try:
+        return opts.get_session_config_entry("session.intra_op.allow_spinning")
+    except Exception:  # noqa: BLE001 - onnxruntime raises when the entry was never set
+        return ""
+
+
+def test_onnx_pool_threads_do_not_spin_and_the_boxes_stay(trained):
+    """An ONNX Runtime session with an intra-op pool (threads >= 2, or 0 = one a core) has its threads sleep
+    after their work (``allow_spinning`` 0: a spinning pool lost ticks to other work, docs/benchmarks.md);
+    a one-thread session keeps ONNX Runtime's default; the boxes are the same either way."""
+    ckpt, images = trained
+    one, two, auto = (Detector.load(ckpt, backend="onnx", threads=t) for t in (1, 2, 0))
+    assert _spinning(one) == "" and _spinning(two) == "0" and _spinning(auto) == "0"
+    assert two._run.session.get_session_options().intra_op_num_threads == 2
+    n_pairs = sum(assert_same_cones(one, two, img, box_px=1e-4, score_tol=1e-4) for img in images)
+    assert n_pairs >= len(images)
+
+
 def test_auto_backend_picks_onnx_runtime_on_the_cpu_and_keeps_the_boxes(trained, monkeypatch):
     """``auto`` (the default): ONNX Runtime for a checkpoint on the CPU, with eager torch's boxes;
     torch where ONNX Runtime cannot serve (bf16, a GPU, not installed); an exported file its own."""

@@ -16,7 +16,7 @@ from ..bench.frames import rendered_frames
 from ..bench.pipeline import bench_adapter, bench_pipeline, bench_tracker, load_for_crop
 from ..bench.table import crop_for_setting, run_table
 from ..resources import far_model_for, far_model_given
-from ..detector.farband import FarBand, far_rows_for
+from ..detector.farband import FarBand, band_rows_for, far_rows_for
 from ..detector.parallel import ForwardPlan
 from ..errors import ConfigError
 from ..geometry.calib import load_calibration
@@ -33,6 +33,10 @@ def forward_plan(threads: int, strip: bool, sequential: bool = False) -> Forward
 def _bench_pipeline(args: argparse.Namespace, calib) -> dict:
     if args.input:
         calib = replace(calib, crop=crop_for_setting(calib.crop, args.input, calib.image_width, calib.image_height))
+    band = band_rows_for(args.band_rows, calib, args.far_rows, "--band-rows")
+    if args.input and band.crop != calib.crop:
+        raise ConfigError("--band-rows", None, "sets the band's rows: not with --input, which sets the whole crop")
+    calib = band.apply(calib)
     far_rows = far_rows_for(args.far_rows, calib, "--far-rows")  # a bad value fails before any model loads
     if far_model_given(args.far_model) and far_rows.crop is None:
         raise ConfigError("--far-model", None, f"needs a far band ({far_rows.what})")
@@ -60,6 +64,7 @@ def _repeat_pipeline(args: argparse.Namespace) -> int:
     cmd += ["--input", args.input] if args.input else []
     cmd += (["--far-rows", args.far_rows] if args.far_rows is not None else []) + (["--far-model", args.far_model] if args.far_model else [])
     cmd += ["--sequential"] if args.sequential else []
+    cmd += ["--band-rows", args.band_rows] if args.band_rows is not None else []
     runs = []
     for i in tqdm(range(args.repeat), unit="run", desc="bench pipeline", file=sys.stderr,
                   disable=args.json or args.no_progress):

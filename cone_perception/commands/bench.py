@@ -3,6 +3,7 @@
   cone-perception bench adapter  [--frames 300] [--calib CAL] [--encoding yuv422_yuy2] [--json]
   cone-perception bench pipeline [--frames 300] [--calib CAL] [--model M] [--backend B] [--threads N]
                                  [--input full|half|crop|crop_half] [--far-rows V0,V1 [--sequential]]
+                                 [--band-rows crop|auto|V0,V1]
                                  [--repeat N] [--json]
   cone-perception bench tracker [--frames 300] [--rows 8] [--calib CAL] [--json]
   cone-perception bench table --models A.pt[,B.pt] --val DIR --gt-names A,B,.. --band V0,V1 --out DIR [--frames N]
@@ -58,6 +59,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--far-rows", default=None, metavar="auto|none|V0,V1",
                    help="pipeline: the far band, image rows also run at full resolution (docs/detector.md 'Far band'): "
                         "auto (default) = the calibration's far strip; V0,V1 = these rows; none (or off) = the band alone")
+    p.add_argument("--band-rows", default=None, metavar="crop|auto|V0,V1",
+                   help="pipeline: the band's rows (docs/detector.md 'Band rows'): crop (default) = the calibration's crop, "
+                        "auto = placed from the calibration, V0,V1 = these rows")
     p.add_argument("--far-model", default=None, metavar="auto|band|PATH",
                    help="pipeline: the far band's model: auto (default) = the shipped far-strip model "
                         "(models/cone_detector_far.pt), band = the band's own model, or a model file; its classes must be the band model's")

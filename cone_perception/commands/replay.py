@@ -68,6 +68,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the far band, image rows also run at full resolution, the whole width (docs/detector.md "
                         "'Far band'): auto (default) = the calibration's far strip, moved each frame with the attitude; "
                         "V0,V1 = these rows, fixed; none (or off) = the band alone. Live: the pipeline node's far_rows (fused only)")
+    p.add_argument("--band-rows", default=None, metavar="crop|auto|V0,V1",
+                   help="the band's rows (docs/detector.md 'Band rows'): crop (default) = the calibration's crop, auto = "
+                        "placed from the calibration, V0,V1 = these rows; the cones expected in view follow the band. "
+                        "Live: the pipeline node's band_rows (fused only)")
     p.add_argument("--far-model", default=None, metavar="auto|band|PATH",
                    help="the far band's model: auto (default) = the shipped far-strip model (models/cone_detector_far.pt), "
                         "band = the band's own model, or a model file; its classes must be the band model's; live: the node's far_model")

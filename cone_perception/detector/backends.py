@@ -93,9 +93,19 @@ class OrtRunner:
         return np.asarray(self.session.run(None, {self.input_name: x})[0][0], dtype=np.float32)
 
 
+def ort_spinning(threads: int | None) -> bool:
+    """Whether ONNX Runtime's intra-op threads may spin after their work (``session.intra_op.allow_spinning``):
+    only in a one-thread session, which has no pool. A pool (``threads >= 2``, or 0 / None: one thread a core)
+    whose threads spin keeps a core busy between forwards and loses a scheduler tick at each synchronisation
+    point whenever other work runs (docs/benchmarks.md, "Band and far strip at once on two threads" and
+    "Band rows and ONNX Runtime spinning")."""
+    return threads == 1
+
+
 def ort_session(model_bytes_or_path, device: str, threads: int | None, source: str):
-    """An ONNX Runtime session (CUDA first when asked for and available); a :class:`ConfigError` naming
-    ``source`` when onnxruntime is missing or cannot load the model."""
+    """An ONNX Runtime session (CUDA first when asked for and available), its intra-op pool not spinning
+    (:func:`ort_spinning`); a :class:`ConfigError` naming ``source`` when onnxruntime is missing or cannot
+    load the model."""
     try:
         import onnxruntime as ort
     except ImportError as e:  # optional dependency
@@ -105,6 +115,8 @@ def ort_session(model_bytes_or_path, device: str, threads: int | None, source: s
         so.intra_op_num_threads = int(threads)
         so.inter_op_num_threads = 1
     so.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
+    if not ort_spinning(threads):
+        so.add_session_config_entry("session.intra_op.allow_spinning", "0")
     providers = ["CPUExecutionProvider"]
     if device.startswith("cuda") and "CUDAExecutionProvider" in ort.get_available_providers():
         providers.insert(0, "CUDAExecutionProvider")

@@ -35,7 +35,7 @@ import numpy as np
 from ..classes import CLASS_NAMES
 from ..crop import CropSpec
 from ..errors import ConfigError
-from ..geometry.strip import StripPlan
+from ..geometry.strip import DEFAULT_STRIP, StripPlan, plan_band
 from ..model.decode import nms_per_class
 from ..params import DEFAULT_IOU
 from .detector import Detector
@@ -80,6 +80,69 @@ def far_rows_for(rows: str | None, calib, source: str = "far_rows") -> FarRows:
     return FarRows(crop, plan, f"far strip rows {crop.v0}-{crop.v1} ({plan.height} rows: cones {s.near_m:g}-{s.far_m:g} m "
                                f"ahead, margins {s.pitch_margin_deg:g} deg pitch / {s.roll_margin_deg:g} deg roll), "
                                "moved with the attitude")
+
+
+#: ``band_rows`` values: the calibration's own ``crop`` (the hand-set band, the default) and the band placed
+#: from the calibration (:func:`band_rows_for`).
+BAND_ROWS_CROP = "crop"
+BAND_ROWS_AUTO = "auto"
+
+
+@dataclass(frozen=True)
+class BandRows:
+    """What a ``band_rows`` value means for one calibration (:func:`band_rows_for`): the band's crop (the
+    calibration's columns and downscale), its plan when placed from the calibration, and in words."""
+
+    crop: CropSpec
+    plan: StripPlan | None
+    what: str
+
+    def apply(self, calib):
+        """``calib`` with this band as its ``crop`` (the one home of the band's rows: the adapter, the detector's
+        input size, the mapping's cut boxes, the tracker's field of view and ``replay``'s expected cones read it)."""
+        return calib if self.crop == calib.crop else replace(calib, crop=self.crop)
+
+
+def band_rows_for(rows: str | None, calib, far_rows: str | None = FAR_ROWS_AUTO, source: str = "band_rows") -> BandRows:
+    """``crop`` (None: the calibration's ``crop``) / ``auto`` / ``"V0,V1"`` for a calibration; the band's columns
+    and downscale stay the calibration's. ``auto``: the rows from the top of the tallest cone as far ahead as the
+    band must see (with the far strip ``far_rows`` auto on: the strip's ``near_m``, nearer cones are cut by the
+    strip; else the calibration's ``max_range_m``) down to the hand-set crop's bottom, with the strip's attitude
+    margins, a multiple of 32 rows at the band's scale, inside the image (:func:`~..geometry.strip.plan_band`);
+    the calibration's ``crop`` where it has no ``camera_matrix`` (said). ConfigError naming ``source`` for a bad
+    value or rows outside the image or not divisible by the downscale."""
+    rows = BAND_ROWS_CROP if rows is None else str(rows).strip()
+    band = calib.crop
+    if rows.lower() == BAND_ROWS_CROP:
+        return BandRows(band, None, f"band rows {band.v0}-{band.v1} (the calibration's crop)")
+    if rows.lower() == BAND_ROWS_AUTO:
+        if calib.camera_matrix is None:
+            return BandRows(band, None, f"band rows {band.v0}-{band.v1}: the calibration {calib.source} has no "
+                                        f"camera_matrix to place the band with (its crop)")
+        strip = calib.strip_plan() if far_rows_for(far_rows, calib, "far_rows").plan is not None else None
+        top_m = strip.spec.near_m if strip is not None else float(calib.max_range_m)
+        cam = calib.pinhole_camera()
+        plan = plan_band(cam, band.v1, top_m, band.downscale, calib.far_strip or DEFAULT_STRIP, calib.source, source)
+        crop = replace(band, v0=plan.top0, v1=plan.top0 + plan.height)
+        crop.validate(calib.image_width, calib.image_height, source)
+        edge = ", ending at the image's edge" if crop.v0 == 0 or crop.v1 == calib.image_height else ""
+        return BandRows(crop, plan, f"band rows {crop.v0}-{crop.v1} placed from the calibration (cones "
+                                    f"{plan.spec.near_m:.1f}-{top_m:g} m ahead whole, margins "
+                                    f"{plan.spec.pitch_margin_deg:g} deg pitch / {plan.spec.roll_margin_deg:g} deg roll"
+                                    f"{edge})")
+    try:
+        v0, v1 = (int(t) for t in rows.split(","))
+    except ValueError:
+        raise ConfigError(source, None, f"expected crop, auto or two image rows V0,V1, got {rows!r}") from None
+    if not 0 <= v0 < v1 <= calib.image_height:
+        raise ConfigError(source, None, f"rows {v0},{v1}: need 0 <= V0 < V1 <= {calib.image_height} (the "
+                                        f"{calib.image_width}x{calib.image_height} image)")
+    crop = replace(band, v0=v0, v1=v1)
+    try:
+        crop.validate(calib.image_width, calib.image_height, source)
+    except ConfigError as e:
+        raise ConfigError(source, None, e.message) from None
+    return BandRows(crop, None, f"band rows {v0}-{v1} (fixed: {source})")
 
 
 def far_band_crop(rows: str | tuple[int, int], image_width: int, image_height: int, band: CropSpec,
@@ -232,5 +295,6 @@ class FarBand:
         return merge_boxes(band_boxes, self.detect(strip_bgr, crop), iou)
 
 
-__all__ = ["EDGE_PX", "FAR_ROWS_AUTO", "FAR_ROWS_OFF", "FarBand", "FarRows", "check_far_classes", "far_rows_for",
+__all__ = ["BAND_ROWS_AUTO", "BAND_ROWS_CROP", "BandRows", "EDGE_PX", "FAR_ROWS_AUTO", "FAR_ROWS_OFF", "FarBand",
+           "FarRows", "band_rows_for", "check_far_classes", "far_rows_for",
            "seen_by_far", "same_cone", "drop_cut_boxes", "far_band_crop", "merge_boxes"]

@@ -4,8 +4,10 @@ With a far strip (:mod:`.farband`) every frame runs two forwards. On two CPU thr
 one after the other, each network on two intra-op threads, or at once, each network on one intra-op
 thread: the strip on a worker thread, the band on the calling thread. ONNX Runtime and torch release
 the GIL in the forward, so the two overlap: a strip smaller than the band hides behind the band's
-forward, and neither network has an intra-op pool to synchronise (ONNX Runtime's two-thread pool
-spins and loses scheduler ticks whenever other work runs). It needs two free cores: with one core
+forward, and neither network has an intra-op pool to synchronise (a pool's threads wait for each
+other at every parallel section; since issue 26h they no longer spin while waiting, backends.ort_spinning,
+and one after the other on 2+2 threads was then 1.06-1.29x at once under load: docs/benchmarks.md, "Band
+rows and ONNX Runtime spinning"; the quiet machine is unmeasured). It needs two free cores: with one core
 busy elsewhere, one thread one after the other is faster (docs/benchmarks.md, "Band and far strip at
 once on two threads").
 

@@ -135,10 +135,16 @@ class Calibration:
         the image or lie above the horizon (:func:`load_calibration` asks at load)."""
         if self.far_strip is None or self.camera_matrix is None:
             return None
+        return plan_strip(self.pinhole_camera(), self.far_strip, self.source)
+
+    def pinhole_camera(self) -> PinholeCamera:
+        """The camera model at rest (``camera_matrix``, image size, mount pose, lens) that places the far strip
+        and the band; needs ``camera_matrix`` (the mount pose, if absent, from the homography)."""
+        if self.camera_matrix is None:
+            raise ValueError(f"{self.source}: placing rows needs camera_matrix in the calibration")
         pose = self.mount_pose or pose_from_homography(self.H_F_B, self.camera_matrix).pose
         dist = np.zeros(0) if self.dist_coeffs is None else np.asarray(self.dist_coeffs, dtype=np.float64)
-        cam = PinholeCamera(self.camera_matrix, self.image_width, self.image_height, pose, dist)
-        return plan_strip(cam, self.far_strip, self.source)
+        return PinholeCamera(self.camera_matrix, self.image_width, self.image_height, pose, dist)
 
     def ground_reference_px(self) -> tuple[float, float]:
         """A pixel known to see the ground: the bottom centre of the image."""

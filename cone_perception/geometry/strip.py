@@ -140,6 +140,21 @@ class StripPlan:
         return inside, inside != top or not math.isfinite(c)
 
 
+def _span(camera: PinholeCamera, spec: FarStripSpec, multiple: int) -> tuple[float, int]:
+    """(centre row at the calibration's attitude, height): the rows :func:`needed_rows` gives for ``spec``'s
+    range at every attitude within its margins, centred, the height rounded up to ``multiple``."""
+    top, bottom, _ = needed_rows(camera, spec.near_m, spec.far_m)
+    c0 = 0.5 * (top + bottom)
+    half = 0.0
+    mp, mr = spec.pitch_margin_deg, spec.roll_margin_deg
+    for p in (-mp, 0.0, mp):  # the attitude the rows follow may be off by up to the margins
+        for r in (-mr, 0.0, mr):
+            t, b, _ = needed_rows(camera, spec.near_m, spec.far_m, p, r)
+            if math.isfinite(t) and math.isfinite(b):
+                half = max(half, c0 - t, b - c0)
+    return c0, int(math.ceil(2.0 * half / multiple)) * multiple
+
+
 def plan_strip(camera: PinholeCamera, spec: FarStripSpec = DEFAULT_STRIP, source: str = "<calibration>",
                field: str = "far_strip") -> StripPlan:
     """The strip of ``camera`` (K, size, rest mount pose, lens) for ``spec``. ConfigError naming ``source``
@@ -152,15 +167,7 @@ def plan_strip(camera: PinholeCamera, spec: FarStripSpec = DEFAULT_STRIP, source
     if not bottom > horizon:
         raise ConfigError(source, field, f"the feet of cones {near:g} m ahead are at row {bottom:.0f}, on or above "
                                          f"the horizon (row {horizon:.0f}): the mount pose cannot be right")
-    c0 = 0.5 * (top + bottom)
-    half = 0.0
-    mp, mr = spec.pitch_margin_deg, spec.roll_margin_deg
-    for p in (-mp, 0.0, mp):  # the attitude the strip follows may be off by up to the margins
-        for r in (-mr, 0.0, mr):
-            t, b, _ = needed_rows(camera, near, far, p, r)
-            if math.isfinite(t) and math.isfinite(b):
-                half = max(half, c0 - t, b - c0)
-    height = int(math.ceil(2.0 * half / ROW_MULTIPLE)) * ROW_MULTIPLE
+    c0, height = _span(camera, spec, ROW_MULTIPLE)
     top0 = int(round(c0 - height / 2.0))
     if top0 < 0 or top0 + height > camera.height:
         raise ConfigError(source, field, f"the strip for cones {near:g}-{far:g} m ahead needs rows {top0}-{top0 + height} "
@@ -170,5 +177,51 @@ def plan_strip(camera: PinholeCamera, spec: FarStripSpec = DEFAULT_STRIP, source
     return StripPlan(height, top0, camera, spec)
 
 
-__all__ = ["DEFAULT_STRIP", "FarStripSpec", "ROW_MULTIPLE", "StripPlan", "TALLEST_CONE_M", "needed_rows",
-           "plan_strip", "strip_spec_from_yaml", "tilted"]
+def foot_distance(camera: PinholeCamera, row: float) -> float:
+    """The distance ahead (m, along the mount's heading) whose cone feet reach down to image ``row`` (the
+    lowest foot over the columns, as :func:`needed_rows`); ``row`` at or below the image's bottom: the image's
+    bottom row; NaN when no foot ahead reaches the row (above the horizon)."""
+    row = min(float(row), camera.height - 1.0)
+
+    def foot(d: float) -> float:
+        return needed_rows(camera, d, d + 1.0)[1]
+
+    lo, hi = 0.05, 1000.0  # nearer: lower in the image (larger row)
+    if not math.isfinite(foot(hi)) or foot(hi) > row:
+        return float("nan")
+    for _ in range(60):
+        mid = math.sqrt(lo * hi)
+        f = foot(mid)
+        if math.isfinite(f) and f <= row:
+            hi = mid
+        else:
+            lo = mid
+    return hi
+
+
+def plan_band(camera: PinholeCamera, bottom_row: int, top_m: float, downscale: int, spec: FarStripSpec = DEFAULT_STRIP,
+              source: str = "<calibration>", field: str = "band_rows") -> StripPlan:
+    """The band placed from the calibration (``band_rows: auto``): from the top of the tallest cone ``top_m``
+    ahead down to the feet of the cones at ``bottom_row`` (the hand-set crop's bottom: how near the car must see),
+    with ``spec``'s attitude margins (``near_m`` / ``far_m`` are replaced), the height a multiple of
+    :data:`ROW_MULTIPLE` rows at the band's scale (``downscale``); kept inside the image (a band whose margins
+    reach past the image's bottom ends there: no rows exist below it). ConfigError naming ``source`` and
+    ``field`` when the camera sees no cone feet at ``bottom_row`` or the band would need more rows than the image."""
+    near = foot_distance(camera, bottom_row)
+    if not math.isfinite(near) or not near < top_m:
+        raise ConfigError(source, field, f"no cone feet ahead at row {bottom_row} nearer than {top_m:g} m (mount_pose, "
+                                         "camera_matrix, crop.v1): set the band's rows by hand")
+    band = FarStripSpec(near, float(top_m), spec.pitch_margin_deg, spec.roll_margin_deg)
+    top, _, _ = needed_rows(camera, near, top_m)
+    if not math.isfinite(top):
+        raise ConfigError(source, field, f"the camera sees no cone {top_m:g} m ahead: set the band's rows by hand")
+    c0, height = _span(camera, band, ROW_MULTIPLE * int(downscale))
+    if height > camera.height:
+        raise ConfigError(source, field, f"the band for cones {near:.1f}-{top_m:g} m ahead needs {height} rows "
+                                         f"(margins included), more than the image's {camera.height}")
+    top0 = min(max(int(round(c0 - height / 2.0)), 0), camera.height - height)
+    return StripPlan(height, top0, camera, band)
+
+
+__all__ = ["DEFAULT_STRIP", "FarStripSpec", "ROW_MULTIPLE", "StripPlan", "TALLEST_CONE_M", "foot_distance",
+           "needed_rows", "plan_band", "plan_strip", "strip_spec_from_yaml", "tilted"]

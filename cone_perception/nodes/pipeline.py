@@ -11,6 +11,12 @@ Parameters (generated from cone_perception/params.py by ``cone-perception params
     band). auto = the calibration's far strip (the rows where cones 15-40 m ahead stand, moved each
     frame with the attitude; none where the calibration has no camera_matrix); V0,V1 = these rows,
     fixed; none or empty = no far band (not off: ROS reads off as a boolean)
+  band_rows (string, default crop; crop, auto, or V0,V1): the band's image rows (its columns and
+    downscale stay the calibration's): crop = the calibration's crop (the default); auto = placed
+    from the calibration: from the tops of cones as far as the far strip's near end (without a
+    strip: max_range_m) to the crop's bottom, with the strip's attitude margins, a multiple of 32
+    rows at the band's scale (docs/detector.md, Band rows; on the shipped calibrations it is not
+    smaller than their crop); V0,V1 = these rows
   far_model (string, default band; auto, band, or a model file): the far band's model: band or empty
     = the band's own model (the default: the image attitude reads every box through the band model's
     box table); auto = the shipped far-strip model (models/cone_detector_far.pt, trained for its
@@ -33,7 +39,7 @@ import time
 
 from sensor_msgs.msg import CompressedImage, Image, PointCloud2
 
-from ..detector.farband import far_rows_for
+from ..detector.farband import band_rows_for, far_rows_for
 from ..geometry.calib import load_calibration
 from ..errors import FrameError
 from ..pipeline import FrameResult, Pipeline
@@ -71,7 +77,11 @@ class PipelineNode(PerceptionNode):
         transport = declare(self, "input_transport")
         markers = bool(declare(self, "publish_markers"))
         self.loader = DetectorLoader(self)
-        far_rows = far_rows_for(declare(self, "far_rows"), calib, "parameter far_rows")  # auto: the calibration's strip
+        far_value = declare(self, "far_rows")
+        band = band_rows_for(declare(self, "band_rows"), calib, far_value, "parameter band_rows")
+        self.get_logger().info(band.what)
+        calib = band.apply(calib)  # the band's rows: crop (the calibration's), auto (placed from it) or V0,V1
+        far_rows = far_rows_for(far_value, calib, "parameter far_rows")  # auto: the calibration's strip
         plan = self.loader.plan_threads(far_rows.crop is not None)  # with a strip and threads >= 2: both forwards at once
         detector = self.loader.load((calib.crop.out_width, calib.crop.out_height))
         self.advertise_cones(calib.frame_id, markers)

@@ -22,7 +22,7 @@ from ..data.bags import read_attitude_truth, read_ground_truth, read_twists
 from ..data.outfiles import print_written, refuse_existing, remove_bag
 from ..resources import far_model_for, far_model_given
 from ..detector import Detector, default_model_path
-from ..detector.farband import FarBand, far_rows_for
+from ..detector.farband import FarBand, band_rows_for, far_rows_for
 from ..detector.parallel import ForwardPlan
 from ..detector.model_files import box_model_or_default
 from ..errors import ConfigError
@@ -59,6 +59,12 @@ def run_replay(args: argparse.Namespace) -> int:
         raise ConfigError("--tracker", None, "needs --track")
     if args.max_range is not None:
         calib = replace(calib, max_range_m=float(args.max_range))
+    band = band_rows_for(args.band_rows, calib, args.far_rows, "--band-rows")
+    if args.live == "separate" and band.crop != calib.crop:
+        raise ConfigError("--band-rows", None, "needs the fused pipeline node (--live fused or offline)")
+    if band.crop != calib.crop:
+        print(f"replay: {band.what}")
+    calib = band.apply(calib)
     far_rows = far_rows_for(args.far_rows, calib, "--far-rows")  # a bad value fails before any model loads
     if args.live == "separate" and far_rows.crop is not None:
         if args.far_rows is not None:
@@ -208,6 +214,8 @@ def _run_live(args, calib) -> dict:
     params["threads"] = args.threads
     if args.far_rows is not None:
         params["far_rows"] = args.far_rows
+    if args.band_rows is not None:
+        params["band_rows"] = args.band_rows
     if far_model_given(args.far_model):
         params["far_model"] = str(Path(args.far_model).resolve())
     elif args.far_model is not None:
