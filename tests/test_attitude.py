@@ -613,3 +613,28 @@ def test_fused_ground_gate_does_not_open_on_a_short_excursion_of_the_fits():
             assert est.gate_latch[0] < 0.1  # the excursion left no latch
     assert np.max(np.abs(used[100:115])) < 0.06  # held at the IMU's attitude through the excursion
     assert np.median(used[185:]) == pytest.approx(0.8, abs=0.12) and est.gate_latch[0] > 0.9  # a lasting grade: open
+
+
+def test_first_frames_keep_the_calibration_unless_the_fit_says_otherwise():
+    """Until the still test has judged (``still_min_frames``), a fit within ``still_start_sigmas`` (1) of its own sigma
+    of zero is taken as a still body on level ground (the calibration's zero; before, such frames took the fit's
+    scatter); a body tilted by 1 degree gets its attitude from the first frame. Boxes with their tops scattered by 7 %
+    of the height, read with a box model saying so."""
+    from cone_perception.attitude import BoxModel
+
+    cfg = ImageAttitudeConfig(box_model=BoxModel(sigma_rel=0.07, source="measured"))
+    mapper = ConeMapper(_calib())
+    rng = np.random.default_rng(0)
+
+    def scattered(boxes):
+        b = boxes.copy()
+        b[:, 1] += rng.normal(0.0, 0.07, len(b)) * (b[:, 3] - b[:, 1])
+        return b
+
+    level = scattered(_cone_boxes(_tilted_camera(0.0, 0.0), CONES_XY, CONES_CLS))
+    fit, cov, _ = mapper.image_attitude(cfg).fit(level, CONES_CLS)
+    assert not np.allclose(fit, 0.0) and np.all(np.abs(fit) < np.sqrt(np.diag(cov)))  # the fit alone: off zero, within 1 sigma
+    assert mapper.image_attitude(cfg).update(level, CONES_CLS).is_zero
+    assert not mapper.image_attitude(replace(cfg, still_start_sigmas=0.0)).update(level, CONES_CLS).is_zero  # as before
+    tilted = scattered(_cone_boxes(_tilted_camera(1.0, 0.0), CONES_XY, CONES_CLS))
+    assert mapper.image_attitude(cfg).update(tilted, CONES_CLS).pitch_deg == pytest.approx(1.0, abs=0.3)

@@ -60,11 +60,24 @@ def test_rendered_readings_apply_each_network_its_own_table():
     """With rendered tables (no measured box model) the strip's tops move by the far table, the band's by the band's."""
     est = ConeMapper(_calib()).image_attitude(ImageAttitudeConfig(far_reading=BoxReading(None, ((10.0, -0.5), (50.0, -0.5)))))
     boxes = np.array([[100.0, 500.0, 112.0, 520.0], [300.0, 500.0, 312.0, 520.0]])
-    _, extra, rel = est._read(boxes, np.array([False, True]))
+    _, extra, rel, scatter = est._read(boxes, np.array([False, True]))
     band = est.cfg.top_bias_extra_px
     assert extra[0] == pytest.approx(np.interp(20.0, [h for h, _ in band], [v for _, v in band])) and extra[0] > 0
     assert extra[1] == pytest.approx(-0.5)
     np.testing.assert_array_equal(rel, est.cfg.sigma_rel)
+    np.testing.assert_array_equal(scatter, 0.0)  # tables: nothing to average over frames
+
+
+def test_each_box_carries_its_network_box_model_spread():
+    """Measured box models: the per-cone sigma and the frame-to-frame scatter the size averaging takes are the
+    box model's of the network that drew the box."""
+    wide = BoxModel(counts=(1, 1, 1, 1), sigma_rel=0.085, input_scale=1.0, source="measured")
+    est = ConeMapper(_calib()).image_attitude(ImageAttitudeConfig(box_model=EXACT_BM, far_reading=BoxReading(wide)))
+    boxes = np.array([[100.0, 500.0, 112.0, 520.0], [300.0, 500.0, 312.0, 520.0]])
+    _, extra, rel, scatter = est._read(boxes, np.array([False, True]))
+    np.testing.assert_allclose(scatter, [0.03, 0.085])
+    np.testing.assert_allclose(rel, [max(est.cfg.sigma_rel, 0.03), 0.085])
+    np.testing.assert_array_equal(extra, 0.0)  # measured box models: no rendered table
 
 
 def test_merge_keeps_track_of_the_strip_boxes():

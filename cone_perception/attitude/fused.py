@@ -160,7 +160,7 @@ class FusedAttitude:
             return Attitude(float(body[0]), float(body[1]), s_imu, s_imu, "imu", 0)
         self.Pg = self.Pg + np.eye(2) * self.q
         bias = np.array([0.0, self.roll_bias])
-        res = self.image.fit(boxes, class_ids, body + self.g + bias, far)
+        res = self.image.fit(boxes, class_ids, body + self.g + bias, far=far)
         n, wm = 0, None
         if res is None:
             self.image.counts.too_few += 1
@@ -168,7 +168,7 @@ class FusedAttitude:
             self.image.counts.rejected += 1
         else:
             z, Rz, n = res
-            wm = self.image.motion_weight(z, Rz)
+            wm = self.image.motion_weight(z, Rz, start_from_fit=False)
             z = z - self.debias_roll(float(z[1] - body[1]))
             S = self.Pg + Rz + np.eye(2) * s_imu**2
             G = self.Pg @ inv2(S)

@@ -10,8 +10,9 @@ walk decaying to zero): frames with too few usable cones hold the last estimate,
 fit beyond :data:`~cone_perception.attitude.model.MAX_ABS_DEG`, or whose residuals are larger than
 its cone model explains, is rejected and counted; a frame whose estimate is too uncertain to beat the
 calibrated H is mapped with the calibration (counted). With a measured box model of the detector
-(:mod:`.boxes`) the boxes are first corrected to the labelled cones'; the far strip's boxes of a model of its
-own are read through that model's (:attr:`ImageAttitudeConfig.far_reading`). ROS-free.
+(:mod:`.boxes`) the boxes are first corrected to the labelled cones' (the far strip's boxes of a model of its
+own through that model's: :attr:`ImageAttitudeConfig.far_reading`), and the filter reads each box with its
+cone's height averaged over the frames it was followed (:mod:`.sizes`, ``size_frames``). ROS-free.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from ..geometry.homography import undistort_pixels
 from ..geometry.linalg import inv2
 from .boxes import BoxModel, BoxReading
 from .model import MAX_ABS_DEG, Attitude, attitude_rotation
+from .sizes import SizeTrackConfig, SizeTracks
 
 
 def box_top_extra_px(height_px: np.ndarray, table) -> np.ndarray:
@@ -72,7 +74,10 @@ class ImageAttitudeConfig:
     #: ``still_ratio`` (pitch and roll) the body is taken as still and the estimate returns to zero,
     #: fully at ``still_ratio - still_ramp``; 0 frames = off
     still_frames: float = 40.0
-    still_min_frames: float = 10.0  # fits before the test judges (until then: moving)
+    still_min_frames: float = 10.0  # fits before the test judges (until then: moving, or see still_start_sigmas)
+    #: until the test judges, a fit within this many of its own sigmas of zero (pitch and roll) is taken as a still
+    #: body (the calibration's zero), fully moving one sigma further; 0 = off (moving)
+    still_start_sigmas: float = 1.0
     still_ratio: float = 1.3
     still_ramp: float = 0.4
     #: ... and only while the fits' mean stays within this (degrees, pitch and roll; ramp of half of it):
@@ -93,6 +98,11 @@ class ImageAttitudeConfig:
     trust_min_cones: int = 3
     trust_max_scale: float = 2.5
     trust_max_sigma_deg: float = 1.0
+    #: each cone's box height averaged over the frames it is followed (:mod:`.sizes`; :meth:`ImageAttitude.update`
+    #: only), with a measured ``box_model`` only: the rendered table's boxes have no scatter to average
+    size_frames: bool = True
+    size_rendered: bool = False  # average the rendered table's boxes too (measured worse: docs/benchmarks.md)
+    size_tracks: SizeTrackConfig = SizeTrackConfig()
 
     def reading(self, far: bool = False) -> BoxReading:
         """The :class:`~cone_perception.attitude.boxes.BoxReading` of the band's boxes, or (``far``) of the far
@@ -111,10 +121,14 @@ class AttitudeCounts:
     rejected: int = 0
     #: frames mapped with the calibration's H because the image attitude did not beat it (any outcome above)
     calibration: int = 0
+    #: cones whose box heights went into an average over frames (``size_frames``), and of them those followed
+    #: from an earlier frame (the rest start their average)
+    size_cones: int = 0
+    size_followed: int = 0
 
     def as_dict(self) -> dict[str, int]:
         return {"fitted": self.fitted, "too_few_cones": self.too_few, "rejected_beyond_limit": self.rejected,
-                "used_calibration": self.calibration}
+                "used_calibration": self.calibration, "size_cones": self.size_cones, "size_followed": self.size_followed}
 
 
 class ImageAttitude:
@@ -147,6 +161,7 @@ class ImageAttitude:
         size = np.array([CONE_SIZE_M.get(c, (np.nan, np.nan, np.nan)) for c in range(NUM_CLASSES)])
         self._height_m, self._base_m, self._tip_r_m = size[:, 0], size[:, 1], size[:, 2]
         self.counts = AttitudeCounts()
+        self.sizes = SizeTracks(self.p0[:2], self.cfg.size_tracks)
         self.reset()
 
     def reset(self) -> None:
@@ -159,9 +174,12 @@ class ImageAttitude:
         self._m2 = np.zeros(2)
         self._mv = np.zeros(2)
         self._n_still = 0
+        self.sizes.reset()
 
-    def motion_weight(self, z: np.ndarray | None, Rz: np.ndarray | None) -> float:
-        """Fold one fit into the still test; 1 = the body moves (use the estimate), 0 = still (use zero)."""
+    def motion_weight(self, z: np.ndarray | None, Rz: np.ndarray | None, start_from_fit: bool = True) -> float:
+        """Fold one fit into the still test; 1 = the body moves (use the estimate), 0 = still (use zero).
+        ``start_from_fit``: before the test judges, the fit's own distance from zero decides
+        (``still_start_sigmas``; False: moving, as ``fused`` wants it, whose IMU sees the body anyway)."""
         c = self.cfg
         if c.still_frames <= 0:
             return 1.0
@@ -172,7 +190,10 @@ class ImageAttitude:
             self._m2 += a * (z * z - self._m2)
             self._mv += a * (np.diag(Rz) - self._mv)
         if self._n_still < c.still_min_frames:
-            return 1.0
+            if c.still_start_sigmas <= 0 or z is None or not start_from_fit:
+                return 1.0
+            # not judged yet: this fit's own evidence that the body is off zero (a ramp of one sigma)
+            return float(np.clip(np.max(np.abs(z) / np.sqrt(np.maximum(np.diag(Rz), 1e-12))) - c.still_start_sigmas, 0.0, 1.0))
         spread = np.sqrt(np.maximum(self._m2 - self._m1**2, 0.0) / np.maximum(self._mv, 1e-12))
         moving = (np.max(spread) - (c.still_ratio - c.still_ramp)) / c.still_ramp
         sloped = (np.max(np.abs(self._m1)) - c.still_max_mean_deg) / (0.5 * c.still_max_mean_deg)
@@ -198,8 +219,9 @@ class ImageAttitude:
         return z - self.bias
 
     # -- model ------------------------------------------------------------------------------------
-    def _select(self, boxes: np.ndarray, class_ids: np.ndarray) -> np.ndarray:
-        """(N,) bool: boxes that may be standing, whole cones of a known size."""
+    def _select(self, boxes: np.ndarray, class_ids: np.ndarray, by_size: bool = True) -> np.ndarray:
+        """(N,) bool: boxes that may be standing, whole cones of a known size (``by_size``: within ``max_range_m`` by
+        their height)."""
         c = self.cfg
         b = boxes
         known = (class_ids >= 0) & (class_ids < NUM_CLASSES)
@@ -208,17 +230,20 @@ class ImageAttitude:
         w = np.maximum(b[:, 2] - b[:, 0], 1e-6)
         h = np.maximum(b[:, 3] - b[:, 1], 1e-6)
         aspect_ok = np.abs(np.log(w / h * (hm / self._base_m[cls]))) <= c.aspect_tol  # NaN (unknown size): False
-        near = self.K[1, 1] * hm <= c.max_range_m * h
+        near = self.K[1, 1] * hm <= c.max_range_m * h if by_size else True
         m = c.edge_margin_px
         inside = (b[:, 0] > m) & (b[:, 2] < self.W - m) & (b[:, 1] > self.band[0] + m) & (b[:, 3] < self.band[1] - m)
         return known & aspect_ok & (h >= c.min_height_px) & inside & near
 
-    def _read(self, boxes: np.ndarray, far: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _read(self, boxes: np.ndarray, far: np.ndarray | None
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Each box through the :class:`~cone_perception.attitude.boxes.BoxReading` of the network that drew it
         (``far``: (N,) bool, the far strip's boxes; None: all the band's): ``(boxes corrected by a measured box
-        model, (N,) px their tops stand above the cones' by a rendered table, (N,) relative per-cone sigma)``."""
+        model, (N,) px their tops stand above the cones' by a rendered table, (N,) relative per-cone sigma, (N,)
+        relative scatter of the box height from frame to frame: the box model's spread, 0 with a table)``."""
         c = self.cfg
         out, extra, rel = boxes.copy(), np.zeros(len(boxes)), np.full(len(boxes), c.sigma_rel)
+        scatter = np.zeros(len(boxes))
         parts = [(c.reading(False), np.ones(len(boxes), bool))]
         if far is not None and c.far_reading is not None:
             far = np.asarray(far, dtype=bool).ravel()
@@ -229,9 +254,10 @@ class ImageAttitude:
             if rd.box_model is not None:
                 out[m] = rd.box_model.correct(boxes[m])
                 rel[m] = max(c.sigma_rel, rd.box_model.sigma_rel)
+                scatter[m] = rd.box_model.sigma_rel
             else:
                 extra[m] = box_top_extra_px(boxes[m, 3] - boxes[m, 1], rd.table)
-        return out, extra, rel
+        return out, extra, rel, scatter
 
     def _prepare(self, boxes: np.ndarray, class_ids: np.ndarray, top_extra: np.ndarray | None = None):
         """``top_extra``: (N,) px each box top stands above its cone's (:meth:`_read`); None: the band's reading."""
@@ -246,6 +272,47 @@ class ImageAttitude:
         rays = np.column_stack([foot, np.ones(len(foot))]) @ self.Kinv.T  # (N, 3) optical frame
         return rays, top[:, 1], class_ids
 
+    def _feet_batch(self, thetas_deg: np.ndarray, rays: np.ndarray):
+        """(k, 2) attitudes -> the camera's rotation (k, 3, 3) and position (k, 3) in rear_axle, each foot ray's
+        ground point minus the camera's position (k, N, 2) and whether the ray hits the ground (k, N)."""
+        R_att = np.stack([attitude_rotation(t[0], t[1]) for t in thetas_deg])  # (k, 3, 3)
+        R_F_C = R_att @ self.R_F_C0
+        p = R_att @ self.p0  # (k, 3)
+        d = rays @ R_F_C.transpose(0, 2, 1)  # (k, N, 3) in rear_axle
+        dz = d[:, :, 2]
+        hits = dz < -1e-9
+        t = -p[:, 2:3] / np.where(hits, dz, -1.0)
+        return R_F_C, p, t[:, :, None] * d[:, :, :2], hits
+
+    def model_heights(self, xy_m: np.ndarray, cls: np.ndarray) -> np.ndarray:
+        """(N,) undistorted px from the foot row up to the tip's row of cones of classes ``cls`` (N,) whose centres
+        stand at rear_axle ``xy_m`` (N, 2) m (:meth:`centres`), at zero attitude (the fit's cone model); NaN behind
+        the camera."""
+        away = np.asarray(xy_m, dtype=np.float64).reshape(-1, 2) - self.p0[:2]
+        dist = np.maximum(np.hypot(away[:, 0], away[:, 1]), 1e-6)
+        foot = away * ((dist - self.off[cls]) / dist)[:, None]
+        tip = away * ((dist + self._tip_r_m[cls]) / dist)[:, None]
+        P = np.stack([np.column_stack([foot, np.full(len(foot), -self.p0[2])]),
+                      np.column_stack([tip, self._height_m[cls] - self.p0[2]])])  # (2, N, 3) minus camera
+        Pc = P @ self.R_F_C0  # optical frame
+        with np.errstate(invalid="ignore", divide="ignore"):
+            v = self.K[1, 1] * Pc[:, :, 1] / Pc[:, :, 2]
+        return np.where(np.all(Pc[:, :, 2] > 1e-6, axis=0), v[0] - v[1], np.nan)
+
+    def centres(self, feet_m: np.ndarray, cls: np.ndarray) -> np.ndarray:
+        """(..., N, 2) rear_axle ground points of the cones' feet -> their centres (m): each moved away from the
+        camera by its class's foot offset, as the fit's cone model (and the mapping) places them. A box's foot is
+        the cone's nearest edge, which turns with the cone's bearing as the car passes; the centre stands still."""
+        away = np.asarray(feet_m, dtype=np.float64) - self.p0[:2]
+        dist = np.maximum(np.hypot(away[..., 0], away[..., 1]), 1e-6)
+        return self.p0[:2] + away * ((dist + self.off[cls]) / dist)[..., None]
+
+    def ground_feet(self, thetas_deg: np.ndarray, rays: np.ndarray) -> np.ndarray:
+        """(k, 2) attitudes (degrees) -> (k, N, 2) rear_axle ground points (m) of the foot rays (N, 3); NaN
+        where a ray misses the ground."""
+        _, p, away, hits = self._feet_batch(np.asarray(thetas_deg, dtype=np.float64).reshape(-1, 2), rays)
+        return np.where(hits[:, :, None], away + p[:, None, :2], np.nan)
+
     def residuals(self, theta_deg: np.ndarray, rays: np.ndarray, v_top: np.ndarray, cls: np.ndarray) -> np.ndarray:
         """(N,) predicted minus observed top row (px) of each cone for attitude (pitch, roll) in degrees.
 
@@ -255,14 +322,7 @@ class ImageAttitude:
 
     def _residuals_batch(self, thetas_deg: np.ndarray, rays: np.ndarray, v_top: np.ndarray, cls: np.ndarray) -> np.ndarray:
         """(k, 2) attitudes -> (k, N) residuals, all in one vectorised pass."""
-        R_att = np.stack([attitude_rotation(t[0], t[1]) for t in thetas_deg])  # (k, 3, 3)
-        R_F_C = R_att @ self.R_F_C0
-        p = R_att @ self.p0  # (k, 3)
-        d = rays @ R_F_C.transpose(0, 2, 1)  # (k, N, 3) in rear_axle
-        dz = d[:, :, 2]
-        hits = dz < -1e-9
-        t = -p[:, 2:3] / np.where(hits, dz, -1.0)
-        away = t[:, :, None] * d[:, :, :2]  # ground point minus camera, (k, N, 2)
+        R_F_C, p, away, hits = self._feet_batch(thetas_deg, rays)  # away: ground point minus camera, (k, N, 2)
         dist = np.sqrt(np.sum(away * away, axis=2, keepdims=True))
         reach = dist + (self.off[cls] + self._tip_r_m[cls])[None, :, None]
         top = away * (reach / dist)  # tip (xy) minus camera
@@ -273,22 +333,55 @@ class ImageAttitude:
 
     # -- fit --------------------------------------------------------------------------------------
     def fit(self, boxes: np.ndarray, class_ids: np.ndarray, start_deg: np.ndarray | None = None,
+            sizes: SizeTracks | None = None, start_cov_deg2: np.ndarray | None = None,
             far: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, int] | None:
         """One frame's robust fit: ``(theta (2,) deg, covariance (2, 2) deg^2, cones used)``, or None
         with fewer than ``min_cones`` usable cones. ``boxes`` (N, 4) full-image px (pixel edges);
-        ``start_deg``: where to linearise first (the filter's prediction; default zero); ``far``: (N,) bool,
-        the boxes of the far strip's network (read through :attr:`ImageAttitudeConfig.far_reading`; None: none)."""
+        ``start_deg``: where to linearise first (the filter's prediction; default zero). ``sizes``: the cones
+        followed over frames (:class:`~cone_perception.attitude.sizes.SizeTracks`; None: this frame's boxes
+        alone, and so without a measured box model unless ``size_rendered``): the cones, mapped with ``start_deg``
+        (``start_cov_deg2`` (2, 2): how far off it may be; None: the prior's) and cut at ``max_range_m`` by their
+        feet, are followed from the frame before (:meth:`_average_sizes`), then each box is read with its cone's
+        averaged height. ``far``: (N,) bool, the boxes of the far strip's network (read through
+        :attr:`ImageAttitudeConfig.far_reading`; None: none)."""
         c = self.cfg
-        boxes, top_extra, rel = self._read(np.asarray(boxes, dtype=np.float64).reshape(-1, 4), far)
+        boxes, top_extra, rel, scatter = self._read(np.asarray(boxes, dtype=np.float64).reshape(-1, 4), far)
         class_ids = np.asarray(class_ids, dtype=np.intp).ravel()
         self.last_scale = np.inf
-        sel = self._select(boxes, class_ids)
+        # the rendered table (no box model): boxes within tenths of a pixel, no scatter to average over frames
+        measured = c.box_model is not None or (c.far_reading is not None and c.far_reading.box_model is not None)
+        averaging = sizes is not None and (measured or c.size_rendered)
+        theta = np.zeros(2) if start_deg is None else np.clip(np.asarray(start_deg, dtype=np.float64), -2.0, 2.0)
+        # averaging: cones cut at max_range_m by their feet, not by their heights (a cut by the scattered height lets
+        # in the cones whose boxes came out tall, and their averages would start tall)
+        sel = self._select(boxes, class_ids, by_size=not averaging)
+        if averaging and int(sel.sum()) >= c.min_cones:
+            rays, _, _ = self._prepare(boxes[sel], class_ids[sel])
+            away = self.ground_feet(theta, rays)[0] - self.p0[:2]
+            with np.errstate(invalid="ignore"):
+                sel[sel] = np.hypot(away[:, 0], away[:, 1]) <= c.max_range_m  # NaN (misses the ground): out
         if int(sel.sum()) < c.min_cones:
+            if averaging:
+                sizes.miss()
             return None
         rays, v_top, cls = self._prepare(boxes[sel], class_ids[sel], top_extra[sel])
         h = boxes[sel, 3] - boxes[sel, 1]
         sigma = np.sqrt(2.0 * c.sigma_px**2 + (rel[sel] * h) ** 2)
-        theta = np.zeros(2) if start_deg is None else np.clip(np.asarray(start_deg, dtype=np.float64), -2.0, 2.0)
+        if not averaging:
+            return self._solve(rays, v_top, cls, sigma, theta)
+        # the box model's spread averages over frames, the cone model's own (sigma_rel) not
+        v_top, sigma = self._average_sizes(sizes, theta, rays, v_top, cls, scatter[sel], start_cov_deg2)
+        res = self._solve(rays, v_top, cls, sigma, theta)
+        if res is not None:  # the followed cones' places, with this frame's attitude
+            sizes.relocate(self.centres(self.ground_feet(res[0], rays)[0], cls))
+        return res
+
+    def _solve(self, rays: np.ndarray, v_top: np.ndarray, cls: np.ndarray, sigma: np.ndarray, theta: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, int] | None:
+        """The robust fit of :meth:`fit` on prepared cones (foot rays, top rows, classes, 1-sigma px), linearised
+        first at ``theta``; sets :attr:`last_scale`."""
+        c = self.cfg
+        self.last_scale = np.inf
         eps = 0.05
         lam = np.eye(2) / c.prior_sigma_deg**2
         for outer in range(self.cfg.outer_iterations):
@@ -325,6 +418,34 @@ class ImageAttitude:
         # the residuals' robust spread in sigmas (1: as the cone model expects; all cones, outliers too): trusted()
         self.last_scale = 1.4826 * float(np.median(np.abs(e)))
         return theta, inv2(A) * scale, n_used
+
+    def _average_sizes(self, sizes: SizeTracks, theta: np.ndarray, rays: np.ndarray, v_top: np.ndarray,
+                       cls: np.ndarray, rel, cov_deg2: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """The usable cones' top rows (N,) px as their averaged sizes say (:class:`SizeTracks`) and their 1-sigma
+        (N,) px: the foot row's, the averaged size's and the cone model's own (``sigma_rel``, not averaged).
+        ``theta``: the predicted attitude, ``cov_deg2`` its covariance (None: the prior's); ``rel``: a box
+        height's relative scatter from frame to frame (1-sigma; the box model's of the network that drew it: (N,),
+        or one for all)."""
+        c = self.cfg
+        v_foot = self.K[1, 1] * rays[:, 1] / rays[:, 2] + self.K[1, 2]
+        hu = np.maximum(v_foot - v_top, 1e-3)  # undistorted height, box model applied
+        log_h = np.log(hu)
+        var = rel**2 + (c.sigma_px / hu) ** 2  # the top row's scatter, relative
+        eps = 0.1
+        cov = np.eye(2) * c.prior_sigma_deg**2 if cov_deg2 is None else np.asarray(cov_deg2, dtype=np.float64)
+        for k in range(2):  # the cones mapped with the prediction, then with the frame's common pitch error taken off
+            g = self.centres(self.ground_feet(np.array([theta, theta + (eps, 0.0), theta + (0.0, eps)]), rays), cls)
+            jac = np.nan_to_num(np.stack([g[1] - g[0], g[2] - g[0]], axis=2) / eps)  # (N, 2, 2) m/deg
+            off = sizes.pitch_offset(g[0], cls, jac[:, :, 0], cov) if k == 0 else 0.0
+            if off == 0.0:
+                break
+            theta = theta - (off, 0.0)  # pitch_offset: the cones as they would lie at theta - off
+        before = sizes.matched
+        avg, var_avg = sizes.average(g[0], cls, log_h, var, self.model_heights, jac, cov)
+        self.counts.size_cones += len(cls)
+        self.counts.size_followed += sizes.matched - before
+        h = np.exp(avg)
+        return v_foot - h, np.sqrt(c.sigma_px**2 + h**2 * (var_avg + c.sigma_rel**2))
 
     def trusted(self, n_cones: int, sd_deg: np.ndarray) -> bool:
         """Whether this frame's image attitude (from a fit of ``n_cones`` cones whose residual scale is
@@ -367,7 +488,7 @@ class ImageAttitude:
         c = self.cfg
         self.x = self.x * c.decay  # predict: random walk decaying to zero
         self.P = self.P * c.decay**2 + np.eye(2) * c.process_sigma_deg**2
-        res = self.fit(boxes, class_ids, self.x + self.bias, far)
+        res = self.fit(boxes, class_ids, self.x + self.bias, self.sizes if c.size_frames else None, self.P, far=far)
         source, n = "hold", 0
         if res is None:
             self.counts.too_few += 1

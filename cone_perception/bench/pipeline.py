@@ -10,6 +10,8 @@ import time
 import numpy as np
 
 from ..adapter import DriverAdapter
+from ..attitude import ImageAttitudeConfig
+from ..attitude.box_files import box_model_for
 from ..crop import CropSpec
 from ..data import bagio
 from ..detector import Detector, default_model_path
@@ -30,8 +32,11 @@ def bench_pipeline(calib, det, frames: list[bytes], n_frames: int, warmup: int =
     """Time ``det`` in the fused pipeline of ``calib`` (its crop and downscale) on raw YUYV ``frames``
     (cycled): per stage, end to end with the packing of ``cone_boxes`` and ``/cones``. The result
     of ``bench pipeline`` (and one row of ``bench table``). ``far``: a far band (``detector/farband.py``) or None;
-    ``concurrent``: its forward at the same time as the band's (``detector/parallel.py``)."""
-    with Pipeline(calib, det, far=far, concurrent=concurrent) as pipe:
+    ``concurrent``: its forward at the same time as the band's (``detector/parallel.py``). The image attitude reads
+    the boxes as the nodes' ``box_model: auto`` does (the model's box model, the rendered table for a synthetic
+    camera), so its stage costs what it costs on the car."""
+    bm, _ = box_model_for("auto", det.source, calib.camera == "synth")
+    with Pipeline(calib, det, far=far, concurrent=concurrent, attitude_config=ImageAttitudeConfig(box_model=bm)) as pipe:
         return _time_pipeline(pipe, calib, det, frames, n_frames, warmup)
 
 

@@ -57,7 +57,8 @@ def declare_box_model(node, calib, model_path, far_model_path=None) -> tuple[Ima
 class AttitudeCountsView(Mapping):
     """The attitude estimator's counts as they are now (read at each ``/diagnostics``): the image fit's
     (``fitted``, ``too_few_cones``, ``rejected_beyond_limit``, ``used_calibration``: frames mapped with the
-    calibration's H) and, with an IMU, ``imu_*``."""
+    calibration's H; ``size_cones`` / ``size_followed``: cones whose heights were averaged over frames / followed
+    from an earlier frame) and, with an IMU, ``imu_*``."""
 
     def __init__(self, estimator) -> None:
         self.estimator = estimator

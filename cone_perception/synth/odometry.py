@@ -3,7 +3,7 @@ with white noise and a small constant bias, at its own rate. ROS-free.
 
 The true twist of the ``rear_axle`` frame (axes x forward, y left; ``vx``, ``vy`` in m/s, ``wz``
 in rad/s) between two frames is the constant twist that moves the car from one frame's pose to the
-next (:meth:`~cone_perception.tracking.egomotion.Motion2D.twist`); an odometry sample at time ``t`` takes
+next (:meth:`~cone_perception.geometry.motion.Motion2D.twist`); an odometry sample at time ``t`` takes
 the twist linearly interpolated between the middles of the frame intervals around ``t``. Noise
 per sample (1 sigma) and one bias per bag (1 sigma of the draw) are the constants below, about a
 wheel-speed + gyro odometry of a small car. The pose (``pose.pose``, frame ``odom``) is the noisy

@@ -9,7 +9,7 @@ from collections import Counter
 import numpy as np
 
 from ..mapping import ConeMapper
-from .egomotion import TwistBuffer
+from ..geometry.motion import TwistBuffer
 from .tracker import ConeTracker, FieldOfView, FrameInfo, TrackerConfig
 
 

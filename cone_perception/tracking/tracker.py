@@ -2,7 +2,7 @@
 
 Per frame (:meth:`ConeTracker.update`): the tracks are moved by the car's motion since the last
 frame (odometry when given, else a registration of the frame's cones against the tracks with a
-constant-velocity prior, see :mod:`cone_perception.tracking.egomotion`), associated with the frame's cones
+constant-velocity prior, see :mod:`cone_perception.geometry.motion`), associated with the frame's cones
 by gated Mahalanobis distance and one-to-one assignment (``scipy.optimize.linear_sum_assignment``),
 and updated by a Kalman filter with each cone's own covariance (its attitude part, when the frame's
 attitude is given, as one error common to the frame: :meth:`ConeTracker.update`). Per track: id (uint32, never
@@ -33,7 +33,7 @@ from ..errors import FrameError
 from ..geometry.linalg import inv2
 from ..mapping import ConeMapper
 from ..records import CONE_DTYPE, TRACKED_CONE_DTYPE
-from .egomotion import Motion2D, from_twist, register_cones
+from ..geometry.motion import Motion2D, from_twist, register_cones
 
 _BIG = 1e9
 #: :attr:`ConeTracker.events` that mean bad or missing input (a node's health WARNs when one grows);
