@@ -7,9 +7,9 @@ detector's box model, :mod:`.boxes`), read from an IMU
 
 from __future__ import annotations
 
-from .boxes import BOX_MODEL_BUCKETS_PX, DEFAULT_BOX_MODEL, BoxModel
+from .boxes import BOX_MODEL_BUCKETS_PX, DEFAULT_BOX_MODEL, BoxModel, box_top_extra_px
 from .fused import FusedAttitude, GroundGate, attitude_estimator, attitude_for_boxes
-from .image import AttitudeCounts, ImageAttitude, ImageAttitudeConfig, box_top_extra_px
+from .image import AttitudeCounts, ImageAttitude, ImageAttitudeConfig
 from .imu import (
     IMU_MAX_AGE_NS, IMU_REST_MAX_ACCEL_SD, IMU_REST_MAX_ANGLE_SD_DEG, IMU_REST_MAX_RATE_SD_DPS, IMU_REST_MIN_SAMPLES,
     QUAT_NORM_TOL, ImuAttitude, ImuCounts, ImuRest, imu_rest, rpy_from_quaternion,

@@ -161,6 +161,40 @@ class BoxReading:
     what: str = ""
 
 
+def box_top_extra_px(height_px: np.ndarray, table) -> np.ndarray:
+    """(N,) px the detector's box tops stand above the cones' (``table``: (box height px, px) pairs,
+    interpolated, ends held; empty = zero) for boxes (N,) px high."""
+    h = np.asarray(height_px, dtype=np.float64)
+    if not table:
+        return np.zeros(h.shape)
+    return np.interp(h, [a for a, _ in table], [b for _, b in table])
+
+
+def read_boxes(boxes: np.ndarray, far: np.ndarray | None, band: BoxReading, far_reading: BoxReading | None,
+               sigma_rel: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(N, 4) boxes (full-image px) each through the reading of the network that drew it (``far``: (N,) bool, the far
+    strip's, read through ``far_reading``; None, or no ``far_reading``: all through ``band``): ``(boxes corrected by
+    a measured box model, (N,) px their tops stand above the cones' by a rendered table, (N,) relative per-cone
+    sigma (at least the fit's ``sigma_rel``), (N,) relative scatter of the box height from frame to frame: the box
+    model's spread, 0 with a table)``."""
+    out, extra, rel = boxes.copy(), np.zeros(len(boxes)), np.full(len(boxes), float(sigma_rel))
+    scatter = np.zeros(len(boxes))
+    parts = [(band, np.ones(len(boxes), bool))]
+    if far is not None and far_reading is not None:
+        far = np.asarray(far, dtype=bool).ravel()
+        parts = [(band, ~far), (far_reading, far)]
+    for rd, m in parts:
+        if not m.any():
+            continue
+        if rd.box_model is not None:
+            out[m] = rd.box_model.correct(boxes[m])
+            rel[m] = max(sigma_rel, rd.box_model.sigma_rel)
+            scatter[m] = rd.box_model.sigma_rel
+        else:
+            extra[m] = box_top_extra_px(boxes[m, 3] - boxes[m, 1], rd.table)
+    return out, extra, rel, scatter
+
+
 #: The shipped far model's box-top table on rendered drives (``models/cone_detector_far.pt`` run at full
 #: resolution in the strip; (box height px, px), full-image px): the median top-row residual at the true
 #: attitude per box height (negative: its box tops lie below the cones' tips), measured on tuning drives with

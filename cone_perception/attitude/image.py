@@ -25,18 +25,9 @@ from ..classes import CONE_SIZE_M, NUM_CLASSES
 from ..geometry.camera import MountPose
 from ..geometry.homography import undistort_pixels
 from ..geometry.linalg import inv2
-from .boxes import BoxModel, BoxReading
+from .boxes import BoxModel, BoxReading, box_top_extra_px, read_boxes
 from .model import MAX_ABS_DEG, Attitude, attitude_rotation
 from .sizes import SizeTrackConfig, SizeTracks
-
-
-def box_top_extra_px(height_px: np.ndarray, table) -> np.ndarray:
-    """(N,) px the detector's box tops stand above the cones' (``table``: (box height px, px) pairs,
-    interpolated, ends held; empty = zero) for boxes (N,) px high."""
-    h = np.asarray(height_px, dtype=np.float64)
-    if not table:
-        return np.zeros(h.shape)
-    return np.interp(h, [a for a, _ in table], [b for _, b in table])
 
 
 @dataclass
@@ -87,9 +78,8 @@ class ImageAttitudeConfig:
     #: measured on real frames, stored beside the model file): boxes are corrected to the labels' before the
     #: fit, and ``top_bias_extra_px`` (the rendered drives' table) is not applied. None: the synthetic case
     box_model: BoxModel | None = None
-    #: how the far strip's boxes are read where its network is not the band's (``far_model``; issue 26f): that
-    #: model's box model or rendered table (:class:`~cone_perception.attitude.boxes.BoxReading`); None: as the
-    #: band's boxes (``box_model`` / ``top_bias_extra_px``)
+    #: how the far strip's boxes are read where its network is not the band's (``far_model``, issue 26f:
+    #: :class:`~cone_perception.attitude.boxes.BoxReading`); None: as the band's (``box_model`` / the table)
     far_reading: BoxReading | None = None
     #: per frame, the image attitude is used only where it beats the calibrated H (:meth:`ImageAttitude.trusted`):
     #: at least ``trust_min_cones`` cones in the fit, the fit's residuals no more than ``trust_max_scale``
@@ -103,13 +93,6 @@ class ImageAttitudeConfig:
     size_frames: bool = True
     size_rendered: bool = False  # average the rendered table's boxes too (measured worse: docs/benchmarks.md)
     size_tracks: SizeTrackConfig = SizeTrackConfig()
-
-    def reading(self, far: bool = False) -> BoxReading:
-        """The :class:`~cone_perception.attitude.boxes.BoxReading` of the band's boxes, or (``far``) of the far
-        strip's (:attr:`far_reading`, else the band's)."""
-        if far and self.far_reading is not None:
-            return self.far_reading
-        return BoxReading(self.box_model, self.top_bias_extra_px if self.box_model is None else ())
 
 
 @dataclass
@@ -235,36 +218,18 @@ class ImageAttitude:
         inside = (b[:, 0] > m) & (b[:, 2] < self.W - m) & (b[:, 1] > self.band[0] + m) & (b[:, 3] < self.band[1] - m)
         return known & aspect_ok & (h >= c.min_height_px) & inside & near
 
-    def _read(self, boxes: np.ndarray, far: np.ndarray | None
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Each box through the :class:`~cone_perception.attitude.boxes.BoxReading` of the network that drew it
-        (``far``: (N,) bool, the far strip's boxes; None: all the band's): ``(boxes corrected by a measured box
-        model, (N,) px their tops stand above the cones' by a rendered table, (N,) relative per-cone sigma, (N,)
-        relative scatter of the box height from frame to frame: the box model's spread, 0 with a table)``."""
+    def _read(self, boxes: np.ndarray, far: np.ndarray | None):
+        """Each box through its network's reading (:func:`~cone_perception.attitude.boxes.read_boxes`)."""
         c = self.cfg
-        out, extra, rel = boxes.copy(), np.zeros(len(boxes)), np.full(len(boxes), c.sigma_rel)
-        scatter = np.zeros(len(boxes))
-        parts = [(c.reading(False), np.ones(len(boxes), bool))]
-        if far is not None and c.far_reading is not None:
-            far = np.asarray(far, dtype=bool).ravel()
-            parts = [(c.reading(False), ~far), (c.far_reading, far)]
-        for rd, m in parts:
-            if not m.any():
-                continue
-            if rd.box_model is not None:
-                out[m] = rd.box_model.correct(boxes[m])
-                rel[m] = max(c.sigma_rel, rd.box_model.sigma_rel)
-                scatter[m] = rd.box_model.sigma_rel
-            else:
-                extra[m] = box_top_extra_px(boxes[m, 3] - boxes[m, 1], rd.table)
-        return out, extra, rel, scatter
+        band = BoxReading(c.box_model, c.top_bias_extra_px if c.box_model is None else ())
+        return read_boxes(boxes, far, band, c.far_reading, c.sigma_rel)
 
     def _prepare(self, boxes: np.ndarray, class_ids: np.ndarray, top_extra: np.ndarray | None = None):
         """``top_extra``: (N,) px each box top stands above its cone's (:meth:`_read`); None: the band's reading."""
         u = 0.5 * (boxes[:, 0] + boxes[:, 2]) - 0.5  # pixel-edge -> pixel-centre coordinates
         foot = np.column_stack([u, boxes[:, 3] - 0.5])
         if top_extra is None:
-            top_extra = box_top_extra_px(boxes[:, 3] - boxes[:, 1], self.cfg.reading(False).table)
+            top_extra = box_top_extra_px(boxes[:, 3] - boxes[:, 1], () if self.cfg.box_model else self.cfg.top_bias_extra_px)
         top = np.column_stack([u, boxes[:, 1] - 0.5 + self.cfg.top_bias_px + top_extra])
         if self.dist is not None:
             foot = undistort_pixels(foot, self.K, self.dist)
@@ -483,8 +448,7 @@ class ImageAttitude:
 
         A fit whose residuals or cones fail :meth:`trusted` (its own 1-sigma aside: the filter averages
         fits) is not folded in (counted as ``rejected``); a frame whose filtered estimate's 1-sigma exceeds
-        ``trust_max_sigma_deg`` is mapped with the calibration's H (counted as ``used_calibration``). ``far``: as
-        :meth:`fit`."""
+        ``trust_max_sigma_deg`` is mapped with the calibration's H (counted as ``used_calibration``); ``far``: :meth:`fit`."""
         c = self.cfg
         self.x = self.x * c.decay  # predict: random walk decaying to zero
         self.P = self.P * c.decay**2 + np.eye(2) * c.process_sigma_deg**2
