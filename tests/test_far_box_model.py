@@ -166,3 +166,56 @@ def test_far_reading_follows_the_box_model_choice(tmp_path, caplog):
     assert far_reading_for("auto", other, band, False)[0].box_model == FAR_BM
     with pytest.raises(ValueError, match="unknown box model choice"):
         far_reading_for("nope", far, band, False)
+
+
+def test_real_behaviour_takes_the_far_model_rendered_offset_out_first():
+    """``replay --box-behaviour real`` on a rendered drive: the far model's rendered boxes already stand below the
+    cones' tips (its rendered table); its box model, measured against labels, holds all of its offset on real frames.
+    The behaviour takes the rendered offset out before moving the box by the box model, so the fit reading the boxes
+    through that box model finds the attitude; without it the offset counts twice and pulls the pitch."""
+    from cone_perception.records import boxes_from_arrays, boxes_to_arrays
+    from cone_perception.synth.boxlook import BoxBehaviour, real_box_behaviour
+
+    table = ((10.0, -0.6), (60.0, -0.6))  # the far model's rendered tops 0.6 px below the cones' (full px)
+    labels = _labels()
+    rendered = labels.copy()
+    rendered[FAR, 1] += 0.6  # the strip network's rendered boxes
+    n = int(FAR.sum())
+    recs = boxes_from_arrays(rendered[FAR], [0.9] * n, CONES_CLS[FAR])
+    look = BoxBehaviour(FAR_BM, top_jitter=0.0, rendered_table=table)
+    np.testing.assert_allclose(boxes_to_arrays(look(recs))[0], FAR_BM.detected(labels[FAR]), atol=1e-6)
+    twice = boxes_to_arrays(BoxBehaviour(FAR_BM, top_jitter=0.0)(recs))[0]  # as before: the offset counted twice
+    assert np.all(twice[:, 1] - FAR_BM.detected(labels[FAR])[:, 1] > 0.55)
+
+    on_labels = _estimator(None).fit(labels, CONES_CLS)[0]
+    fits = {}
+    for name, behaviour in (("taken out", look), ("twice", BoxBehaviour(FAR_BM, top_jitter=0.0))):
+        boxes = labels.copy()
+        boxes[FAR] = boxes_to_arrays(behaviour(recs))[0]
+        fits[name] = abs(_estimator(BoxReading(FAR_BM)).fit(boxes, CONES_CLS, far=FAR)[0][0] - on_labels[0])
+    assert fits["taken out"] < 0.01 and fits["twice"] > 0.03, fits
+
+    class Fake:  # a detector and a far strip holding one
+        def detect(self, img, crop):
+            return recs
+
+    strip = Fake()
+    strip.detector = Fake()
+    _, far = real_box_behaviour(Fake(), strip, EXACT_BM, 0.0, FAR_BM, far_rendered_table=table)
+    np.testing.assert_allclose(boxes_to_arrays(far.detector.detect(None, None))[0], FAR_BM.detected(labels[FAR]), atol=1e-6)
+
+
+def test_far_strip_boxes_have_their_own_range_cut():
+    """A cone 24 m away (its box says 20.8 m, the box covering the base plate too): too far for the band's halved
+    input (``max_range_m`` 20), but the far strip's network sees it at full resolution (``far_max_range_m`` 25);
+    None: the band's cut for all."""
+    xy = np.array([[24.0, 1.5], [24.0, -1.5], [10.0, 1.5]])
+    cls = np.array([CONES_CLS[0], CONES_CLS[1], CONES_CLS[0]])
+    boxes = _cone_boxes(_tilted_camera(0.0, 0.0), xy, cls)
+    far = np.array([True, False, False])
+    est = ConeMapper(_calib()).image_attitude(ImageAttitudeConfig())
+    assert est.cfg.max_range_m == 20.0 and est.cfg.far_max_range_m == 25.0
+    np.testing.assert_array_equal(est._select(boxes, cls, far=far), [True, False, True])
+    np.testing.assert_array_equal(est._select(boxes, cls), [False, False, True])  # no strip boxes marked
+    same = ConeMapper(_calib()).image_attitude(ImageAttitudeConfig(far_max_range_m=None))
+    np.testing.assert_array_equal(same._select(boxes, cls, far=far), [False, False, True])

@@ -122,8 +122,10 @@ def _run_offline(args, calib) -> dict:
     att_cfg, _ = attitude_config_for("model" if use_model else "rendered", det.source, far_model if far else None, True)
     if args.box_behaviour == "real":  # the real frames' boxes on a rendered drive, each network's as its box model says
         far_real = far_reading_for("model", far_model if far else None, det.source, False)[0]
+        far_table = far_reading_for("rendered", far_model if far else None, det.source, True)[0]  # its rendered offset
         det, far = real_box_behaviour(det, far, box_model_or_default(det.source), args.box_jitter,
-                                      far_real.box_model if far_real is not None else None)
+                                      far_real.box_model if far_real is not None else None,
+                                      far_rendered_table=far_table.table if far_table is not None else ())
     pipeline = Pipeline(calib, det, args.attitude, imu, far, cones_conf=args.conf if args.track_conf is not None else None,
                         attitude_config=att_cfg, concurrent=plan.concurrent)
     with pipeline:  # joins the strip's worker thread, if one ran
