@@ -37,6 +37,9 @@ class ImageAttitudeConfig:
     min_cones: int = 3  # usable cones for a fit
     min_height_px: float = 8.0  # boxes shorter than this tell little and are often wrong
     max_range_m: float = 20.0  # cones farther (by their size) are left out
+    #: the same for the boxes of the far strip's network (``far``): at full resolution a cone at 25 m is still 12 px
+    #: tall at its input, where the band's halved input has it at 6 px; None: ``max_range_m``
+    far_max_range_m: float | None = 25.0
     edge_margin_px: float = 2.0  # boxes this close to the image / band edge are cut: left out
     aspect_tol: float = 0.45  # |log(w/h / expected)| above this: knocked over, merged or wrong
     sigma_px: float = 1.5  # box edge 1-sigma (foot and top)
@@ -202,9 +205,19 @@ class ImageAttitude:
         return z - self.bias
 
     # -- model ------------------------------------------------------------------------------------
-    def _select(self, boxes: np.ndarray, class_ids: np.ndarray, by_size: bool = True) -> np.ndarray:
-        """(N,) bool: boxes that may be standing, whole cones of a known size (``by_size``: within ``max_range_m`` by
-        their height)."""
+    def _ranges(self, n: int, far: np.ndarray | None) -> np.ndarray:
+        """(n,) the range cut of each box (m): ``far_max_range_m`` for the far strip's network's (``far``), else
+        ``max_range_m``."""
+        c = self.cfg
+        rng = np.full(n, float(c.max_range_m))
+        if far is not None and c.far_max_range_m is not None:
+            rng[np.asarray(far, dtype=bool).ravel()] = float(c.far_max_range_m)
+        return rng
+
+    def _select(self, boxes: np.ndarray, class_ids: np.ndarray, by_size: bool = True,
+                far: np.ndarray | None = None) -> np.ndarray:
+        """(N,) bool: boxes that may be standing, whole cones of a known size (``by_size``: within their range cut
+        by their height, :meth:`_ranges`; ``far``: as :meth:`fit`)."""
         c = self.cfg
         b = boxes
         known = (class_ids >= 0) & (class_ids < NUM_CLASSES)
@@ -213,7 +226,7 @@ class ImageAttitude:
         w = np.maximum(b[:, 2] - b[:, 0], 1e-6)
         h = np.maximum(b[:, 3] - b[:, 1], 1e-6)
         aspect_ok = np.abs(np.log(w / h * (hm / self._base_m[cls]))) <= c.aspect_tol  # NaN (unknown size): False
-        near = self.K[1, 1] * hm <= c.max_range_m * h if by_size else True
+        near = self.K[1, 1] * hm <= self._ranges(len(b), far) * h if by_size else True
         m = c.edge_margin_px
         inside = (b[:, 0] > m) & (b[:, 2] < self.W - m) & (b[:, 1] > self.band[0] + m) & (b[:, 3] < self.band[1] - m)
         return known & aspect_ok & (h >= c.min_height_px) & inside & near
@@ -319,12 +332,12 @@ class ImageAttitude:
         theta = np.zeros(2) if start_deg is None else np.clip(np.asarray(start_deg, dtype=np.float64), -2.0, 2.0)
         # averaging: cones cut at max_range_m by their feet, not by their heights (a cut by the scattered height lets
         # in the cones whose boxes came out tall, and their averages would start tall)
-        sel = self._select(boxes, class_ids, by_size=not averaging)
+        sel = self._select(boxes, class_ids, by_size=not averaging, far=far)
         if averaging and int(sel.sum()) >= c.min_cones:
             rays, _, _ = self._prepare(boxes[sel], class_ids[sel])
             away = self.ground_feet(theta, rays)[0] - self.p0[:2]
-            with np.errstate(invalid="ignore"):
-                sel[sel] = np.hypot(away[:, 0], away[:, 1]) <= c.max_range_m  # NaN (misses the ground): out
+            with np.errstate(invalid="ignore"):  # NaN (misses the ground): out
+                sel[sel] = np.hypot(away[:, 0], away[:, 1]) <= self._ranges(len(boxes), far)[sel]
         if int(sel.sum()) < c.min_cones:
             if averaging:
                 sizes.miss()
