@@ -49,6 +49,9 @@ DESIGNS = [
     ("diagnostic: far boxes read with their sidecar AND the far model's rendered table", "strip_far", {}, {"table_too": True}, "merged"),
     ("band's model in the strip, band's boxes first", "strip_band", {}, {}, "band_first"),
     ("far boxes left out, band's boxes first", "strip_far", {}, {}, "band_only_of_merge"),
+    ("far boxes checked against the band's boxes of the same cones (running medians of their offsets taken off)",
+     "strip_far", {}, {}, "cross"),
+    ("the same, pairs only where the band's box is >= 24 px (12 px at its input)", "strip_far", {}, {}, "cross:24"),
 ]
 
 
@@ -121,12 +124,55 @@ def patch(persist_rel: float, table_too: bool, far_sigma: float):
                     setattr(image_mod.ImageAttitude, "_average_sizes", orig_avg))
 
 
+class CrossCheck:
+    """Prototype: the far network's boxes checked against the band's boxes of the same cones (both read through their own
+    box models): the running medians of the far boxes' top and bottom offsets from the band's (fractions of the height),
+    taken off the far boxes the fit reads once ``min_pairs`` pairs are in."""
+
+    def __init__(self, bm_band, bm_far, min_pairs: int = 30, keep: int = 3000, min_band_px: float = 0.0):
+        self.bm_band, self.bm_far, self.min_pairs, self.keep = bm_band, bm_far, min_pairs, keep
+        self.min_band_px = min_band_px  # pairs only where the band's box is at least this tall (full px)
+        self.dt, self.db = [], []
+
+    def __call__(self, recs, far, band):
+        from cone_perception.detector.farband import same_cone
+
+        fb = recs[far]
+        if len(fb) and len(band):
+            m = same_cone(band, fb, True) & ((band["v2"] - band["v1"]) >= self.min_band_px)[:, None]
+            one = m.sum(0) == 1
+            j = np.flatnonzero(one)
+            i = np.argmax(m[:, one], axis=0)
+            if len(j):
+                bc = self.bm_band.correct(_xyxy(band[i]))
+                fc = self.bm_far.correct(_xyxy(fb[j]))
+                h = bc[:, 3] - bc[:, 1]
+                self.dt = (self.dt + list((fc[:, 1] - bc[:, 1]) / h))[-self.keep:]
+                self.db = (self.db + list((fc[:, 3] - bc[:, 3]) / h))[-self.keep:]
+        if len(self.dt) < self.min_pairs or not far.any():
+            return recs
+        out = recs.copy()
+        hc = self.bm_far.correct(_xyxy(recs[far]))
+        hc = hc[:, 3] - hc[:, 1]
+        out["v1"][far] = recs["v1"][far] - np.median(self.dt) * hc
+        out["v2"][far] = recs["v2"][far] - np.median(self.db) * hc
+        return out
+
+
+def _xyxy(r):
+    return np.column_stack([r["u1"], r["v1"], r["u2"], r["v2"]]).astype(np.float64)
+
+
 def run_drive(bag: str, d: dict, frames: list, config, kind: str) -> tuple:
     m = ConeMapper(load_calibration(bag + "_calib.yaml"))
     est = m.image_attitude(config)
     rep, ep = LocalisationReport(max_range_m=m.calib.max_range_m), []
+    cross = (CrossCheck(config.box_model, config.far_reading.box_model if config.far_reading else None,
+                        min_band_px=float(kind[6:] or 0)) if kind.startswith("cross") else None)
     for st, merged, far, band in frames:
-        recs, fmask = fit_input(kind, merged, far, band)
+        recs, fmask = fit_input("merged" if cross else kind, merged, far, band)
+        if cross is not None and far is not None:
+            recs = cross(recs, fmask, band)
         a = attitude_for_boxes(est, recs, st, fmask)
         rep.add_frame(m.map_boxes(merged, a), d["truth"][st])
         ep.append(abs(a.pitch_deg - d["att"][st][0]))
@@ -146,6 +192,8 @@ def main() -> None:
                     "(issue 26's case)")
     ap.add_argument("--look-table", action="store_true", help="the far model's rendered offset (its rendered table) taken "
                     "out of its boxes before they are given the real behaviour")
+    ap.add_argument("--far-look-box-model", default=None, help="a sidecar to GIVE the far model's boxes their behaviour "
+                    "with, the fit still reading them through --far-box-model's (a wrong sidecar: robustness)")
     ap.add_argument("--far-box-model", default=None, help="the far model's sidecar to give and read its boxes with "
                     "(default: the shipped model's)")
     args = ap.parse_args()
@@ -153,6 +201,7 @@ def main() -> None:
     bm_band = read_box_model(default_model_path())
     far_path = Path(args.far_box_model) if args.far_box_model else default_far_model_path()
     bm_far = read_box_model(far_path) if not args.far_box_model else _sidecar(far_path)
+    bm_look = _sidecar(Path(args.far_look_box_model)) if args.far_look_box_model else bm_far
     data = {b: record(b, args.cache) for b in bags}
     pick = {int(x) for x in args.designs.split(",") if x}
     print(f"drives {', '.join(Path(b).name for b in bags)}; real boxes: band spread {bm_band.sigma_rel}, far spread {bm_far.sigma_rel}")
@@ -174,7 +223,7 @@ def main() -> None:
                 else:
                     cur = getattr(config, key)
                     config = replace(config, **{key: float(val) if cur is None else type(cur)(float(val))})
-            r = [run_drive(b, data[b], frames_for(data[b], source, None if args.as_rendered else bm_band, bm_far, 0, args.look_table), config, kind) for b in bags]
+            r = [run_drive(b, data[b], frames_for(data[b], source, None if args.as_rendered else bm_band, bm_look, 0, args.look_table), config, kind) for b in bags]
         finally:
             undo()
         print(f"| {k} | {name} | " + " | ".join(f"{a:.3f} / {b:.3f} / {c:.3f}" for a, b, c, _ in r)

@@ -5,6 +5,14 @@ calibration that is not these clips' camera (none is known), so the counts are i
     cone-perception detect data/real_val_1080 --model models/M.pt --crop 96,672 --downscale 2 --conf 0.1 \
         --out runs/eval/real_crop_half_M.jsonl      # M = cone_detector, cone_detector_n, cone_detector_mnv2
     .venv/bin/python docs/experiments/box_model_real_fits.py cone_detector cone_detector_n cone_detector_mnv2
+
+With the far strip (``--strip FILE``: the far model's predictions in the strip rows at full resolution, cut boxes
+dropped and merged with the band's as the pipeline merges them; each network's boxes through its own box model),
+once per ``--far-range`` (the fit's ``far_max_range_m``; none: ``max_range_m`` for all):
+
+    cone-perception detect data/real_val_1080 --crop 240,432 --downscale 1 --model models/cone_detector_far.pt \
+        --conf 0.001 --out runs/eval/real_strip_far.jsonl
+    .venv/bin/python docs/experiments/box_model_real_fits.py cone_detector --strip runs/eval/real_strip_far.jsonl --far-range none,25
 """
 import argparse
 
@@ -22,8 +30,13 @@ def main() -> None:
     ap.add_argument("models", nargs="+", help="model names under models/ (their runs/eval/real_crop_half_M.jsonl)")
     ap.add_argument("--calib", default="calib/example_mainhoop.yaml")
     ap.add_argument("--conf", type=float, default=0.25)
+    ap.add_argument("--strip", default=None, help="the far model's strip predictions (full resolution), merged in")
+    ap.add_argument("--strip-rows", default="240,432", help="the strip's rows (default %(default)s, the far card's)")
+    ap.add_argument("--far-range", default="none,25", help="with --strip: far_max_range_m values (none: max_range_m)")
     args = ap.parse_args()
     calib = load_calibration(args.calib)
+    if args.strip:
+        return with_strip(args, calib)
     for m in args.models:
         for bm in (None, read_box_model(f"models/{m}.pt")):
             est = ConeMapper(calib).image_attitude(ImageAttitudeConfig(box_model=bm))
@@ -40,6 +53,50 @@ def main() -> None:
             print(m, "box model" if bm else "rendered table", est.counts.as_dict(),
                   "residual spread median %.2f p90 %.2f" % (np.median(scales), np.percentile(scales, 90)),
                   "pitch of used fits median %+.2f" % (np.median(pitch) if pitch else np.nan))
+
+
+def with_strip(args, calib) -> None:
+    from types import SimpleNamespace
+
+    from cone_perception.attitude.boxes import BoxReading
+    from cone_perception.detector.farband import drawn_by_far, drop_cut_boxes, merge_boxes
+    from cone_perception.mapping import one_box_per_cone
+    from cone_perception.records import boxes_from_arrays
+    from cone_perception.resources import default_far_model_path
+
+    v0, v1 = (float(x) for x in args.strip_rows.split(","))
+    strip = {p.image: p for p in read_predictions(args.strip)}
+    far_bm = read_box_model(default_far_model_path())
+
+    def records(p, conf):
+        b = p.boxes[p.boxes["score"] >= conf]
+        s = np.array([calib.image_width / p.width, calib.image_height / p.height] * 2)
+        xy = np.column_stack([b["u1"], b["v1"], b["u2"], b["v2"]]) * s
+        return boxes_from_arrays(xy, b["score"], b["class_id"])
+
+    for m in args.models:
+        frames = []
+        for p in read_predictions(f"runs/eval/real_crop_half_{m}.jsonl"):
+            band = records(p, args.conf)
+            far = drop_cut_boxes(records(strip[p.image], args.conf), SimpleNamespace(v0=v0, v1=v1))
+            merged = one_box_per_cone(merge_boxes(band, far))
+            frames.append((merged, drawn_by_far(merged, far)))
+        for rng in args.far_range.split(","):
+            cfg = ImageAttitudeConfig(box_model=read_box_model(f"models/{m}.pt"), far_reading=BoxReading(far_bm),
+                                      far_max_range_m=None if rng == "none" else float(rng))
+            est = ConeMapper(calib).image_attitude(cfg)
+            scales, pitch, n_far = [], [], []
+            for merged, far in frames:
+                b = np.column_stack([merged["u1"], merged["v1"], merged["u2"], merged["v2"]]).astype(np.float64)
+                a = est.single_frame(b, merged["class_id"].astype(np.intp), far)
+                n_far.append(int((est._select(est._read(b, far)[0], merged["class_id"].astype(np.intp), far=far) & far).sum()))
+                if np.isfinite(est.last_scale):
+                    scales.append(est.last_scale)
+                if a.source == "image":
+                    pitch.append(a.pitch_deg)
+            print(m, "+ far strip, far_max_range_m", rng, est.counts.as_dict(), "strip boxes in the fit %d" % sum(n_far),
+                  "residual spread median %.2f p90 %.2f" % (np.median(scales), np.percentile(scales, 90)),
+                  "pitch of used fits median %+.2f (%d)" % (np.median(pitch) if pitch else np.nan, len(pitch)))
 
 
 if __name__ == "__main__":
