@@ -92,7 +92,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--box-behaviour", choices=("as-is", "real"), default="as-is",
                    help="offline, synthetic bags: real gives the detector's boxes the real frames' behaviour of its box "
                         "model (MODEL.box_model.yaml: heights 0.97-0.99x, tops 1-3 %% low, the top scattered by the "
-                        "measured spread; synth/boxlook.py), as-is keeps them (default %(default)s)")
+                        "measured spread; synth/boxlook.py; the far strip's boxes its far model's, that model's rendered "
+                        "offset taken out first), as-is keeps them (default %(default)s)")
     p.add_argument("--box-jitter", type=float, default=None, metavar="F",
                    help="--box-behaviour real: 1-sigma of each box top as a fraction of its height (default: the box "
                         "model's measured spread, 0.07 for the shipped models; 0 = the medians only)")
