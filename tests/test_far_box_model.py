@@ -219,3 +219,18 @@ def test_far_strip_boxes_have_their_own_range_cut():
     np.testing.assert_array_equal(est._select(boxes, cls), [False, False, True])  # no strip boxes marked
     same = ConeMapper(_calib()).image_attitude(ImageAttitudeConfig(far_max_range_m=None))
     np.testing.assert_array_equal(same._select(boxes, cls, far=far), [False, False, True])
+
+
+def test_far_range_cut_holds_when_sizes_are_averaged():
+    """With sizes averaged over frames the cut is by the feet (not the scattered heights): the strip's boxes of cones
+    21-24 m away go into the fit, the band's of the same cones do not."""
+    xy = np.array([[x, s * 1.8] for x in (6.0, 9.0, 12.0, 15.0, 21.0, 22.5, 24.0) for s in (-1, 1)])
+    cls = np.array([CONES_CLS[0] if y > 0 else CONES_CLS[1] for _, y in xy])
+    boxes = _cone_boxes(_tilted_camera(0.0, 0.0), xy, cls)
+    far = xy[:, 0] > 20.0
+    used = {}
+    for name, mask in (("strip", far), ("band", None)):
+        est = ConeMapper(_calib()).image_attitude(ImageAttitudeConfig(box_model=EXACT_BM, far_reading=BoxReading(EXACT_BM)))
+        res = est.fit(boxes, cls, sizes=est.sizes, far=mask)
+        used[name] = res[2]
+    assert used["band"] == 8 and used["strip"] == 14, used
