@@ -170,6 +170,16 @@ def box_top_extra_px(height_px: np.ndarray, table) -> np.ndarray:
     return np.interp(h, [a for a, _ in table], [b for _, b in table])
 
 
+def range_cuts(n: int, far: np.ndarray | None, max_range_m: float, far_max_range_m: float | None) -> np.ndarray:
+    """(n,) the image fit's range cut of each of n boxes (m): ``far_max_range_m`` for the far strip's network's (``far``,
+    (n,) bool; at full resolution a cone at 25 m is still 12 px tall at its input, 6 px in the band's halved input),
+    else ``max_range_m``; ``far`` or ``far_max_range_m`` None: ``max_range_m`` for all."""
+    rng = np.full(n, float(max_range_m))
+    if far is not None and far_max_range_m is not None:
+        rng[np.asarray(far, dtype=bool).ravel()] = float(far_max_range_m)
+    return rng
+
+
 def read_boxes(boxes: np.ndarray, far: np.ndarray | None, band: BoxReading, far_reading: BoxReading | None,
                sigma_rel: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(N, 4) boxes (full-image px) each through the reading of the network that drew it (``far``: (N,) bool, the far

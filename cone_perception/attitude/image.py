@@ -25,7 +25,7 @@ from ..classes import CONE_SIZE_M, NUM_CLASSES
 from ..geometry.camera import MountPose
 from ..geometry.homography import undistort_pixels
 from ..geometry.linalg import inv2
-from .boxes import BoxModel, BoxReading, box_top_extra_px, read_boxes
+from .boxes import BoxModel, BoxReading, box_top_extra_px, range_cuts, read_boxes
 from .model import MAX_ABS_DEG, Attitude, attitude_rotation
 from .sizes import SizeTrackConfig, SizeTracks
 
@@ -37,9 +37,7 @@ class ImageAttitudeConfig:
     min_cones: int = 3  # usable cones for a fit
     min_height_px: float = 8.0  # boxes shorter than this tell little and are often wrong
     max_range_m: float = 20.0  # cones farther (by their size) are left out
-    #: the same for the boxes of the far strip's network (``far``): at full resolution a cone at 25 m is still 12 px
-    #: tall at its input, where the band's halved input has it at 6 px; None: ``max_range_m``
-    far_max_range_m: float | None = 25.0
+    far_max_range_m: float | None = 25.0  # the far strip's boxes' (full resolution: 12 px at 25 m); None: max_range_m
     edge_margin_px: float = 2.0  # boxes this close to the image / band edge are cut: left out
     aspect_tol: float = 0.45  # |log(w/h / expected)| above this: knocked over, merged or wrong
     sigma_px: float = 1.5  # box edge 1-sigma (foot and top)
@@ -205,19 +203,8 @@ class ImageAttitude:
         return z - self.bias
 
     # -- model ------------------------------------------------------------------------------------
-    def _ranges(self, n: int, far: np.ndarray | None) -> np.ndarray:
-        """(n,) the range cut of each box (m): ``far_max_range_m`` for the far strip's network's (``far``), else
-        ``max_range_m``."""
-        c = self.cfg
-        rng = np.full(n, float(c.max_range_m))
-        if far is not None and c.far_max_range_m is not None:
-            rng[np.asarray(far, dtype=bool).ravel()] = float(c.far_max_range_m)
-        return rng
-
-    def _select(self, boxes: np.ndarray, class_ids: np.ndarray, by_size: bool = True,
-                far: np.ndarray | None = None) -> np.ndarray:
-        """(N,) bool: boxes that may be standing, whole cones of a known size (``by_size``: within their range cut
-        by their height, :meth:`_ranges`; ``far``: as :meth:`fit`)."""
+    def _select(self, boxes: np.ndarray, class_ids: np.ndarray, by_size: bool = True, far: np.ndarray | None = None):
+        """(N,) bool: standing, whole cones of a known size (``by_size``: within :func:`.range_cuts` by their height)."""
         c = self.cfg
         b = boxes
         known = (class_ids >= 0) & (class_ids < NUM_CLASSES)
@@ -226,7 +213,7 @@ class ImageAttitude:
         w = np.maximum(b[:, 2] - b[:, 0], 1e-6)
         h = np.maximum(b[:, 3] - b[:, 1], 1e-6)
         aspect_ok = np.abs(np.log(w / h * (hm / self._base_m[cls]))) <= c.aspect_tol  # NaN (unknown size): False
-        near = self.K[1, 1] * hm <= self._ranges(len(b), far) * h if by_size else True
+        near = self.K[1, 1] * hm <= range_cuts(len(b), far, c.max_range_m, c.far_max_range_m) * h if by_size else True
         m = c.edge_margin_px
         inside = (b[:, 0] > m) & (b[:, 2] < self.W - m) & (b[:, 1] > self.band[0] + m) & (b[:, 3] < self.band[1] - m)
         return known & aspect_ok & (h >= c.min_height_px) & inside & near
@@ -330,14 +317,14 @@ class ImageAttitude:
         measured = c.box_model is not None or (c.far_reading is not None and c.far_reading.box_model is not None)
         averaging = sizes is not None and (measured or c.size_rendered)
         theta = np.zeros(2) if start_deg is None else np.clip(np.asarray(start_deg, dtype=np.float64), -2.0, 2.0)
-        # averaging: cones cut at max_range_m by their feet, not by their heights (a cut by the scattered height lets
-        # in the cones whose boxes came out tall, and their averages would start tall)
+        # averaging: cones cut at their range by the feet, not the scattered heights (those that came out tall would start tall)
         sel = self._select(boxes, class_ids, by_size=not averaging, far=far)
         if averaging and int(sel.sum()) >= c.min_cones:
             rays, _, _ = self._prepare(boxes[sel], class_ids[sel])
             away = self.ground_feet(theta, rays)[0] - self.p0[:2]
-            with np.errstate(invalid="ignore"):  # NaN (misses the ground): out
-                sel[sel] = np.hypot(away[:, 0], away[:, 1]) <= self._ranges(len(boxes), far)[sel]
+            cut = range_cuts(len(boxes), far, c.max_range_m, c.far_max_range_m)[sel]
+            with np.errstate(invalid="ignore"):
+                sel[sel] = np.hypot(away[:, 0], away[:, 1]) <= cut  # NaN (misses the ground): out
         if int(sel.sum()) < c.min_cones:
             if averaging:
                 sizes.miss()
