@@ -52,6 +52,7 @@ DESIGNS = [
     ("far boxes checked against the band's boxes of the same cones (running medians of their offsets taken off)",
      "strip_far", {}, {}, "cross"),
     ("the same, pairs only where the band's box is >= 24 px (12 px at its input)", "strip_far", {}, {}, "cross:24"),
+    ("far boxes' tops checked against the band's (bottoms left)", "strip_far", {}, {}, "crosstop"),
 ]
 
 
@@ -129,7 +130,9 @@ class CrossCheck:
     box models): the running medians of the far boxes' top and bottom offsets from the band's (fractions of the height),
     taken off the far boxes the fit reads once ``min_pairs`` pairs are in."""
 
-    def __init__(self, bm_band, bm_far, min_pairs: int = 30, keep: int = 3000, min_band_px: float = 0.0):
+    def __init__(self, bm_band, bm_far, min_pairs: int = 30, keep: int = 3000, min_band_px: float = 0.0,
+                 tops_only: bool = False):
+        self.tops_only = tops_only
         self.bm_band, self.bm_far, self.min_pairs, self.keep = bm_band, bm_far, min_pairs, keep
         self.min_band_px = min_band_px  # pairs only where the band's box is at least this tall (full px)
         self.dt, self.db = [], []
@@ -155,7 +158,8 @@ class CrossCheck:
         hc = self.bm_far.correct(_xyxy(recs[far]))
         hc = hc[:, 3] - hc[:, 1]
         out["v1"][far] = recs["v1"][far] - np.median(self.dt) * hc
-        out["v2"][far] = recs["v2"][far] - np.median(self.db) * hc
+        if not self.tops_only:
+            out["v2"][far] = recs["v2"][far] - np.median(self.db) * hc
         return out
 
 
@@ -168,7 +172,8 @@ def run_drive(bag: str, d: dict, frames: list, config, kind: str) -> tuple:
     est = m.image_attitude(config)
     rep, ep = LocalisationReport(max_range_m=m.calib.max_range_m), []
     cross = (CrossCheck(config.box_model, config.far_reading.box_model if config.far_reading else None,
-                        min_band_px=float(kind[6:] or 0)) if kind.startswith("cross") else None)
+                        min_band_px=float(kind.split(":")[1]) if ":" in kind else 0.0, tops_only="top" in kind)
+             if kind.startswith("cross") else None)
     for st, merged, far, band in frames:
         recs, fmask = fit_input("merged" if cross else kind, merged, far, band)
         if cross is not None and far is not None:
