@@ -9,9 +9,9 @@ height, independently per box and frame. A network whose boxes do not sit on the
 tops 0.3-0.6 px below the cones' tips, its rendered table, :data:`~cone_perception.attitude.boxes.RENDERED_TABLES`)
 has that rendered offset taken out first (``rendered_table``): the box model, measured against labels, already holds
 all of the network's offset on real frames, and adding it to the rendered one would count it twice.
-:class:`BehavingDetector` wraps a detector so (``replay --box-behaviour real``). The sidecars measure the spread of the top offset only (labelling noise included):
-bottoms keep their rendered scatter unless ``bottom_jitter`` is set. Off unless asked; ``synth dataset`` and
-``synth bag`` are unchanged by it.
+:class:`BehavingDetector` wraps a detector so (``replay --box-behaviour real``). The sidecars measure the spread
+of the top offset only (labelling noise included): bottoms keep their rendered scatter unless ``bottom_jitter`` is
+set. Off unless asked; ``synth dataset`` and ``synth bag`` are unchanged by it.
 """
 
 from __future__ import annotations
