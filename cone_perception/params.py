@@ -39,6 +39,10 @@ DEFAULT_IOU = 0.45
 #: lower cap (the nodes' 100 before) would drop cones silently in a crowded frame (a start area, skidpad).
 DEFAULT_MAX_DET = 300
 
+#: Boxes lower than this x the height a cone of their class has, standing where the box's foot maps, are marks on
+#: the ground, not cones (``mapping.ConeMapper``'s ``min_height_ratio``; docs/benchmarks.md, "Flat boxes").
+DEFAULT_MIN_HEIGHT_RATIO = 0.8
+
 Value = Union[bool, int, float, str, "tuple[float, ...]"]
 
 _ROS_TYPE_NAMES = {bool: "bool", int: "int", float: "double", str: "string"}
@@ -204,6 +208,9 @@ _MAPPING = (
        "wide default, warned), rendered = the rendered drives' box-top table, auto = rendered for a synthetic "
        "camera's calibration (camera: synth), else model; shown on /diagnostics (attitude:box_model)",
        choices=("auto", "model", "rendered")),
+    _p("min_height_ratio", DEFAULT_MIN_HEIGHT_RATIO, "a box lower than this x the height a cone of its class has "
+       "where its foot maps, scoring under 0.5, is a mark on the ground (a painted line), not a cone: dropped, counted on /diagnostics "
+       "(boxes_dropped: flat); 0 = off; needs a mount pose in the calibration, else it cannot act", min=0.0, max=0.99),
 )
 _PIPELINE = (
     _p("far_rows", "auto", "the far band: image rows also run at full resolution, the whole width, for small, far "

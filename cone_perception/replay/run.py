@@ -30,6 +30,7 @@ from ..evaluation import GT_MIN_VISIBLE, LocalisationReport, format_localisation
 from ..evaluation.attitude import attitude_plot, format_attitude_report
 from ..evaluation.tracking import DriveEvaluation, format_drive_evaluation
 from ..geometry.calib import load_calibration, resolve_calibration_path
+from ..params import PARAMS
 from ..pipeline import Pipeline
 from ..synth.boxlook import real_box_behaviour
 from ..timing import format_table, summarize
@@ -57,6 +58,11 @@ def run_replay(args: argparse.Namespace) -> int:
         raise ConfigError("--max-range", None, f"must be a positive number of metres, got {args.max_range:g}")
     if args.tracker and not args.track:
         raise ConfigError("--tracker", None, "needs --track")
+    why = PARAMS["min_height_ratio"].check(args.min_height_ratio)
+    if why:
+        raise ConfigError("--min-height-ratio", None, why)
+    if args.live and args.min_height_ratio != PARAMS["min_height_ratio"].default:
+        raise ConfigError("--min-height-ratio", None, "works offline only (live: the nodes' min_height_ratio)")
     if args.max_range is not None:
         calib = replace(calib, max_range_m=float(args.max_range))
     band = band_rows_for(args.band_rows, calib, args.far_rows, "--band-rows")
@@ -125,7 +131,7 @@ def _run_offline(args, calib) -> dict:
         det, far = real_box_behaviour(det, far, box_model_or_default(det.source), args.box_jitter,
                                       far_real.box_model if far_real is not None else None)
     pipeline = Pipeline(calib, det, args.attitude, imu, far, cones_conf=args.conf if args.track_conf is not None else None,
-                        attitude_config=att_cfg, concurrent=plan.concurrent)
+                        attitude_config=att_cfg, concurrent=plan.concurrent, min_height_ratio=args.min_height_ratio)
     with pipeline:  # joins the strip's worker thread, if one ran
         res = offline_replay(args.bag, pipeline, args.topic, args.out, args.gt_topic,
                              _progress(args.no_progress), imu_topic=args.imu_topic, tracking=tracking)
@@ -147,6 +153,8 @@ def _run_offline(args, calib) -> dict:
         print_written([args.out], "replay")
     if far is not None:
         print(f"far band: {format_strip_counts(pipeline)}")
+    print("boxes dropped: " + ", ".join(f"{k} {v}" for k, v in pipeline.mapper.dropped.items())
+          + f" (a flat box: lower than {args.min_height_ratio:g} x a cone there)")
     if args.attitude_png:
         stamps = sorted(res.attitude)
         attitude_plot(args.attitude_png, stamps, [res.attitude[s] for s in stamps], read_attitude_truth(args.bag),
@@ -154,7 +162,7 @@ def _run_offline(args, calib) -> dict:
         print_written([args.attitude_png], "replay")
     return {"mode": "offline", "frames": n, "dropped": dict(res.stats.dropped), "wall_s": res.wall_s,
             "stages": stages, "localisation": res.localisation, "tracking": res.tracking,
-            "attitude_fits": res.pipeline_attitude,
+            "attitude_fits": res.pipeline_attitude, "boxes_dropped": dict(pipeline.mapper.dropped),
             "far_strip": strip_summary(pipeline) if far is not None else None}
 
 
