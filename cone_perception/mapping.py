@@ -254,8 +254,9 @@ class ConeMapper:
 
         Boxes whose foot point is above the horizon or beyond ``max_range_m``
         are dropped (they are never published), and with ``min_height_ratio`` boxes too low for a cone
-        standing there (:meth:`height_ratios`) scoring under :data:`FLAT_MAX_SCORE`; each counted in :attr:`dropped`. Raises :class:`FrameError`
-        for a malformed box (the whole message is dropped by the caller).
+        standing there (:meth:`height_ratios`) scoring under :data:`FLAT_MAX_SCORE`; each counted in
+        :attr:`dropped`. Raises :class:`FrameError` for a malformed box (the whole message is dropped by
+        the caller).
         ``attitude``: the body's attitude offset for this frame (needs a mount pose); its
         uncertainty is added to each cone's covariance.
         """
