@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from typing import Union
 
 from .geometry.calib import DEFAULT_CAMERA
+from .resources import FAR_MODEL_DEFAULT
 
 # -- the detector's defaults: one home. The nodes' parameters below, the API (``detector.Detector``,
 # which imports them from here: this module loads no torch, the mapping node imports it) and the CLI
@@ -223,7 +224,7 @@ _PIPELINE = (
        "far strip's near end (without a strip: max_range_m) to the crop's bottom, with the strip's attitude margins, "
        "a multiple of 32 rows at the band's scale (docs/detector.md, Band rows; on the shipped calibrations it is not "
        "smaller than their crop); V0,V1 = these rows", values="crop, auto, or V0,V1"),
-    _p("far_model", "auto", "the far band's model: auto = the shipped far-strip model (models/cone_detector_far.pt, "
+    _p("far_model", FAR_MODEL_DEFAULT, "the far band's model: auto = the shipped far-strip model (models/cone_detector_far.pt, "
        "trained for its full-resolution scale: more small cones; the image attitude reads its boxes through its own "
        "box model, box_model); band or empty = the band's own model; else a model file (its box model: "
        "MODEL.box_model.yaml). Its classes must be the band model's (refused at start-up otherwise)",

@@ -88,7 +88,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "bag's IMU), fused (IMU + image); all but fixed need mount_pose in the calibration. Default: "
                         "fused when the bag has the IMU topic, else image, fixed without a mount pose")
     p.add_argument("--box-model", choices=("auto", "model", "rendered"), default="auto",
-                   help="offline, attitude image/fused: which box model the image fit reads the detector's boxes with: "
+                   help="attitude image/fused (live: the nodes' box_model): which box model the image fit reads the detector's boxes with: "
                         "model (measured on real frames, MODEL.box_model.yaml beside the model file; a model without one "
                         "gets a conservative default and a warning), rendered (the rendered drives' table, for synthetic "
                         "bags), auto (rendered with --gt-topic, i.e. a synthetic drive with truth, unless --box-behaviour "

@@ -109,6 +109,15 @@ def _imu_source(args, calib):
     return ImuAttitude(rest)
 
 
+def box_model_choice(args) -> str:
+    """``model`` or ``rendered``: how the image attitude reads the boxes, offline and in the live nodes
+    (their ``box_model``) alike: ``--box-model``; ``auto``: rendered with ``--gt-topic`` (a synthetic drive with
+    truth) unless ``--box-behaviour real``, else model."""
+    if args.box_model != "auto":
+        return args.box_model
+    return "rendered" if args.gt_topic and args.box_behaviour != "real" else "model"
+
+
 def _run_offline(args, calib) -> dict:
     tracking = _tracking(args, calib)  # its bad options fail before the model loads
     # built for the calibration's band, as the pipeline node does (a fixed-size backend never letterboxes)
@@ -124,8 +133,7 @@ def _run_offline(args, calib) -> dict:
                                   threads=plan.network_threads or None, bf16=args.bf16)
     imu = _imu_source(args, calib)
     # the fit reads each network's boxes through its own box model (the far strip's of a far model: issue 26f)
-    use_model = args.box_model == "model" or (args.box_model == "auto" and (not args.gt_topic or args.box_behaviour == "real"))
-    att_cfg, _ = attitude_config_for("model" if use_model else "rendered", det.source, far_model if far else None, True)
+    att_cfg, _ = attitude_config_for(box_model_choice(args), det.source, far_model if far else None, True)
     if args.box_behaviour == "real":  # the real frames' boxes on a rendered drive, each network's as its box model says
         far_real = far_reading_for("model", far_model if far else None, det.source, False)[0]
         det, far = real_box_behaviour(det, far, box_model_or_default(det.source), args.box_jitter,
@@ -223,6 +231,8 @@ def _run_live(args, calib) -> dict:
     if args.model:
         params["model"] = str(Path(args.model).resolve())
     params["threads"] = args.threads
+    if args.box_model != "auto" or args.gt_topic:  # as offline: a rendered drive's boxes through the rendered tables
+        params["box_model"] = box_model_choice(args)
     if args.far_rows is not None:
         params["far_rows"] = args.far_rows
     if args.band_rows is not None:
