@@ -19,6 +19,8 @@ from cone_perception.geometry.strip import (SMALLEST_CONE_M, SPLIT_MIN_PX, TALLE
                                             foot_distance, needed_rows, plan_split)
 from cone_perception.records import BOX_DTYPE, boxes_from_arrays
 
+from rosutil import ros  # noqa: F401 (a fixture)
+
 CALIB = load_calibration("example_mainhoop")  # 1920x1080, fy 960, 1.2 m, pitch 10 deg, crop 384-960 halved
 
 
@@ -162,3 +164,39 @@ def test_bench_runs_the_split_and_says_so(capsys):
     assert r["model_input"] == [960, 96] and "rows 448-960 at 1/4 (480x128)" in r["band_split"]
     assert cli_main(["bench", "pipeline", "--frames", "2", "--band-split", "1,2"]) != 0
     assert "--band-split" in capsys.readouterr().err
+
+
+def test_thresholds_set_at_run_time_reach_both_parts():
+    """The node's conf / iou / max_det, set at run time on the band's detector, apply to both parts."""
+    up, near = _Recorder(np.zeros(0, BOX_DTYPE)), _Recorder(np.zeros(0, BOX_DTYPE))
+    det = SplitDetector(up, near, band_split_for("auto", CALIB))
+    det.conf, det.iou = 0.4, 0.3
+    assert (up.conf, near.conf, up.iou, near.iou, det.conf) == (0.4, 0.4, 0.3, 0.3, 0.4)
+
+
+def test_pipeline_node_band_split_parameter(ros):  # noqa: F811 (ros is a fixture)
+    """The node's ``band_split``: auto runs the split detector with the calibration's rows; its boxes are the core
+    pipeline's with the same split; a run-time conf reaches both parts; a bad value stops the node naming it."""
+    from rclpy.parameter import Parameter
+
+    from cone_perception.bench.frames import rendered_frames
+    from cone_perception.detector import default_model_path
+    from cone_perception.nodes.pipeline import PipelineNode
+    from cone_perception.pipeline import Pipeline
+
+    node = ros.add(PipelineNode(context=ros.context, parameter_overrides=[Parameter("band_split", value="auto"),
+                                                                          Parameter("far_rows", value="none")]))
+    det = node.pipeline.detector
+    assert isinstance(det, SplitDetector) and det.split.near == CropSpec(448, 960, 0, 1920, 4)
+    core = Pipeline(CALIB, SplitDetector.load(default_model_path(), band_split_for("auto", CALIB)))
+    data = rendered_frames(CALIB, 1)[0]
+    a = node.pipeline.process_raw("yuv422_yuy2", 1920, 1080, 3840, data).boxes
+    b = core.process_raw("yuv422_yuy2", 1920, 1080, 3840, data).boxes
+    assert len(a) == len(b) > 0
+    np.testing.assert_allclose(np.sort(a["v2"]), np.sort(b["v2"]), atol=0.05)
+    node._set_threshold("conf", 0.5)
+    assert det.upper_detector.conf == det.near_detector.conf == 0.5
+    with pytest.raises(ConfigError, match="parameter band_split"):
+        PipelineNode(context=ros.context, parameter_overrides=[Parameter("band_split", value="1,2")])
+    plain = ros.add(PipelineNode(context=ros.context, parameter_overrides=[Parameter("far_rows", value="none")]))
+    assert not isinstance(plain.pipeline.detector, SplitDetector)  # the default: one band

@@ -394,6 +394,15 @@ class SplitDetector:
             raise AttributeError(name)
         return getattr(self.upper_detector, name)
 
+    def __setattr__(self, name, value):
+        if name in self._BOTH:  # a threshold changed at run time (the node's conf, iou, max_det): both parts'
+            setattr(self.upper_detector, name, value)
+            setattr(self.near_detector, name, value)
+        else:
+            object.__setattr__(self, name, value)
+
+    _BOTH = ("conf", "iou", "max_det")
+
     @classmethod
     def load(cls, model, split: BandSplit, **detector_kw) -> "SplitDetector":
         """Both parts' detectors of ``model`` (``Detector.load_for_band`` for each size), warm."""
