@@ -123,22 +123,25 @@ class _Recorder:
 
 def test_split_detector_cuts_scales_and_merges():
     """The upper part gets the band's top rows as they are, the near part its lower rows at half the band's scale;
-    a box on an inner edge is a cut cone and dropped; a cone both see whole is kept once (the upper band's box);
-    each part's boxes are its own (full-image px); timing is the sum."""
-    s = band_split_for("auto", CALIB)
+    a box on an inner edge is a cut cone and dropped; a near box whose foot stands above the upper band's bottom is
+    a cone the upper band sees whole (dropped); a cone both still keep is kept once (the upper band's box); each
+    part's boxes are its own (full-image px); timing is the sum."""
+    s = band_split_for("auto", CALIB)  # upper 384-576, near 448-960: the upper band's feet end at 574 (EDGE_PX 2)
     upper = _Recorder(_boxes([[100, 500, 120, 530, 0.9, 0],      # whole in the upper band: kept
                               [300, 540, 340, 575, 0.8, 1],      # on the upper band's bottom edge (576): cut, dropped
-                              [900, 470, 930, 520, 0.7, 2]]))    # a cone the near band sees too: the upper's kept
-    near = _Recorder(_boxes([[600, 449, 640, 500, 0.9, 0],       # on the near band's top edge (448): cut, dropped
-                             [901, 471, 931, 521, 0.8, 2],       # the same cone as the upper's third box
+                              [900, 470, 930, 520, 0.7, 2],      # a cone the near band sees too: the upper's kept
+                              [500, 530, 530, 573.5, 0.6, 0]]))  # foot just above 574: the upper's
+    near = _Recorder(_boxes([[600, 449, 640, 580, 0.9, 0],       # on the near band's top edge (448): cut, dropped
+                             [901, 471, 931, 521, 0.8, 2],       # the upper's third cone: its foot above 574, dropped
+                             [501, 531, 531, 574.5, 0.65, 0],    # the upper's fourth cone, its foot a px lower: merged
                              [1000, 700, 1100, 900, 0.95, 1]]))  # a near cone: kept
     det = SplitDetector(upper, near, s)
     band = np.random.default_rng(0).integers(0, 255, (288, 960, 3), dtype=np.uint8)
     out = det.detect(band, CALIB.crop)
     assert upper.seen[0][0] == (96, 960, 3) and upper.seen[0][1] == s.upper
     assert near.seen[0][0] == (128, 480, 3) and near.seen[0][1] == s.near
-    got = sorted((float(b["u1"]), float(b["score"])) for b in out)
-    assert got == [(100.0, pytest.approx(0.9)), (900.0, pytest.approx(0.7)), (1000.0, pytest.approx(0.95))]
+    got = sorted((float(b["u1"]), round(float(b["score"]), 3)) for b in out)
+    assert got == [(100.0, 0.9), (500.0, 0.6), (900.0, 0.7), (1000.0, 0.95)]
     assert det.timing["forward_ms"] == 2.0 and det.iou == 0.45
     assert out.dtype.names == BOX_DTYPE.names
 

@@ -381,8 +381,11 @@ class SplitDetector:
     """The band's detector for a split band (``band_split``): takes the band as the adapter cuts it (the
     calibration's ``crop``, at its downscale) and runs its upper rows as they are and its near rows at the coarser
     scale (``cv2.INTER_AREA`` from the band: the same as from full resolution), each with a detector built for its
-    size; boxes cut by the split's inner edges are dropped (the other part sees the cone whole), and of a cone both
-    see whole the upper band's box is kept while scored at least half the near box's (:func:`merge_boxes`). The
+    size. Each cone is the upper band's whose foot stands above the upper band's bottom (less ``EDGE_PX``), else
+    the near band's: an upper box touching that bottom is a cut cone, a near box with its foot above it a cone the
+    upper band sees whole at twice the scale, and both are dropped (as is a near box touching the near band's top);
+    of a cone both still keep the upper band's box is kept while scored at least half the near box's
+    (:func:`merge_boxes`). The
     rest of the pipeline sees one detector: ``timing`` sums the two, other attributes are the upper detector's."""
 
     def __init__(self, upper_detector, near_detector, split: BandSplit):
@@ -432,7 +435,10 @@ class SplitDetector:
         ta, tb = dict(self.upper_detector.timing), dict(self.near_detector.timing)
         self.timing = {k: ta.get(k, 0.0) + tb.get(k, 0.0) for k in set(ta) | set(tb)}
         a = drop_edge_boxes(a, bottom=up.v1)
-        b = drop_edge_boxes(b, top=near.v0)
+        # the near band keeps only the cones whose feet stand where the upper band cuts them: a cone with its foot
+        # higher is whole in the upper band, at twice the scale (the near band's box of it, a few px tall, is
+        # rough: kept, it paired badly and doubled the false cones on a rendered drive)
+        b = drop_edge_boxes(b[b["v2"] >= up.v1 - EDGE_PX], top=near.v0)
         return merge_boxes(b, a, getattr(self.upper_detector, "iou", DEFAULT_IOU))
 
 
