@@ -133,7 +133,8 @@ def test_split_detector_cuts_scales_and_merges():
                               [500, 530, 530, 573.5, 0.6, 0]]))  # foot just above 574: the upper's
     near = _Recorder(_boxes([[600, 449, 640, 580, 0.9, 0],       # on the near band's top edge (448): cut, dropped
                              [901, 471, 931, 521, 0.8, 2],       # the upper's third cone: its foot above 574, dropped
-                             [501, 531, 531, 574.5, 0.65, 0],    # the upper's fourth cone, its foot a px lower: merged
+                             [501, 531, 531, 574.5, 0.65, 1],    # the upper's fourth cone (foot a px lower, another
+                                                                 # class at the coarser scale): one cone, the upper's
                              [1000, 700, 1100, 900, 0.95, 1]]))  # a near cone: kept
     det = SplitDetector(upper, near, s)
     band = np.random.default_rng(0).integers(0, 255, (288, 960, 3), dtype=np.uint8)

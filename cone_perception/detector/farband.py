@@ -377,14 +377,20 @@ def drop_edge_boxes(boxes: np.ndarray, top: float | None = None, bottom: float |
     return boxes[keep]
 
 
+#: A near-band box is kept where its foot reaches within this fraction of its height above the upper band's
+#: bottom (less ``EDGE_PX``): the boundary's overlap, where both parts may keep a cone and the merge pairs them.
+SPLIT_OVERLAP = 0.25
+
+
 class SplitDetector:
     """The band's detector for a split band (``band_split``): takes the band as the adapter cuts it (the
     calibration's ``crop``, at its downscale) and runs its upper rows as they are and its near rows at the coarser
     scale (``cv2.INTER_AREA`` from the band: the same as from full resolution), each with a detector built for its
     size. Each cone is the upper band's whose foot stands above the upper band's bottom (less ``EDGE_PX``), else
-    the near band's: an upper box touching that bottom is a cut cone, a near box with its foot above it a cone the
-    upper band sees whole at twice the scale, and both are dropped (as is a near box touching the near band's top);
-    of a cone both still keep the upper band's box is kept while scored at least half the near box's
+    the near band's: an upper box touching that bottom is a cut cone, a near box with its foot above it (by more
+    than ``SPLIT_OVERLAP`` of its height) a cone the upper band sees whole at twice the scale, and both are dropped
+    (as is a near box touching the near band's top);
+    of a cone both still keep (of any class) the upper band's box is kept while scored at least half the near box's
     (:func:`merge_boxes`). The
     rest of the pipeline sees one detector: ``timing`` sums the two, other attributes are the upper detector's."""
 
@@ -438,8 +444,12 @@ class SplitDetector:
         # the near band keeps only the cones whose feet stand where the upper band cuts them: a cone with its foot
         # higher is whole in the upper band, at twice the scale (the near band's box of it, a few px tall, is
         # rough: kept, it paired badly and doubled the false cones on a rendered drive)
-        b = drop_edge_boxes(b[b["v2"] >= up.v1 - EDGE_PX], top=near.v0)
-        return merge_boxes(b, a, getattr(self.upper_detector, "iou", DEFAULT_IOU))
+        # (less SPLIT_OVERLAP of its own height: the two networks place a foot a few px apart, and a cone at the
+        # boundary dropped by both was lost; one both keep pairs in the merge)
+        b = drop_edge_boxes(b[b["v2"] >= up.v1 - EDGE_PX - SPLIT_OVERLAP * (b["v2"] - b["v1"])], top=near.v0)
+        # of any class: the two parts see one cone, and where the coarser one names its class otherwise (an orange
+        # for a large orange) both boxes were kept, a false cone beside the true one
+        return merge_boxes(b, a, getattr(self.upper_detector, "iou", DEFAULT_IOU), same_class=False)
 
 
 __all__ = ["BAND_SPLIT_AUTO", "BAND_SPLIT_OFF", "BandSplit", "SplitDetector", "band_split_for", "drop_edge_boxes",
