@@ -204,3 +204,13 @@ def test_pipeline_node_band_split_parameter(ros):  # noqa: F811 (ros is a fixtur
         PipelineNode(context=ros.context, parameter_overrides=[Parameter("band_split", value="1,2")])
     plain = ros.add(PipelineNode(context=ros.context, parameter_overrides=[Parameter("far_rows", value="none")]))
     assert not isinstance(plain.pipeline.detector, SplitDetector)  # the default: one band
+
+
+def test_a_camera_with_a_lens_splits_like_its_pinhole():
+    """A barrel lens (k1 -0.126, the #27 drives' calibrations) was refused ("no cone ahead is 48 px tall"): the
+    search started 5 cm ahead, far out of view, where the lens model folds points back. It starts at the nearest
+    feet in view; at the image's centre column the lens barely changes the split."""
+    cam = CALIB.pinhole_camera()
+    lens = type(cam)(cam.K, 1920, 1080, CALIB.mount_pose, np.array([-0.126, 0.0, 0.0, 0.0, 0.0]))
+    p, q = plan_split(lens, (368, 1080), 2), plan_split(cam, (368, 1080), 2)
+    assert p.upper == q.upper and p.near == q.near and p.split_m == pytest.approx(q.split_m, rel=0.02)

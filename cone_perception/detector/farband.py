@@ -380,6 +380,8 @@ def drop_edge_boxes(boxes: np.ndarray, top: float | None = None, bottom: float |
 #: A near-band box is kept where its foot reaches within this fraction of its height above the upper band's
 #: bottom (less ``EDGE_PX``): the boundary's overlap, where both parts may keep a cone and the merge pairs them.
 SPLIT_OVERLAP = 0.25
+#: The near band's own score threshold (None: the detector's): an experiment's knob, off.
+SPLIT_NEAR_CONF: float | None = None
 
 
 class SplitDetector:
@@ -447,6 +449,8 @@ class SplitDetector:
         # (less SPLIT_OVERLAP of its own height: the two networks place a foot a few px apart, and a cone at the
         # boundary dropped by both was lost; one both keep pairs in the merge)
         b = drop_edge_boxes(b[b["v2"] >= up.v1 - EDGE_PX - SPLIT_OVERLAP * (b["v2"] - b["v1"])], top=near.v0)
+        if SPLIT_NEAR_CONF is not None:  # an experiment's knob (docs/benchmarks.md, "Row-scaled band")
+            b = b[b["score"] >= SPLIT_NEAR_CONF]
         # of any class: the two parts see one cone, and where the coarser one names its class otherwise (an orange
         # for a large orange) both boxes were kept, a false cone beside the true one
         return merge_boxes(b, a, getattr(self.upper_detector, "iou", DEFAULT_IOU), same_class=False)

@@ -271,8 +271,10 @@ def plan_split(camera: PinholeCamera, band_rows: tuple[int, int], downscale: int
     if near_downscale <= downscale:
         raise ConfigError(source, field, f"the near band's downscale {near_downscale} must be coarser than the band's {downscale}")
     need = min_px * near_downscale  # full-resolution px a small cone needs in the near band
-    lo, hi = 0.05, 1000.0  # the distance ahead where a small cone is `need` px tall (nearer: taller)
-    if not cone_height_px(camera, lo, SMALLEST_CONE_M) >= need:
+    # the distance ahead where a small cone is `need` px tall (nearer: taller), searched from the nearest feet in
+    # view (nearer points leave the image, where a lens model's projection no longer holds)
+    lo, hi = foot_distance(camera, camera.height - 1.0), 1000.0
+    if not (math.isfinite(lo) and cone_height_px(camera, lo, SMALLEST_CONE_M) >= need):
         raise ConfigError(source, field, f"no cone ahead is {need:g} px tall (mount_pose, camera_matrix): nothing to "
                                          "run at the coarser scale")
     for _ in range(60):
