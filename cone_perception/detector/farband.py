@@ -22,6 +22,9 @@ Its rows (``far_rows``, one spelling for the node parameter and the commands' ``
 * ``V0,V1``: those rows, fixed (the hand-set override);
 * ``none`` or empty (the commands also take ``off``): no far band.
 
+The band itself may run in two (``band_split``, :func:`band_split_for`, :class:`SplitDetector`): its near rows,
+where every cone is large, at a quarter of full resolution (docs/detector.md, "Row-scaled band").
+
 Cost: one more forward on ``width x (V1 - V0)`` px (1920x96: 0.67x the pixels of 960x288).
 What it is worth: ``models/cone_detector.md``, "Small, far cones"; docs/benchmarks.md, "Far strip".
 """
@@ -380,8 +383,6 @@ def drop_edge_boxes(boxes: np.ndarray, top: float | None = None, bottom: float |
 #: A near-band box is kept where its foot reaches within this fraction of its height above the upper band's
 #: bottom (less ``EDGE_PX``): the boundary's overlap, where both parts may keep a cone and the merge pairs them.
 SPLIT_OVERLAP = 0.25
-#: The near band's own score threshold (None: the detector's): an experiment's knob, off.
-SPLIT_NEAR_CONF: float | None = None
 
 
 class SplitDetector:
@@ -391,10 +392,9 @@ class SplitDetector:
     size. Each cone is the upper band's whose foot stands above the upper band's bottom (less ``EDGE_PX``), else
     the near band's: an upper box touching that bottom is a cut cone, a near box with its foot above it (by more
     than ``SPLIT_OVERLAP`` of its height) a cone the upper band sees whole at twice the scale, and both are dropped
-    (as is a near box touching the near band's top);
-    of a cone both still keep (of any class) the upper band's box is kept while scored at least half the near box's
-    (:func:`merge_boxes`). The
-    rest of the pipeline sees one detector: ``timing`` sums the two, other attributes are the upper detector's."""
+    (as is a near box touching the near band's top); of a cone both still keep (of any class) the upper band's box
+    is kept while scored at least half the near box's (:func:`merge_boxes`). The rest of the pipeline sees one
+    detector: ``timing`` sums the two, other attributes are the upper detector's (thresholds set on it reach both)."""
 
     def __init__(self, upper_detector, near_detector, split: BandSplit):
         self.upper_detector, self.near_detector, self.split = upper_detector, near_detector, split
@@ -449,8 +449,6 @@ class SplitDetector:
         # (less SPLIT_OVERLAP of its own height: the two networks place a foot a few px apart, and a cone at the
         # boundary dropped by both was lost; one both keep pairs in the merge)
         b = drop_edge_boxes(b[b["v2"] >= up.v1 - EDGE_PX - SPLIT_OVERLAP * (b["v2"] - b["v1"])], top=near.v0)
-        if SPLIT_NEAR_CONF is not None:  # an experiment's knob (docs/benchmarks.md, "Row-scaled band")
-            b = b[b["score"] >= SPLIT_NEAR_CONF]
         # of any class: the two parts see one cone, and where the coarser one names its class otherwise (an orange
         # for a large orange) both boxes were kept, a false cone beside the true one
         return merge_boxes(b, a, getattr(self.upper_detector, "iou", DEFAULT_IOU), same_class=False)
