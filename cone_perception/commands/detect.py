@@ -2,7 +2,7 @@
 
   cone-perception detect SOURCE --out FILE.jsonl [--model M] [--imgsz WxH] [--crop V0,V1[,U0,U1]]
                                  [--downscale N] [--calib C] [--far-rows auto|none|V0,V1] [--far-model M]
-                                 [--backend B] [--save-vis DIR] [--every N]
+                                 [--band-split none|auto|N0,U1] [--backend B] [--save-vis DIR] [--every N]
 
 One line per image (see ``cone_perception/data/predictions.py``), boxes in the image's own pixels.
 A video's frames are named ``<video stem>_<frame index, 6 digits>`` (index from 0 in the file);
