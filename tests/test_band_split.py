@@ -214,3 +214,15 @@ def test_a_camera_with_a_lens_splits_like_its_pinhole():
     lens = type(cam)(cam.K, 1920, 1080, CALIB.mount_pose, np.array([-0.126, 0.0, 0.0, 0.0, 0.0]))
     p, q = plan_split(lens, (368, 1080), 2), plan_split(cam, (368, 1080), 2)
     assert p.upper == q.upper and p.near == q.near and p.split_m == pytest.approx(q.split_m, rel=0.02)
+
+
+def test_detect_and_replay_refuse_a_split_they_cannot_run(tmp_path, capsys):
+    """``detect --band-split auto`` needs --calib, a hand-set split needs the band (--crop or --calib); ``replay
+    --live`` runs the band in one piece: each refused naming --band-split, before any model loads."""
+    out = str(tmp_path / "p.jsonl")
+    assert cli_main(["detect", str(tmp_path), "--out", out, "--band-split", "auto"]) != 0
+    assert "auto needs --calib" in capsys.readouterr().err
+    assert cli_main(["detect", str(tmp_path), "--out", out, "--band-split", "448,576"]) != 0
+    assert "needs --crop or --calib" in capsys.readouterr().err
+    assert cli_main(["replay", str(tmp_path / "bag"), "--live", "fused", "--band-split", "auto"]) != 0
+    assert "--band-split" in capsys.readouterr().err
