@@ -18,6 +18,15 @@ Before the mapping, the pipeline and the ``mapping`` node keep one box per cone 
 second box of a cone another, better-scored box already has (another class on the same spot, or a much weaker
 small box of its class) would be a second, false cone (issue 26g).
 
+A box on the ground must also stand up like a cone (``min_height_ratio``, :meth:`ConeMapper.height_ratios`): its
+height against the height a cone of its class has, standing where the box's foot maps (the cone model of the
+image attitude fit, :meth:`~cone_perception.attitude.ImageAttitude.model_heights`). A mark painted on the ground
+is flat: its box's top lies on the ground too, so the box is lower than a cone standing at the range its foot row
+says (a worn yellow line taken for yellow cones, issue 26: 0.70 of a cone's height, median, on the rendered drives;
+the cones' own boxes 0.92-1.27); only boxes scoring under :data:`FLAT_MAX_SCORE` (the painted line's score 0.33,
+median: a weak box), so that a true cone whose box the detector drew low is kept where the detector is sure of it.
+Every box dropped is counted by cause in :attr:`ConeMapper.dropped`.
+
 Pixel conventions: boxes are in pixel-EDGE coordinates (a box around pixel
 columns 10..19 has u1 = 10, u2 = 20, as detectors and YOLO labels use them);
 the calibration, like OpenCV, uses pixel-CENTRE coordinates (pixel 10 spans
@@ -34,6 +43,15 @@ from .errors import FrameError
 from .geometry import GroundMapper, apply_homography, foot_point_weights, foot_points
 from .geometry.calib import Calibration
 from .records import BOX_DTYPE, CONE_DTYPE, boxes_to_arrays
+
+#: causes of :attr:`ConeMapper.dropped`: a second box of a cone (:func:`one_box_per_cone`, counted by its
+#: callers); the foot above the horizon or beyond ``max_range_m``; a box lower
+#: than ``min_height_ratio`` x a cone's height at the range its foot gives (a mark on the ground)
+DROP_CAUSES = ("second_box", "off_ground", "flat")
+#: The height gate acts only on boxes scoring under this: the painted line's boxes score 0.33 (median), and on the
+#: real validation clips 6 % of the true cones' boxes are under 0.8 of their labels' height, 1.5 % among those scoring
+#: under 0.5 (docs/benchmarks.md, "Flat boxes").
+FLAT_MAX_SCORE = 0.5
 
 
 def validate_boxes(records: np.ndarray) -> None:
@@ -114,8 +132,18 @@ def one_box_per_cone(records: np.ndarray, iou: float = CROSS_CLASS_IOU, small_px
 class ConeMapper:
     """Boxes -> cones for one calibrated camera."""
 
-    def __init__(self, calib: Calibration):
+    def __init__(self, calib: Calibration, min_height_ratio: float = 0.0):
+        """``min_height_ratio``: boxes lower than this x the height a cone of their class has where their foot maps,
+        scoring under :data:`FLAT_MAX_SCORE`, are dropped as marks on the ground (0: off; needs a mount pose in the
+        calibration, else it cannot act)."""
+        if not (np.isfinite(min_height_ratio) and 0.0 <= min_height_ratio < 1.0):
+            raise ValueError(f"min_height_ratio must be in [0, 1), got {min_height_ratio}")
         self.calib = calib
+        self.min_height_ratio = float(min_height_ratio)
+        #: boxes dropped by :meth:`map_boxes` so far, by cause (:data:`DROP_CAUSES`); the replay summary and the
+        #: nodes' /diagnostics report them
+        self.dropped = dict.fromkeys(DROP_CAUSES, 0)
+        self._sizes = None  # the image fit's cone model, for model_heights (built on first use)
         self.ground = GroundMapper(
             calib.H_F_B,
             calib.max_range_m,
@@ -183,6 +211,23 @@ class ConeMapper:
             off = np.clip(half, lo, lo * np.sqrt(2.0))
         return np.where(np.isfinite(off), off, self._offset_m[cls])
 
+    def height_ratios(self, records: np.ndarray, xy_m: np.ndarray) -> np.ndarray:
+        """(N,) each box's height (undistorted px, at its centre column) over the height a cone of its class has
+        with its centre at ``xy_m`` (N, 2) (the box mapped, :meth:`map_boxes`): the cone model of the image
+        attitude fit at zero attitude (an attitude error of a tenth of a degree changes it by under 1 % at 40 m).
+        NaN where it is not known: no mount pose in the calibration, a class of unknown size, behind the camera."""
+        n = len(records)
+        if self.attitude_model is None or n == 0:
+            return np.full(n, np.nan)
+        if self._sizes is None:
+            self._sizes = self.image_attitude()
+        b, _, c = boxes_to_arrays(records)
+        uc = 0.5 * (b[:, 0] + b[:, 2]) - 0.5
+        und = self.ground.undistort(np.r_[np.c_[uc, b[:, 1] - 0.5], np.c_[uc, b[:, 3] - 0.5]])
+        h = und[n:, 1] - und[:n, 1]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return h / self._sizes.model_heights(np.asarray(xy_m, dtype=np.float64).reshape(-1, 2), np.asarray(c, np.intp))
+
     def box_foot_of(self, xy_m: np.ndarray, class_ids: np.ndarray) -> np.ndarray:
         """Inverse of the box -> cone mapping: (N, 2) cone centres (m) -> (N, 2) box foot points
         in pixel-EDGE coordinates (where this calibration expects each class's foot point; with the
@@ -208,8 +253,10 @@ class ConeMapper:
         """Validated :data:`BOX_DTYPE` records -> :data:`CONE_DTYPE` records.
 
         Boxes whose foot point is above the horizon or beyond ``max_range_m``
-        are dropped (they are never published). Raises :class:`FrameError` for
-        a malformed box (the whole message is dropped by the caller).
+        are dropped (they are never published), and with ``min_height_ratio`` boxes too low for a cone
+        standing there (:meth:`height_ratios`) scoring under :data:`FLAT_MAX_SCORE`; each counted in
+        :attr:`dropped`. Raises :class:`FrameError` for a malformed box (the whole message is dropped by
+        the caller).
         ``attitude``: the body's attitude offset for this frame (needs a mount pose); its
         uncertainty is added to each cone's covariance.
         """
@@ -219,8 +266,16 @@ class ConeMapper:
         ground = self._ground_for(attitude)
         uv = self.foot_points(records)
         xy, valid = ground.map_pixels(uv)
+        self.dropped["off_ground"] += int((~valid).sum())
         off = self.width_offsets(records, uv, ground)[valid] if self._from_width else None
         xy[valid] = self.foot_offsets(xy[valid], records["class_id"][valid], off)
+        if self.min_height_ratio > 0 and valid.any():
+            idx = np.flatnonzero(valid)
+            weak = np.asarray(records["score"][idx], np.float64) < FLAT_MAX_SCORE
+            with np.errstate(invalid="ignore"):
+                flat = (self.height_ratios(records[idx], xy[idx]) < self.min_height_ratio) & weak  # NaN: not known, kept
+            valid[idx[flat]] = False
+            self.dropped["flat"] += int(flat.sum())
         cov = ground.covariance(uv[valid])
         if (self.attitude_model is not None and attitude is not None and valid.any()
                 and (attitude.sigma_pitch_deg > 0 or attitude.sigma_roll_deg > 0)):

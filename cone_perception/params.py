@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from typing import Union
 
 from .geometry.calib import DEFAULT_CAMERA
+from .resources import FAR_MODEL_DEFAULT
 
 # -- the detector's defaults: one home. The nodes' parameters below, the API (``detector.Detector``,
 # which imports them from here: this module loads no torch, the mapping node imports it) and the CLI
@@ -38,6 +39,10 @@ DEFAULT_IOU = 0.45
 #: a frame never holds that many cones above ``conf``, so on the car it only bounds NMS's output, and a
 #: lower cap (the nodes' 100 before) would drop cones silently in a crowded frame (a start area, skidpad).
 DEFAULT_MAX_DET = 300
+
+#: Boxes lower than this x the height a cone of their class has, standing where the box's foot maps, are marks on
+#: the ground, not cones (``mapping.ConeMapper``'s ``min_height_ratio``; docs/benchmarks.md, "Flat boxes").
+DEFAULT_MIN_HEIGHT_RATIO = 0.8
 
 Value = Union[bool, int, float, str, "tuple[float, ...]"]
 
@@ -204,6 +209,9 @@ _MAPPING = (
        "wide default, warned), rendered = the rendered drives' box-top table, auto = rendered for a synthetic "
        "camera's calibration (camera: synth), else model; shown on /diagnostics (attitude:box_model)",
        choices=("auto", "model", "rendered")),
+    _p("min_height_ratio", DEFAULT_MIN_HEIGHT_RATIO, "a box lower than this x the height a cone of its class has "
+       "where its foot maps, scoring under 0.5, is a mark on the ground (a painted line), not a cone: dropped, counted on /diagnostics "
+       "(boxes_dropped: flat); 0 = off; needs a mount pose in the calibration, else it cannot act", min=0.0, max=0.99),
 )
 _PIPELINE = (
     _p("far_rows", "auto", "the far band: image rows also run at full resolution, the whole width, for small, far "
@@ -216,7 +224,7 @@ _PIPELINE = (
        "far strip's near end (without a strip: max_range_m) to the crop's bottom, with the strip's attitude margins, "
        "a multiple of 32 rows at the band's scale (docs/detector.md, Band rows; on the shipped calibrations it is not "
        "smaller than their crop); V0,V1 = these rows", values="crop, auto, or V0,V1"),
-    _p("far_model", "auto", "the far band's model: auto = the shipped far-strip model (models/cone_detector_far.pt, "
+    _p("far_model", FAR_MODEL_DEFAULT, "the far band's model: auto = the shipped far-strip model (models/cone_detector_far.pt, "
        "trained for its full-resolution scale: more small cones; the image attitude reads its boxes through its own "
        "box model, box_model); band or empty = the band's own model; else a model file (its box model: "
        "MODEL.box_model.yaml). Its classes must be the band model's (refused at start-up otherwise)",

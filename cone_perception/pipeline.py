@@ -17,7 +17,7 @@ from .detector.farband import FarBand, drawn_by_far, merge_boxes
 from .detector.parallel import PairRunner
 from .geometry.calib import Calibration
 from .mapping import ConeMapper, one_box_per_cone
-from .params import DEFAULT_IOU
+from .params import DEFAULT_IOU, DEFAULT_MIN_HEIGHT_RATIO
 
 STAGES = ("adapter", "preprocess", "forward", "postprocess", "far_forward", "far_band", "far_wait", "attitude", "mapping")
 
@@ -54,6 +54,9 @@ class Pipeline:
     score that splits its boxes: those at or above it are the frame's boxes and ``/cones`` (and fit the
     attitude), those below are mapped with the same attitude into :attr:`FrameResult.weak_cones`, for the
     tracker only (docs/tracking.md, "Weak detections"). None: no split.
+    ``min_height_ratio``: boxes lower than this x a cone's height where their foot maps are dropped as marks on the
+    ground (:class:`~cone_perception.mapping.ConeMapper`; 0: off); :attr:`mapper` ``.dropped`` counts every
+    dropped box by cause.
     ``concurrent``: with ``far``, run the band's and the strip's detect at the same time, the strip on a
     worker thread (:mod:`cone_perception.detector.parallel`; :class:`~cone_perception.detector.parallel.ForwardPlan`
     says when, and with how many threads each detector is loaded); the same boxes as one after the other.
@@ -63,7 +66,8 @@ class Pipeline:
     """
 
     def __init__(self, calib: Calibration, detector, attitude: str | None = None, imu=None, far: FarBand | None = None,
-                 cones_conf: float | None = None, attitude_config=None, concurrent: bool = False):
+                 cones_conf: float | None = None, attitude_config=None, concurrent: bool = False,
+                 min_height_ratio: float = DEFAULT_MIN_HEIGHT_RATIO):
         self.calib = calib
         if far is not None:
             far.check_classes(detector)  # a far model of other classes: refused before the first frame
@@ -71,7 +75,7 @@ class Pipeline:
         self.far = far  # the far band (full-resolution rows near the horizon, detector/farband.py), or None
         self.adapter = DriverAdapter(calib.crop, calib.image_width, calib.image_height, far.crop if far else None)
         self.detector = detector
-        self.mapper = ConeMapper(calib)
+        self.mapper = ConeMapper(calib, min_height_ratio)  # its ``dropped``: the boxes dropped, by cause
         self.imu = imu  # an ImuAttitude the caller feeds (modes imu, fused), or None
         self.attitude_mode, self.attitude = attitude_estimator(self.mapper, attitude, imu, attitude_config)
         self.cones_conf = cones_conf
@@ -117,7 +121,9 @@ class Pipeline:
         else:
             boxes = self.detector.detect(band, self.calib.crop)
             timing.update({k.removesuffix("_ms"): v for k, v in self.detector.timing.items()})
+        n_boxes = len(boxes)
         boxes = one_box_per_cone(boxes)  # a second box of one cone (two classes, or twice small) goes
+        self.mapper.dropped["second_box"] += n_boxes - len(boxes)
         weak = None
         if self.cones_conf is not None:
             strong = boxes["score"] >= self.cones_conf

@@ -94,12 +94,14 @@ def test_replay_weak_detections_reach_the_tracker_only(drive, tmp_path, capsys):
     assert main(base + ["--track-conf", "0.05", "--json", str(tmp_path / "b.json")]) == 0
     a, b = (json.loads((tmp_path / f"{k}.json").read_text()) for k in "ab")
     assert a["localisation"] == b["localisation"]  # /cones unchanged by the weak detections
+    assert set(a["boxes_dropped"]) == {"second_box", "off_ground", "flat"}  # every dropped box, by cause
     assert "weak_hit" not in a["tracking"]["events"]
     assert b["tracking"]["events"].get("weak_hit", 0) + b["tracking"]["events"].get("weak_spawn", 0) > 0
     assert list(b["tracking"]["tracked"]["bands"]) == ["0-7 m", "7-15 m", "15-25 m", "25-40 m"]
     capsys.readouterr()
     for extra, word in ((["--tracker", "nonsense=1"], "TrackerConfig field"), (["--tracker", "max_range_m=far"], "float"),
-                        (["--track-conf", "0.5"], "--track-conf"), (["--max-range", "-3"], "--max-range")):
+                        (["--track-conf", "0.5"], "--track-conf"), (["--max-range", "-3"], "--max-range"),
+                        (["--min-height-ratio", "1.5"], "--min-height-ratio")):
         assert main(base + extra) == 2, extra
         assert word in capsys.readouterr().err, extra
     assert main(["replay", str(drive), "--track-conf", "0.1"]) == 2  # needs --track

@@ -25,7 +25,7 @@ from pathlib import Path
 from ..attitude import ATTITUDE_MODES
 from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, RUNTIME_THREADS
 from ..geometry.calib import DEFAULT_CAMERA
-from ..params import DEFAULT_CONF
+from ..params import DEFAULT_CONF, PARAMS
 from ..replay.run import run_replay
 
 
@@ -75,6 +75,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--far-model", default=None, metavar="auto|band|PATH",
                    help="the far band's model: auto (default) = the shipped far-strip model (models/cone_detector_far.pt), "
                         "band = the band's own model, or a model file; its classes must be the band model's; live: the node's far_model")
+    p.add_argument("--min-height-ratio", type=float, default=PARAMS["min_height_ratio"].default, metavar="R",
+                   help="offline: a box lower than R x the height a cone of its class has where its foot maps is a mark "
+                        "on the ground, not a cone: dropped and counted (summary: boxes dropped); 0 = off (default "
+                        "%(default)s; live: the nodes' min_height_ratio)")
     p.add_argument("--live", choices=["fused", "separate"], default=None,
                    help="play the bag into live node processes instead of replaying offline")
     p.add_argument("--pace", choices=["lockstep", "rate"], default="lockstep",
@@ -84,7 +88,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "bag's IMU), fused (IMU + image); all but fixed need mount_pose in the calibration. Default: "
                         "fused when the bag has the IMU topic, else image, fixed without a mount pose")
     p.add_argument("--box-model", choices=("auto", "model", "rendered"), default="auto",
-                   help="offline, attitude image/fused: which box model the image fit reads the detector's boxes with: "
+                   help="attitude image/fused (live: the nodes' box_model): which box model the image fit reads the detector's boxes with: "
                         "model (measured on real frames, MODEL.box_model.yaml beside the model file; a model without one "
                         "gets a conservative default and a warning), rendered (the rendered drives' table, for synthetic "
                         "bags), auto (rendered with --gt-topic, i.e. a synthetic drive with truth, unless --box-behaviour "

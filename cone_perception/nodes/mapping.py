@@ -17,6 +17,10 @@ Parameters (generated from cone_perception/params.py by ``cone-perception params
     beside the model file (MODEL.box_model.yaml; a model without one: a wide default, warned),
     rendered = the rendered drives' box-top table, auto = rendered for a synthetic camera's
     calibration (camera: synth), else model; shown on /diagnostics (attitude:box_model)
+  min_height_ratio (double, default 0.8; 0.0 .. 0.99): a box lower than this x the height a cone of
+    its class has where its foot maps, scoring under 0.5, is a mark on the ground (a painted line),
+    not a cone: dropped, counted on /diagnostics (boxes_dropped: flat); 0 = off; needs a mount pose
+    in the calibration, else it cannot act
   model (string, default ""; a .pt, .onnx or .torchscript path): the model file of the detection
     node that draws cone_boxes, for its box model (box_model); empty = the shipped default model
     (models/cone_detector.pt)
@@ -43,7 +47,8 @@ class MappingNode(PerceptionNode):
         calib_name = declare(self, "calibration")
         markers = bool(declare(self, "publish_markers"))
         calib = load_calibration(calib_name)
-        self.mapper = ConeMapper(calib)
+        self.mapper = ConeMapper(calib, float(declare(self, "min_height_ratio")))
+        self.health.watch("boxes_dropped", self.mapper.dropped)  # by cause (mapping.DROP_CAUSES)
         self.advertise_cones(calib.frame_id, markers)
         self.runtime = RuntimeParameters(self)
         self.runtime.register("publish_markers", lambda v: setattr(self, "publish_markers", bool(v)))
@@ -58,7 +63,9 @@ class MappingNode(PerceptionNode):
     def on_boxes(self, msg: PointCloud2) -> None:
         boxes = _msgs.boxes_from_msg(msg)
         validate_boxes(boxes)  # a bad message is dropped before it can move the attitude filter
+        n_boxes = len(boxes)
         boxes = one_box_per_cone(boxes)  # as the fused pipeline does: a second box of one cone goes
+        self.mapper.dropped["second_box"] += n_boxes - len(boxes)
         att = attitude_for_boxes(self.attitude, boxes, _msgs.stamp_ns(msg.header))
         self.publish_cones(self.mapper.map_boxes(boxes, att), msg.header)
         self.publish_attitude(att, msg.header)

@@ -26,9 +26,9 @@ Parameters (generated from cone_perception/params.py by ``cone-perception params
     cone_tracker); it gets each frame's attitude, which a separate cone_tracker does not
   Also those of driver_adapter (calibration, input_transport); those of detection (model, backend,
     device, fp16, bf16, threads, conf, iou, max_det, debug_image, debug_image_hz); those of mapping
-    (publish_markers, attitude, imu_rest_deg, box_model); those of cone_tracker, with track: true
-    (odom_topic, odom_type, odom_max_age_s, publish_tracked_markers); those of every node
-    (input_timeout_s, max_frame_age_s, input_rate_hz).
+    (publish_markers, attitude, imu_rest_deg, box_model, min_height_ratio); those of cone_tracker,
+    with track: true (odom_topic, odom_type, odom_max_age_s, publish_tracked_markers); those of
+    every node (input_timeout_s, max_frame_age_s, input_rate_hz).
 """
 
 from __future__ import annotations
@@ -91,7 +91,9 @@ class PipelineNode(PerceptionNode):
         att_config, box_model = declare_box_model(self, calib, self.loader.model,
                                                   far_model if far_rows.crop is not None else None)
         self.pipeline = Pipeline(calib, detector, mode, imu, self._far_band(far_rows, far_model),
-                                 attitude_config=att_config, concurrent=plan.concurrent)
+                                 attitude_config=att_config, concurrent=plan.concurrent,
+                                 min_height_ratio=float(declare(self, "min_height_ratio")))
+        self.health.watch("boxes_dropped", self.pipeline.mapper.dropped)  # by cause (mapping.DROP_CAUSES)
         report_attitude(self, self.pipeline.attitude_mode, self.pipeline.attitude, box_model)
         if self.pipeline.far is not None:  # /diagnostics: frames with the strip, those clamped to the image (WARN)
             self.health.watch("far_strip", self.pipeline.strip_counts, warn=["clamped"])

@@ -30,6 +30,7 @@ from ..evaluation import GT_MIN_VISIBLE, LocalisationReport, format_localisation
 from ..evaluation.attitude import attitude_plot, format_attitude_report
 from ..evaluation.tracking import DriveEvaluation, format_drive_evaluation
 from ..geometry.calib import load_calibration, resolve_calibration_path
+from ..params import PARAMS
 from ..pipeline import Pipeline
 from ..synth.boxlook import real_box_behaviour
 from ..timing import format_table, summarize
@@ -57,6 +58,11 @@ def run_replay(args: argparse.Namespace) -> int:
         raise ConfigError("--max-range", None, f"must be a positive number of metres, got {args.max_range:g}")
     if args.tracker and not args.track:
         raise ConfigError("--tracker", None, "needs --track")
+    why = PARAMS["min_height_ratio"].check(args.min_height_ratio)
+    if why:
+        raise ConfigError("--min-height-ratio", None, why)
+    if args.live and args.min_height_ratio != PARAMS["min_height_ratio"].default:
+        raise ConfigError("--min-height-ratio", None, "works offline only (live: the nodes' min_height_ratio)")
     if args.max_range is not None:
         calib = replace(calib, max_range_m=float(args.max_range))
     band = band_rows_for(args.band_rows, calib, args.far_rows, "--band-rows")
@@ -103,6 +109,15 @@ def _imu_source(args, calib):
     return ImuAttitude(rest)
 
 
+def box_model_choice(args) -> str:
+    """``model`` or ``rendered``: how the image attitude reads the boxes, offline and in the live nodes
+    (their ``box_model``) alike: ``--box-model``; ``auto``: rendered with ``--gt-topic`` (a synthetic drive with
+    truth) unless ``--box-behaviour real``, else model."""
+    if args.box_model != "auto":
+        return args.box_model
+    return "rendered" if args.gt_topic and args.box_behaviour != "real" else "model"
+
+
 def _run_offline(args, calib) -> dict:
     tracking = _tracking(args, calib)  # its bad options fail before the model loads
     # built for the calibration's band, as the pipeline node does (a fixed-size backend never letterboxes)
@@ -118,14 +133,13 @@ def _run_offline(args, calib) -> dict:
                                   threads=plan.network_threads or None, bf16=args.bf16)
     imu = _imu_source(args, calib)
     # the fit reads each network's boxes through its own box model (the far strip's of a far model: issue 26f)
-    use_model = args.box_model == "model" or (args.box_model == "auto" and (not args.gt_topic or args.box_behaviour == "real"))
-    att_cfg, _ = attitude_config_for("model" if use_model else "rendered", det.source, far_model if far else None, True)
+    att_cfg, _ = attitude_config_for(box_model_choice(args), det.source, far_model if far else None, True)
     if args.box_behaviour == "real":  # the real frames' boxes on a rendered drive, each network's as its box model says
         far_real = far_reading_for("model", far_model if far else None, det.source, False)[0]
         det, far = real_box_behaviour(det, far, box_model_or_default(det.source), args.box_jitter,
                                       far_real.box_model if far_real is not None else None)
     pipeline = Pipeline(calib, det, args.attitude, imu, far, cones_conf=args.conf if args.track_conf is not None else None,
-                        attitude_config=att_cfg, concurrent=plan.concurrent)
+                        attitude_config=att_cfg, concurrent=plan.concurrent, min_height_ratio=args.min_height_ratio)
     with pipeline:  # joins the strip's worker thread, if one ran
         res = offline_replay(args.bag, pipeline, args.topic, args.out, args.gt_topic,
                              _progress(args.no_progress), imu_topic=args.imu_topic, tracking=tracking)
@@ -147,6 +161,8 @@ def _run_offline(args, calib) -> dict:
         print_written([args.out], "replay")
     if far is not None:
         print(f"far band: {format_strip_counts(pipeline)}")
+    print("boxes dropped: " + ", ".join(f"{k} {v}" for k, v in pipeline.mapper.dropped.items())
+          + f" (a flat box: lower than {args.min_height_ratio:g} x a cone there)")
     if args.attitude_png:
         stamps = sorted(res.attitude)
         attitude_plot(args.attitude_png, stamps, [res.attitude[s] for s in stamps], read_attitude_truth(args.bag),
@@ -154,7 +170,7 @@ def _run_offline(args, calib) -> dict:
         print_written([args.attitude_png], "replay")
     return {"mode": "offline", "frames": n, "dropped": dict(res.stats.dropped), "wall_s": res.wall_s,
             "stages": stages, "localisation": res.localisation, "tracking": res.tracking,
-            "attitude_fits": res.pipeline_attitude,
+            "attitude_fits": res.pipeline_attitude, "boxes_dropped": dict(pipeline.mapper.dropped),
             "far_strip": strip_summary(pipeline) if far is not None else None}
 
 
@@ -215,6 +231,8 @@ def _run_live(args, calib) -> dict:
     if args.model:
         params["model"] = str(Path(args.model).resolve())
     params["threads"] = args.threads
+    if args.box_model != "auto" or args.gt_topic:  # as offline: a rendered drive's boxes through the rendered tables
+        params["box_model"] = box_model_choice(args)
     if args.far_rows is not None:
         params["far_rows"] = args.far_rows
     if args.band_rows is not None:

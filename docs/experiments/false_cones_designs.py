@@ -99,13 +99,42 @@ DESIGNS = {
     "one_box_per_cone, certainty_prior 0.4": (one_box, {"certainty_prior": 0.4}),
     "shipped, spawn_max_m 2.5": (shipped, {"spawn_max_m": 2.5}),
     "cross-class 0.6, spawn_max_m 2.5": (cross_class(0.6), {"spawn_max_m": 2.5}),
+    # issue 26 (session 13): a box must stand up like a cone (mapping's min_height_ratio): its height against a
+    # cone's at the range its foot gives; marks painted on the ground are flat. gate(ratio, range, score) -> drop
+    "height gate 0.7": (one_box, {}, lambda r, d, s: r < 0.7),
+    "height gate 0.75": (one_box, {}, lambda r, d, s: r < 0.75),
+    "height gate 0.8": (one_box, {}, lambda r, d, s: r < 0.8),
+    "height gate 0.85": (one_box, {}, lambda r, d, s: r < 0.85),
+    "height gate 0.9": (one_box, {}, lambda r, d, s: r < 0.9),
+    "height gate 0.8, 7-25 m only": (one_box, {}, lambda r, d, s: (r < 0.8) & (d >= 7) & (d < 25)),
+    "height gate 0.8, score < 0.5 only": (one_box, {}, lambda r, d, s: (r < 0.8) & (s < 0.5)),
+    "height gate 0.85, score < 0.5 only": (one_box, {}, lambda r, d, s: (r < 0.85) & (s < 0.5)),
+    "height gate 0.7, score < 0.5 only": (one_box, {}, lambda r, d, s: (r < 0.7) & (s < 0.5)),
+    "height gate 0.75, score < 0.5 only": (one_box, {}, lambda r, d, s: (r < 0.75) & (s < 0.5)),
+    "height gate 0.8, score < 0.4 only": (one_box, {}, lambda r, d, s: (r < 0.8) & (s < 0.4)),
+    "weak far boxes out: score < 0.35 beyond 25 m": (one_box, {}, lambda r, d, s: (s < 0.35) & (d >= 25)),
+    "weak boxes out: score < 0.35": (one_box, {}, lambda r, d, s: s < 0.35),
+    "height gate 0.8 + weak far boxes out (< 0.35, >= 25 m)": (one_box, {}, lambda r, d, s: (r < 0.8) | ((s < 0.35) & (d >= 25))),
     # the tracker's spawn distance growing with range (spawn_max_frac) and position noise growing with range
     # (process_std_frac) were screened at commit 43ee0c5, where TrackerConfig had those fields; neither paid
     # (docs/benchmarks.md, "False cones within 40 m (issue 26g)"), so they were taken out again
 }
 
 
-def run(data: dict, merge, tracker_kw: dict) -> dict:
+def gated(mapper: ConeMapper, boxes: np.ndarray, att, gate) -> np.ndarray:
+    """``boxes`` minus those ``gate(height ratio, range m, score)`` drops: each box mapped with the attitude (foot
+    offset of its class), its height against a cone's there (:meth:`ConeMapper.height_ratios`)."""
+    if len(boxes) == 0:
+        return boxes
+    xy, ok = mapper._ground_for(att).map_pixels(mapper.foot_points(boxes))
+    xy[ok] = mapper.foot_offsets(xy[ok], boxes["class_id"][ok])
+    ratio = mapper.height_ratios(boxes, xy)
+    with np.errstate(invalid="ignore"):
+        drop = gate(np.where(np.isfinite(ratio), ratio, 9.0), np.hypot(xy[:, 0], xy[:, 1]), boxes["score"].astype(float))
+    return boxes[~(drop & ok)]
+
+
+def run(data: dict, merge, tracker_kw: dict, gate=None) -> dict:
     calib = load_calibration(data["calib"])
     mapper = ConeMapper(calib)
     truth = read_ground_truth(data["bag"], "/cones_gt")
@@ -114,6 +143,8 @@ def run(data: dict, merge, tracker_kw: dict) -> dict:
     for stamp, fr in sorted(data["frames"].items()):
         band = fr["band"] if fr["band"] is not None else fr["boxes"]
         boxes = merge(band, fr["far"])
+        if gate is not None:
+            boxes = gated(mapper, boxes, fr["attitude"], gate)
         cones = mapper.map_boxes(boxes, fr["attitude"])
         if stamp in truth:
             rep.add_frame(cones, truth[stamp])
@@ -139,12 +170,12 @@ if __name__ == "__main__":
             datas.append((Path(p).stem, pickle.load(f)))
     print("| design | drive | /cones 15-25 / 25-40 m, false per frame < 40 m | /cones/tracked 15-25 / 25-40 m, false | near 0-7 / 7-15 m (cones; tracked) |")
     print("|---|---|---|---|---|")
-    for name, (merge, kw) in DESIGNS.items():
+    for name, (merge, kw, *gate) in DESIGNS.items():
         if args.only not in name:
             continue
         res = []
         for dn, data in datas:
-            r = run(data, merge, kw)
+            r = run(data, merge, kw, *gate)
             res.append(r)
             print(f"| {name} | {dn} | {r['raw'][0]:.3f} / {r['raw'][1]:.3f}, {r['raw'][2]:.2f} | "
                   f"{r['tracked'][0]:.3f} / {r['tracked'][1]:.3f}, {r['tracked'][2]:.2f} | "
