@@ -224,6 +224,11 @@ _PIPELINE = (
        "far strip's near end (without a strip: max_range_m) to the crop's bottom, with the strip's attitude margins, "
        "a multiple of 32 rows at the band's scale (docs/detector.md, Band rows; on the shipped calibrations it is not "
        "smaller than their crop); V0,V1 = these rows", values="crop, auto, or V0,V1"),
+    _p("band_split", "none", "the band in two (docs/detector.md, Row-scaled band): none = one band at the "
+       "calibration's downscale (the default); auto = split from the calibration: the near rows, where every cone is "
+       "at least 48 px tall, at a quarter of full resolution, the rows above at the band's half, overlapping by a "
+       "cone (refused naming band_split where the calibration leaves nothing to split); N0,U1 = the near band from "
+       "row N0, the upper band to row U1", values="none, auto, or N0,U1"),
     _p("far_model", FAR_MODEL_DEFAULT, "the far band's model: auto = the shipped far-strip model (models/cone_detector_far.pt, "
        "trained for its full-resolution scale: more small cones; the image attitude reads its boxes through its own "
        "box model, box_model); band or empty = the band's own model; else a model file (its box model: "

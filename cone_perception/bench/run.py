@@ -16,7 +16,8 @@ from ..bench.frames import rendered_frames
 from ..bench.pipeline import bench_adapter, bench_pipeline, bench_tracker, load_for_crop
 from ..bench.table import crop_for_setting, run_table
 from ..resources import far_model_for, far_model_given
-from ..detector.farband import FarBand, band_rows_for, far_rows_for
+from ..detector import default_model_path
+from ..detector.farband import FarBand, SplitDetector, band_rows_for, band_split_for, far_rows_for
 from ..detector.parallel import ForwardPlan
 from ..errors import ConfigError
 from ..geometry.calib import load_calibration
@@ -41,13 +42,19 @@ def _bench_pipeline(args: argparse.Namespace, calib) -> dict:
     if far_model_given(args.far_model) and far_rows.crop is None:
         raise ConfigError("--far-model", None, f"needs a far band ({far_rows.what})")
     plan = forward_plan(args.threads, far_rows.crop is not None, args.sequential)
-    det = load_for_crop(args.model, args.backend, calib.crop, plan.network_threads, bf16=args.bf16)
+    split = band_split_for(args.band_split, calib, "--band-split")
+    if split.upper is None:
+        det = load_for_crop(args.model, args.backend, calib.crop, plan.network_threads, bf16=args.bf16)
+    else:
+        det = SplitDetector.load(args.model or default_model_path(), split, backend=args.backend,
+                                 threads=plan.network_threads, bf16=args.bf16)
     far = FarBand.for_calibration(far_model_for(args.far_model, det.source), args.far_rows, calib, "--far-rows", "--far-model",
                                   backend=args.backend, threads=plan.network_threads, bf16=args.bf16)
     result = bench_pipeline(calib, det, rendered_frames(calib, max(1, args.scenes)), args.frames, args.warmup, far,
                             plan.concurrent)
     result["far_rows"] = f"{far.crop.v0},{far.crop.v1}" if far is not None else "none"
-    result["far_band"] = far_rows.what
+    result["far_band"] = far_rows.what if split.upper is None else f"{far_rows.what}; {split.what}"
+    result["band_split"] = split.what
     result["far_model"] = far.detector.source if far is not None and args.far_model else ""
     result["forwards"] = plan.describe() if far is not None else ""
     result["setting"] = args.input or "calibration"
@@ -65,6 +72,7 @@ def _repeat_pipeline(args: argparse.Namespace) -> int:
     cmd += (["--far-rows", args.far_rows] if args.far_rows is not None else []) + (["--far-model", args.far_model] if args.far_model else [])
     cmd += ["--sequential"] if args.sequential else []
     cmd += ["--band-rows", args.band_rows] if args.band_rows is not None else []
+    cmd += ["--band-split", args.band_split] if args.band_split is not None else []
     runs = []
     for i in tqdm(range(args.repeat), unit="run", desc="bench pipeline", file=sys.stderr,
                   disable=args.json or args.no_progress):

@@ -62,6 +62,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--band-rows", default=None, metavar="crop|auto|V0,V1",
                    help="pipeline: the band's rows (docs/detector.md 'Band rows'): crop (default) = the calibration's crop, "
                         "auto = placed from the calibration, V0,V1 = these rows")
+    p.add_argument("--band-split", default=None, metavar="none|auto|N0,U1",
+                   help="pipeline: the band in two (docs/detector.md 'Row-scaled band'): none (default) = one band; "
+                        "auto = split from the calibration: the near rows, where every cone is large, at a quarter "
+                        "of full resolution, the upper rows at the band's half; N0,U1 = the near band from row N0, "
+                        "the upper band to row U1")
     p.add_argument("--far-model", default=None, metavar="auto|band|PATH",
                    help="pipeline: the far band's model: auto (default) = the shipped far-strip model "
                         "(models/cone_detector_far.pt), band = the band's own model, or a model file; its classes must be the band model's")

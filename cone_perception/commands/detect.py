@@ -2,7 +2,7 @@
 
   cone-perception detect SOURCE --out FILE.jsonl [--model M] [--imgsz WxH] [--crop V0,V1[,U0,U1]]
                                  [--downscale N] [--calib C] [--far-rows auto|none|V0,V1] [--far-model M]
-                                 [--backend B] [--save-vis DIR] [--every N]
+                                 [--band-split none|auto|N0,U1] [--backend B] [--save-vis DIR] [--every N]
 
 One line per image (see ``cone_perception/data/predictions.py``), boxes in the image's own pixels.
 A video's frames are named ``<video stem>_<frame index, 6 digits>`` (index from 0 in the file);
@@ -39,6 +39,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--calib", default=None, metavar="C",
                    help="as the car runs this camera: the calibration's band (crop, downscale) and, unless --far-rows "
                         "says otherwise, its far strip at its calibrated rows (instead of --crop/--downscale)")
+    p.add_argument("--band-split", default=None, metavar="none|auto|N0,U1",
+                   help="with --crop or --calib: the band in two (docs/detector.md 'Row-scaled band'): none (default) = one "
+                        "band; auto (needs --calib) = split from the calibration, the near rows at a quarter of full "
+                        "resolution; N0,U1 = the near band from row N0, the upper band to row U1")
     p.add_argument("--far-rows", default=None, metavar="auto|none|V0,V1",
                    help="the far band: image rows also run at full resolution, the whole width, merged with the band's "
                         "boxes (docs/detector.md 'Far band'): auto = the --calib calibration's far strip (the default "

@@ -68,6 +68,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the far band, image rows also run at full resolution, the whole width (docs/detector.md "
                         "'Far band'): auto (default) = the calibration's far strip, moved each frame with the attitude; "
                         "V0,V1 = these rows, fixed; none (or off) = the band alone. Live: the pipeline node's far_rows (fused only)")
+    p.add_argument("--band-split", default=None, metavar="none|auto|N0,U1",
+                   help="offline: the band in two (docs/detector.md 'Row-scaled band'): none (default) = one band; auto = "
+                        "split from the calibration, the near rows at a quarter of full resolution; N0,U1 = the near band "
+                        "from row N0, the upper band to row U1")
     p.add_argument("--band-rows", default=None, metavar="crop|auto|V0,V1",
                    help="the band's rows (docs/detector.md 'Band rows'): crop (default) = the calibration's crop, auto = "
                         "placed from the calibration, V0,V1 = these rows; the cones expected in view follow the band. "

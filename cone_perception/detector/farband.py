@@ -22,6 +22,9 @@ Its rows (``far_rows``, one spelling for the node parameter and the commands' ``
 * ``V0,V1``: those rows, fixed (the hand-set override);
 * ``none`` or empty (the commands also take ``off``): no far band.
 
+The band itself may run in two (``band_split``, :func:`band_split_for`, :class:`SplitDetector`): its near rows,
+where every cone is large, at a quarter of full resolution (docs/detector.md, "Row-scaled band").
+
 Cost: one more forward on ``width x (V1 - V0)`` px (1920x96: 0.67x the pixels of 960x288).
 What it is worth: ``models/cone_detector.md``, "Small, far cones"; docs/benchmarks.md, "Far strip".
 """
@@ -30,12 +33,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
+import cv2
 import numpy as np
 
 from ..classes import CLASS_NAMES
 from ..crop import CropSpec
 from ..errors import ConfigError
-from ..geometry.strip import DEFAULT_STRIP, StripPlan, plan_band
+from ..geometry.strip import DEFAULT_STRIP, SPLIT_DOWNSCALE, StripPlan, plan_band, plan_split
 from ..model.decode import nms_per_class
 from ..params import DEFAULT_IOU
 from .detector import Detector
@@ -310,6 +314,147 @@ class FarBand:
         return merge_boxes(band_boxes, self.detect(strip_bgr, crop), iou)
 
 
-__all__ = ["BAND_ROWS_AUTO", "BAND_ROWS_CROP", "BandRows", "EDGE_PX", "FAR_ROWS_AUTO", "FAR_ROWS_OFF", "FarBand",
+#: ``band_split`` values: the band in one piece (the default) and split from the calibration (:func:`band_split_for`).
+BAND_SPLIT_OFF = ("none", "off", "")
+BAND_SPLIT_AUTO = "auto"
+
+
+@dataclass(frozen=True)
+class BandSplit:
+    """What a ``band_split`` value means for one calibration (:func:`band_split_for`): the upper band (the band's
+    downscale) and the near band (``near.downscale``), both inside the calibration's ``crop``, or None (one band)."""
+
+    upper: CropSpec | None
+    near: CropSpec | None
+    what: str
+
+
+def band_split_for(value: str | None, calib, source: str = "band_split") -> BandSplit:
+    """``none`` (None, empty, ``off``: one band) / ``auto`` / ``"N0,U1"`` for a calibration (its ``crop``, after
+    ``band_rows``). ``auto``: :func:`~..geometry.strip.plan_split` from the calibration (its ``far_strip`` margins);
+    ``N0,U1``: the near band from row N0 to the band's bottom at a quarter of full resolution, the upper band from
+    the band's top to row U1 at the band's downscale. ConfigError naming ``source`` for a bad value, a calibration
+    without ``camera_matrix`` for ``auto``, rows outside the band or bands that do not overlap."""
+    v = "none" if value is None else str(value).strip().lower()
+    band = calib.crop
+    if v in BAND_SPLIT_OFF:
+        return BandSplit(None, None, f"band {band.v0}-{band.v1} in one piece at 1/{band.downscale}")
+    if band.downscale * 2 not in (SPLIT_DOWNSCALE,) or band.width_full_px % SPLIT_DOWNSCALE:
+        raise ConfigError(source, None, f"needs a band at downscale {SPLIT_DOWNSCALE // 2} whose width is divisible by "
+                                        f"{SPLIT_DOWNSCALE}, got downscale {band.downscale}, {band.width_full_px} px")
+    if v == BAND_SPLIT_AUTO:
+        if calib.camera_matrix is None:
+            raise ConfigError(source, None, f"auto needs a camera_matrix in the calibration {calib.source}: set N0,U1")
+        p = plan_split(calib.pinhole_camera(), (band.v0, band.v1), band.downscale, calib.far_strip or DEFAULT_STRIP,
+                       source=calib.source, field=source)
+        (u0, u1), (n0, _) = p.upper, p.near
+        how = f"placed from the calibration (small cones nearer than {p.split_m:.1f} m at least {p.min_px:g} px there)"
+    else:
+        try:
+            n0, u1 = (int(t) for t in v.split(","))
+        except ValueError:
+            raise ConfigError(source, None, f"expected none, auto or two image rows N0,U1, got {value!r}") from None
+        how = f"fixed: {source}"
+        if not band.v0 < n0 < u1 < band.v1:
+            raise ConfigError(source, None, f"rows {n0},{u1}: need {band.v0} < N0 < U1 < {band.v1} (inside the band, "
+                                            "the near band from N0 overlapping the upper band up to U1)")
+        if (band.v1 - n0) % SPLIT_DOWNSCALE or (u1 - band.v0) % band.downscale:
+            raise ConfigError(source, None, f"rows {n0},{u1}: the near band's rows must divide by {SPLIT_DOWNSCALE}, "
+                                            f"the upper band's by {band.downscale}")
+    upper = replace(band, v1=u1)
+    near = replace(band, v0=n0, downscale=SPLIT_DOWNSCALE)
+    return BandSplit(upper, near, f"band split: rows {upper.v0}-{upper.v1} at 1/{upper.downscale} "
+                                  f"({upper.out_width}x{upper.out_height}), rows {near.v0}-{near.v1} at "
+                                  f"1/{near.downscale} ({near.out_width}x{near.out_height}), {how}")
+
+
+def drop_edge_boxes(boxes: np.ndarray, top: float | None = None, bottom: float | None = None,
+                    edge_px: float = EDGE_PX) -> np.ndarray:
+    """``BOX_DTYPE`` boxes minus those touching row ``top`` or row ``bottom`` (within ``edge_px``; None: not that
+    edge): cones cut by an inner edge of a split band, seen whole by the other part."""
+    keep = np.ones(len(boxes), bool)
+    if top is not None:
+        keep &= boxes["v1"] > top + edge_px
+    if bottom is not None:
+        keep &= boxes["v2"] < bottom - edge_px
+    return boxes[keep]
+
+
+#: A near-band box is kept where its foot reaches within this fraction of its height above the upper band's
+#: bottom (less ``EDGE_PX``): the boundary's overlap, where both parts may keep a cone and the merge pairs them.
+SPLIT_OVERLAP = 0.25
+
+
+class SplitDetector:
+    """The band's detector for a split band (``band_split``): takes the band as the adapter cuts it (the
+    calibration's ``crop``, at its downscale) and runs its upper rows as they are and its near rows at the coarser
+    scale (``cv2.INTER_AREA`` from the band: the same as from full resolution), each with a detector built for its
+    size. Each cone is the upper band's whose foot stands above the upper band's bottom (less ``EDGE_PX``), else
+    the near band's: an upper box touching that bottom is a cut cone, a near box with its foot above it (by more
+    than ``SPLIT_OVERLAP`` of its height) a cone the upper band sees whole at twice the scale, and both are dropped
+    (as is a near box touching the near band's top); of a cone both still keep (of any class) the upper band's box
+    is kept while scored at least half the near box's (:func:`merge_boxes`). The rest of the pipeline sees one
+    detector: ``timing`` sums the two, other attributes are the upper detector's (thresholds set on it reach both)."""
+
+    def __init__(self, upper_detector, near_detector, split: BandSplit):
+        self.upper_detector, self.near_detector, self.split = upper_detector, near_detector, split
+        self.timing: dict[str, float] = {}
+
+    def __getattr__(self, name):
+        if name in ("upper_detector", "near_detector", "split"):
+            raise AttributeError(name)
+        return getattr(self.upper_detector, name)
+
+    def __setattr__(self, name, value):
+        if name in self._BOTH:  # a threshold changed at run time (the node's conf, iou, max_det): both parts'
+            setattr(self.upper_detector, name, value)
+            setattr(self.near_detector, name, value)
+        else:
+            object.__setattr__(self, name, value)
+
+    _BOTH = ("conf", "iou", "max_det")
+
+    @classmethod
+    def load(cls, model, split: BandSplit, **detector_kw) -> "SplitDetector":
+        """Both parts' detectors of ``model`` (``Detector.load_for_band`` for each size), warm."""
+        dets = []
+        for crop in (split.upper, split.near):
+            d = Detector.load_for_band(model, (crop.out_width, crop.out_height), **detector_kw)
+            d.warmup()
+            dets.append(d)
+        return cls(dets[0], dets[1], split)
+
+    def warmup(self) -> None:
+        pass  # loaded warm
+
+    def input_size_for(self, w: int, h: int) -> tuple[int, int]:
+        """The upper band's network input (the near band's: ``split.what``)."""
+        up = self.split.upper
+        return self.upper_detector.input_size_for(up.out_width, up.out_height)
+
+    def detect(self, band_bgr: np.ndarray, crop: CropSpec) -> np.ndarray:
+        """The band ``band_bgr`` cut at ``crop`` (the calibration's) -> boxes (full-image px)."""
+        up, near = self.split.upper, self.split.near
+        r = (up.v1 - crop.v0) // crop.downscale
+        a = self.upper_detector.detect(np.ascontiguousarray(band_bgr[:r]), up)
+        n0 = (near.v0 - crop.v0) // crop.downscale
+        small = cv2.resize(band_bgr[n0:], (near.out_width, near.out_height), interpolation=cv2.INTER_AREA)
+        b = self.near_detector.detect(small, near)
+        ta, tb = dict(self.upper_detector.timing), dict(self.near_detector.timing)
+        self.timing = {k: ta.get(k, 0.0) + tb.get(k, 0.0) for k in set(ta) | set(tb)}
+        a = drop_edge_boxes(a, bottom=up.v1)
+        # the near band keeps only the cones whose feet stand where the upper band cuts them: a cone with its foot
+        # higher is whole in the upper band, at twice the scale (the near band's box of it, a few px tall, is
+        # rough: kept, it paired badly and doubled the false cones on a rendered drive)
+        # (less SPLIT_OVERLAP of its own height: the two networks place a foot a few px apart, and a cone at the
+        # boundary dropped by both was lost; one both keep pairs in the merge)
+        b = drop_edge_boxes(b[b["v2"] >= up.v1 - EDGE_PX - SPLIT_OVERLAP * (b["v2"] - b["v1"])], top=near.v0)
+        # of any class: the two parts see one cone, and where the coarser one names its class otherwise (an orange
+        # for a large orange) both boxes were kept, a false cone beside the true one
+        return merge_boxes(b, a, getattr(self.upper_detector, "iou", DEFAULT_IOU), same_class=False)
+
+
+__all__ = ["BAND_SPLIT_AUTO", "BAND_SPLIT_OFF", "BandSplit", "SplitDetector", "band_split_for", "drop_edge_boxes",
+           "BAND_ROWS_AUTO", "BAND_ROWS_CROP", "BandRows", "EDGE_PX", "FAR_ROWS_AUTO", "FAR_ROWS_OFF", "FarBand",
            "FarRows", "band_rows_for", "check_far_classes", "drawn_by_far", "far_rows_for",
            "seen_by_far", "same_cone", "drop_cut_boxes", "far_band_crop", "merge_boxes"]

@@ -223,5 +223,88 @@ def plan_band(camera: PinholeCamera, bottom_row: int, top_m: float, downscale: i
     return StripPlan(height, top0, camera, band)
 
 
+#: The smallest cone (px tall at the detector's input) a coarser band may leave to the detector: a small cone at
+#: the near band's top must be at least this tall there (boxes >= 12 px are where the detector is sure: issue 26's
+#: no-loss class; docs/detector.md "Row-scaled band").
+SPLIT_MIN_PX = 12.0
+#: The near band's downscale (a quarter of full resolution: twice the band's 2).
+SPLIT_DOWNSCALE = 4
+SMALLEST_CONE_M = min(h for h, _, _ in CONE_SIZE_M.values())
+
+
+@dataclass(frozen=True)
+class SplitPlan:
+    """The band in two: its upper rows ``upper`` (V0, V1) at the band's own downscale and its lower rows ``near``
+    (V0, V1) at ``near_downscale``; the two overlap by at least a large cone's height at the split, so every cone
+    is whole in one of them (:func:`plan_split`). ``split_m``: the distance ahead whose small cones are
+    ``min_px`` tall in the near band (nearer ones are larger)."""
+
+    upper: tuple[int, int]
+    near: tuple[int, int]
+    near_downscale: int
+    split_m: float
+    min_px: float
+
+
+def cone_height_px(camera: PinholeCamera, d_m: float, height_m: float) -> float:
+    """Image height (px) of a cone ``height_m`` tall ``d_m`` ahead at the image's centre column (pinhole, the rest
+    attitude): its foot's row minus its top's."""
+    pose = camera.pose
+    yaw = math.radians(pose.yaw_deg)
+    xy = np.array([pose.x_m + d_m * math.cos(yaw), pose.y_m + d_m * math.sin(yaw)])
+    uv, depth = camera.project(np.array([[*xy, 0.0], [*xy, height_m]]))
+    return float(uv[0, 1] - uv[1, 1]) if np.all(depth > 0) else float("nan")
+
+
+def plan_split(camera: PinholeCamera, band_rows: tuple[int, int], downscale: int, spec: FarStripSpec = DEFAULT_STRIP,
+               near_downscale: int = SPLIT_DOWNSCALE, min_px: float = SPLIT_MIN_PX, edge_px: float = 2.0,
+               source: str = "<calibration>", field: str = "band_split") -> SplitPlan:
+    """The band ``band_rows`` (its rows at ``downscale``) split in two from the calibration (``band_split: auto``):
+    the near rows, where every cone is large, at ``near_downscale``. The split distance is where a small cone is
+    ``min_px`` tall at ``near_downscale``; the upper band (the band's top, ``downscale``) reaches down to the lowest
+    foot of such a cone within ``spec``'s attitude margins (plus ``edge_px``: a box touching an inner edge is a cut
+    cone and dropped), the near band (down to the band's bottom) up to the top of a large cone standing at the upper
+    band's bottom; heights are multiples of 32 rows at each band's scale, inside the band. ConfigError naming
+    ``source`` and ``field`` when no cone is that large in the band's rows (nothing to split) or the two bands would
+    not overlap by a cone."""
+    v0, v1 = int(band_rows[0]), int(band_rows[1])
+    if near_downscale <= downscale:
+        raise ConfigError(source, field, f"the near band's downscale {near_downscale} must be coarser than the band's {downscale}")
+    need = min_px * near_downscale  # full-resolution px a small cone needs in the near band
+    # the distance ahead where a small cone is `need` px tall (nearer: taller), searched from the nearest feet in
+    # view (nearer points leave the image, where a lens model's projection no longer holds)
+    lo, hi = foot_distance(camera, camera.height - 1.0), 1000.0
+    if not (math.isfinite(lo) and cone_height_px(camera, lo, SMALLEST_CONE_M) >= need):
+        raise ConfigError(source, field, f"no cone ahead is {need:g} px tall (mount_pose, camera_matrix): nothing to "
+                                         "run at the coarser scale")
+    for _ in range(60):
+        mid = math.sqrt(lo * hi)
+        h = cone_height_px(camera, mid, SMALLEST_CONE_M)
+        lo, hi = (mid, hi) if math.isfinite(h) and h >= need else (lo, mid)
+    split_m = lo
+    feet = [needed_rows(camera, split_m, split_m + 1.0, p, r)[1]
+            for p in (-spec.pitch_margin_deg, 0.0, spec.pitch_margin_deg)
+            for r in (-spec.roll_margin_deg, 0.0, spec.roll_margin_deg)]
+    feet = [f for f in feet if math.isfinite(f)]
+    step_up, step_near = ROW_MULTIPLE * int(downscale), ROW_MULTIPLE * int(near_downscale)
+    if not feet or max(feet) + edge_px >= v1 - step_up:
+        raise ConfigError(source, field, f"small cones {split_m:.1f} m ahead ({need:g} px tall) stand at or below row "
+                                         f"{max(feet) if feet else float('nan'):.0f}, within {step_up} rows of the band's "
+                                         f"bottom {v1}: too little to run at the coarser scale")
+    bottom = max(feet) + edge_px  # the upper band reaches below every such foot
+    u1 = min(v0 + int(math.ceil((bottom - v0) / step_up)) * step_up, v1)
+    d_up = foot_distance(camera, u1)  # a large cone with its foot at the upper band's bottom: whole in the near band
+    top = needed_rows(camera, d_up, d_up)[0] - edge_px if math.isfinite(d_up) else float("nan")
+    if not math.isfinite(top):
+        raise ConfigError(source, field, f"no cone feet ahead at row {u1}: the split needs cones below the horizon")
+    n0 = max(v1 - int(math.ceil((v1 - top) / step_near)) * step_near, v0)
+    while (v1 - n0) % near_downscale:  # inside the band, divisible by its downscale
+        n0 += 1
+    if not n0 < u1 - edge_px:
+        raise ConfigError(source, field, f"the near band {n0}-{v1} and the upper band {v0}-{u1} do not overlap")
+    return SplitPlan((v0, u1), (n0, v1), int(near_downscale), split_m, float(min_px))
+
+
 __all__ = ["DEFAULT_STRIP", "FarStripSpec", "ROW_MULTIPLE", "StripPlan", "TALLEST_CONE_M", "foot_distance",
-           "needed_rows", "plan_band", "plan_strip", "strip_spec_from_yaml", "tilted"]
+           "needed_rows", "plan_band", "plan_split", "plan_strip", "SplitPlan", "SPLIT_DOWNSCALE",
+           "SPLIT_MIN_PX", "cone_height_px", "strip_spec_from_yaml", "tilted"]

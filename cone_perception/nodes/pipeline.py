@@ -17,6 +17,12 @@ Parameters (generated from cone_perception/params.py by ``cone-perception params
     strip: max_range_m) to the crop's bottom, with the strip's attitude margins, a multiple of 32
     rows at the band's scale (docs/detector.md, Band rows; on the shipped calibrations it is not
     smaller than their crop); V0,V1 = these rows
+  band_split (string, default none; none, auto, or N0,U1): the band in two (docs/detector.md,
+    Row-scaled band): none = one band at the calibration's downscale (the default); auto = split
+    from the calibration: the near rows, where every cone is at least 48 px tall, at a quarter of
+    full resolution, the rows above at the band's half, overlapping by a cone (refused naming
+    band_split where the calibration leaves nothing to split); N0,U1 = the near band from row N0,
+    the upper band to row U1
   far_model (string, default auto; auto, band, or a model file): the far band's model: auto = the
     shipped far-strip model (models/cone_detector_far.pt, trained for its full-resolution scale:
     more small cones; the image attitude reads its boxes through its own box model, box_model); band
@@ -39,7 +45,7 @@ import time
 
 from sensor_msgs.msg import CompressedImage, Image, PointCloud2
 
-from ..detector.farband import band_rows_for, far_rows_for
+from ..detector.farband import SplitDetector, band_rows_for, band_split_for, far_rows_for
 from ..resources import far_model_for
 from ..geometry.calib import load_calibration
 from ..errors import FrameError
@@ -83,7 +89,13 @@ class PipelineNode(PerceptionNode):
         calib = band.apply(calib)  # the band's rows: crop (the calibration's), auto (placed from it) or V0,V1
         far_rows = far_rows_for(far_value, calib, "parameter far_rows")  # auto: the calibration's strip
         plan = self.loader.plan_threads(far_rows.crop is not None)  # with a strip and threads >= 2: both forwards at once
-        detector = self.loader.load((calib.crop.out_width, calib.crop.out_height))
+        split = band_split_for(declare(self, "band_split"), calib, "parameter band_split")
+        if split.upper is None:
+            detector = self.loader.load((calib.crop.out_width, calib.crop.out_height))
+        else:  # the band in two: its upper rows at its downscale, its near rows at a quarter
+            self.get_logger().info(split.what)
+            detector = SplitDetector(*(self.loader.load((c.out_width, c.out_height)) for c in (split.upper, split.near)),
+                                     split)
         self.advertise_cones(calib.frame_id, markers)
         mode, imu = declare_attitude(self)
         far_model = far_model_for(declare(self, "far_model"), None)  # None: the band's model

@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import cv2
 from tqdm import tqdm
@@ -16,7 +17,8 @@ from ..data.predictions import write_prediction
 from ..data.sources import iter_source
 from ..resources import far_model_for, far_model_given
 from ..detector import Detector, default_model_path, detect_one, resolve_backend
-from ..detector.farband import FAR_ROWS_AUTO, FAR_ROWS_OFF, FarBand, far_rows_for
+from ..detector.farband import (BAND_SPLIT_AUTO, BAND_SPLIT_OFF, FAR_ROWS_AUTO, FAR_ROWS_OFF, FarBand, SplitDetector,
+                                band_split_for, far_rows_for)
 from ..errors import ConfigError
 from ..geometry.calib import load_calibration
 from ..vis import draw_band, draw_boxes
@@ -27,7 +29,10 @@ def _car_band(args: argparse.Namespace) -> None:
     """``--calib``: set ``--crop``, ``--downscale`` and ``--far-rows`` (V0,V1 or None) from the calibration;
     without it ``--far-rows`` is rows or off (``auto`` needs a calibration)."""
     rows = None if args.far_rows is None else str(args.far_rows).strip()
+    split = None if args.band_split is None else str(args.band_split).strip()
     if args.calib is None:
+        if split is not None and split.lower() == BAND_SPLIT_AUTO:
+            raise ConfigError("--band-split", None, "auto needs --calib: the split is placed from a calibration")
         if rows is not None and rows.lower() == FAR_ROWS_AUTO:
             raise ConfigError("--far-rows", None, "auto needs --calib: the far strip is placed from a calibration")
         args.far_rows = None if rows is None or rows.lower() in FAR_ROWS_OFF else rows
@@ -40,10 +45,18 @@ def _car_band(args: argparse.Namespace) -> None:
     fr = far_rows_for(rows, calib, "--far-rows")
     print(f"detect: band rows {c.v0}-{c.v1} / {c.downscale} of {calib.source}; {fr.what}", file=sys.stderr)
     args.far_rows = f"{fr.crop.v0},{fr.crop.v1}" if fr.crop is not None else None
+    sp = band_split_for(split, calib, "--band-split")
+    if sp.upper is not None:
+        print(f"detect: {sp.what}", file=sys.stderr)
+    args.band_split = f"{sp.near.v0},{sp.upper.v1}" if sp.upper is not None else None
 
 
 def run_detect(args: argparse.Namespace) -> int:
     _car_band(args)  # --calib: the calibration's band and far strip as --crop / --downscale / --far-rows
+    if args.band_split and str(args.band_split).strip().lower() in BAND_SPLIT_OFF:
+        args.band_split = None
+    if args.band_split and not args.crop:
+        raise ConfigError("--band-split", None, "needs --crop or --calib: it splits the car's band")
     if args.far_rows and not args.crop:
         raise ConfigError("--far-rows", None, "needs --crop or --calib: the far band adds to the car's band")
     if far_model_given(args.far_model) and not args.far_rows:
@@ -63,6 +76,8 @@ def run_detect(args: argparse.Namespace) -> int:
         if not args.crop or args.imgsz:
             return det
         band = band_for(w)
+        if args.band_split:
+            return split_for(band)
         return detector_for_size((max(1, band.out_width), max(1, band.out_height)))
 
     def far_for(w: int, h: int):
@@ -76,6 +91,13 @@ def run_detect(args: argparse.Namespace) -> int:
             far.check_classes(det)  # a far model of other classes: refused before its first image
             far_by_size[(w, h)] = far
         return far_by_size[(w, h)]
+
+    def split_for(band: CropSpec):  # --band-split N0,U1 of this band: the band's detector in two parts
+        if band not in by_band:
+            sp = band_split_for(args.band_split, SimpleNamespace(crop=band, camera_matrix=None, source="--crop"),
+                                "--band-split")
+            by_band[band] = SplitDetector.load(model, sp, backend=backend, conf=args.conf, iou=args.iou, bf16=args.bf16)
+        return by_band[band]
 
     def detector_for_size(band):
         if band not in by_band:

@@ -22,7 +22,7 @@ from ..data.bags import read_attitude_truth, read_ground_truth, read_twists
 from ..data.outfiles import print_written, refuse_existing, remove_bag
 from ..resources import far_model_for, far_model_given
 from ..detector import Detector, default_model_path
-from ..detector.farband import FarBand, band_rows_for, far_rows_for
+from ..detector.farband import FarBand, SplitDetector, band_rows_for, band_split_for, far_rows_for
 from ..detector.parallel import ForwardPlan
 from ..detector.model_files import attitude_config_for, box_model_or_default, far_reading_for
 from ..errors import ConfigError
@@ -71,6 +71,9 @@ def run_replay(args: argparse.Namespace) -> int:
     if band.crop != calib.crop:
         print(f"replay: {band.what}")
     calib = band.apply(calib)
+    split = band_split_for(args.band_split, calib, "--band-split")  # a bad value fails before any model loads
+    if args.live and split.upper is not None:
+        raise ConfigError("--band-split", None, "offline only (the nodes run the band in one piece)")
     far_rows = far_rows_for(args.far_rows, calib, "--far-rows")  # a bad value fails before any model loads
     if args.live == "separate" and far_rows.crop is not None:
         if args.far_rows is not None:
@@ -124,9 +127,15 @@ def _run_offline(args, calib) -> dict:
     conf = args.track_conf if args.track_conf is not None else args.conf  # the pipeline splits at --conf
     strip_on = far_rows_for(args.far_rows, calib, "--far-rows").crop is not None  # auto (None): the calibration's
     plan = ForwardPlan.of(args.threads, strip_on)  # with a strip and 2 threads: both forwards at once
-    det = Detector.load_for_band(args.model or default_model_path(), (calib.crop.out_width, calib.crop.out_height),
-                                 backend=args.backend, conf=conf, threads=plan.network_threads or None, bf16=args.bf16)
-    det.warmup()
+    split = band_split_for(args.band_split, calib, "--band-split")
+    if split.upper is None:
+        det = Detector.load_for_band(args.model or default_model_path(), (calib.crop.out_width, calib.crop.out_height),
+                                     backend=args.backend, conf=conf, threads=plan.network_threads or None, bf16=args.bf16)
+        det.warmup()
+    else:
+        print(f"replay: {split.what}")
+        det = SplitDetector.load(args.model or default_model_path(), split, backend=args.backend, conf=conf,
+                                 threads=plan.network_threads or None, bf16=args.bf16)
     far_model = far_model_for(args.far_model, det.source)
     far = FarBand.for_calibration(far_model, args.far_rows, calib, "--far-rows", "--far-model",
                                   say=lambda t: print(f"replay: {t}"), backend=args.backend, conf=conf,

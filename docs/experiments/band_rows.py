@@ -19,7 +19,8 @@ A design is ``THREADS:BAND:FAR[:FLAG...]``:
 * flags: ``spin`` = every ONNX Runtime session spins (its default, the rule before this issue; without it
   the shipped rule, backends.ort_spinning: pools do not spin); ``seq`` = the band's and the strip's forwards
   one after the other, each network on all THREADS (``bench pipeline --sequential``); ``alt`` = the strip
-  runs on every other frame only (its cut and the thread hand-off still every frame: an upper bound).
+  runs on every other frame only (its cut and the thread hand-off still every frame: an upper bound); ``split`` =
+  the band split from the calibration (``--band-split auto``: its near rows at a quarter of full resolution).
 """
 from __future__ import annotations
 
@@ -36,13 +37,14 @@ from cone_perception.bench.frames import rendered_frames
 from cone_perception.bench.pipeline import bench_pipeline, load_for_crop
 from cone_perception.bench.run import forward_plan
 from cone_perception.detector import backends
-from cone_perception.detector.farband import FarBand, band_rows_for, far_rows_for
+from cone_perception.detector import default_model_path
+from cone_perception.detector.farband import FarBand, SplitDetector, band_rows_for, band_split_for, far_rows_for
 from cone_perception.geometry.calib import load_calibration
 from cone_perception.pipeline import Pipeline
 from cone_perception.records import BOX_DTYPE
 
 
-FLAGS = ("spin", "seq", "alt")
+FLAGS = ("spin", "seq", "alt", "split")
 
 
 def parse(design: str) -> tuple[int, str, str, set[str]]:
@@ -76,7 +78,11 @@ def run_design(design: str, frames: int, calib_name: str = "example_mainhoop") -
     calib = band_rows_for(band, calib, far_rows, "--band-rows").apply(calib)
     fr = far_rows_for(far_rows, calib, "--far-rows")
     plan = forward_plan(threads, fr.crop is not None, "seq" in flags)
-    det = load_for_crop(None, "auto", calib.crop, plan.network_threads)
+    split = band_split_for("auto" if "split" in flags else "none", calib, "--band-split")
+    if split.upper is None:
+        det = load_for_crop(None, "auto", calib.crop, plan.network_threads)
+    else:
+        det = SplitDetector.load(default_model_path(), split, threads=plan.network_threads)
     far = FarBand.for_calibration(det.source, far_rows, calib, "--far-rows", threads=plan.network_threads)
     if far is not None and "alt" in flags:
         far = AlternateFrames(far)
