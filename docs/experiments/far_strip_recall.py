@@ -7,7 +7,11 @@ restriction, class-aware greedy matching at IoU 0.5) and prints, per height bin,
 recall, plus the precision of all detections in the band at the threshold.
 
     .venv/bin/python docs/experiments/far_strip_recall.py PRED.jsonl GT [--gt-names ...] [--band V0,V1]
-        [--scale 0.3333] [--bins 0,6,9,12,24,1000] [--conf 0.25] [--only-predicted]
+        [--scale 0.3333] [--bins 0,6,9,12,24,1000] [--conf 0.25 | --at-precision 0.703] [--only-predicted]
+
+--at-precision P: instead of --conf, the lowest score threshold of 0.01, 0.02, .. 0.99 whose precision
+is at least P (recall falls as the threshold rises, so this is the most recall at that precision):
+issue 26 compares the far strip's models at equal precision.
 
 --scale: factor from the prediction's image px to the px the bins count in (1920-px frames of the
 640x360 video: 1/3). Real clips: GT data/real_val_1080 with --gt-names
@@ -35,6 +39,8 @@ def main(argv=None) -> int:
     p.add_argument("--scale", type=float, default=1.0)
     p.add_argument("--bins", default="0,6,9,12,24,1000")
     p.add_argument("--conf", type=float, default=0.25)
+    p.add_argument("--at-precision", type=float, default=None,
+                   help="use the lowest threshold (0.01 steps) whose precision is at least this")
     p.add_argument("--iou", type=float, default=0.5)
     p.add_argument("--only-predicted", action="store_true")
     p.add_argument("--json", action="store_true")
@@ -44,11 +50,32 @@ def main(argv=None) -> int:
     if a.band:
         images, _ = restrict_to_band(images, tuple(int(v) for v in a.band.split(",")))
     edges = [float(v) for v in a.bins.split(",")]
+    if a.at_precision is None:
+        out = _at(images, a.conf, edges, a)
+    else:
+        out = None
+        for c in np.arange(1, 100) / 100:
+            out = _at(images, float(c), edges, a)
+            if out["precision"] >= a.at_precision:
+                break
+        out["at_precision"] = a.at_precision
+    if a.json:
+        print(json.dumps(out))
+    else:
+        print(f"score >= {out['conf']:.2f}: precision {out['precision']:.3f} of {out['detections']} detections")
+        for k, v in out["bins"].items():
+            r = "-" if v["recall"] is None else f"{v['recall']:.3f}"
+            print(f"  {k} px: {v['found']}/{v['cones']} recall {r}")
+    return 0
+
+
+def _at(images, conf: float, edges: list[float], a) -> dict:
+    """Recall per height bin and precision of all detections at score >= conf."""
     n = np.zeros(len(edges) - 1, int)
     hit = np.zeros(len(edges) - 1, int)
     tp = fp = 0
     for im in images:
-        keep = at_conf(im.pred_scores, a.conf)
+        keep = at_conf(im.pred_scores, conf)
         to_gt, ignored = match_by_class(im.pred_boxes[keep], im.pred_classes[keep], im.gt_boxes, im.gt_classes,
                                         im.gt_ignore, a.iou)
         found = np.zeros(len(im.gt_boxes), bool)
@@ -61,18 +88,11 @@ def main(argv=None) -> int:
             m = (k == j) & ~im.gt_ignore
             n[j] += int(m.sum())
             hit[j] += int((m & found).sum())
-    out = {"conf": a.conf, "precision": tp / max(tp + fp, 1), "detections": tp + fp,
+    out = {"conf": conf, "precision": tp / max(tp + fp, 1), "detections": tp + fp,
            "bins": {f"{edges[j]:g}-{edges[j + 1]:g}": {"cones": int(n[j]), "found": int(hit[j]),
                                                        "recall": hit[j] / n[j] if n[j] else None}
                     for j in range(len(edges) - 1)}}
-    if a.json:
-        print(json.dumps(out))
-    else:
-        print(f"score >= {a.conf}: precision {out['precision']:.3f} of {out['detections']} detections")
-        for k, v in out["bins"].items():
-            r = "-" if v["recall"] is None else f"{v['recall']:.3f}"
-            print(f"  {k} px: {v['found']}/{v['cones']} recall {r}")
-    return 0
+    return out
 
 
 if __name__ == "__main__":
