@@ -135,19 +135,33 @@ class StampGaps:
             return ["backwards"]
         period = self.period_ns
         unexplained = delta - (frames - 1) * period if period else delta / frames
-        if self.silence_s > 0 and unexplained > self.silence_s * 1e9:
+        if self._silent(unexplained):
             self.silences += 1
             return ["silence"]
         if self.period_s <= 0:
             self._deltas.append(delta / frames)
+        self._unsettled.append((delta, frames))
         period = self.period_ns
-        if period is None:
-            self._unsettled.append((delta, frames))
+        if period is None:  # a step of several frames may still be a silence: only the period tells
             return []
-        n = sum(self._gap(d, f, period) for d, f in self._unsettled) + self._gap(delta, frames, period)
-        self._unsettled.clear()
+        n = self._settle(period)
         self.missing += n
         return ["missing"] if n else []
+
+    def _silent(self, unexplained: float) -> bool:
+        return self.silence_s > 0 and unexplained > self.silence_s * 1e9
+
+    def _settle(self, period: float) -> int:
+        """The frames missing in the steps not settled yet (those seen before the period was known, and
+        the last); a step the period shows to be a silence counts as one, with no frame missing."""
+        n = 0
+        for d, f in self._unsettled:
+            if self._silent(d - (f - 1) * period):
+                self.silences += 1
+            else:
+                n += self._gap(d, f, period)
+        self._unsettled.clear()
+        return n
 
 
 # -- frames replaced before processing -------------------------------------------------------------

@@ -426,6 +426,33 @@ def test_sequence_numbers_a_silence_is_no_missing_frame() -> None:
         assert mon.received + mon.replaced == 600 - truth["first"] and mon.missing == 0 and mon.gaps.silences == 1, ratio
 
 
+def test_a_silence_before_the_period_is_known_is_no_missing_frame_however_many_were_replaced() -> None:
+    """A soak's primer: one frame, a 3 s silence, then the node takes the 5th frame of the stream that
+    follows (4 replaced): the silence is no missing frame, known or not yet known the period."""
+    for replaced in (0, 1, 2, 3, 4, 10, 40):
+        mon = StreamMonitor("/image_raw", timeout_s=1.0)
+        mon.observe(0, 0, 1)
+        mon.ok += 1
+        first = 3000 * MS
+        for i in range(replaced, 240):
+            mon.observe(first + i * PERIOD, first + i * PERIOD, 2 + i)
+            mon.ok += 1
+        assert (mon.replaced, mon.missing, mon.gaps.silences) == (replaced, 0, 1), replaced
+        assert mon.received + mon.replaced + mon.missing == 1 + 240, replaced
+        assert mon.period_ns == PERIOD, replaced
+
+
+def test_stamp_gaps_settle_a_silence_seen_before_the_period() -> None:
+    g = StampGaps(silence_s=1.0)
+    g.step(0)
+    g.step(3100 * MS, frames=4)  # 3.1 s over 4 frames: 0.78 s each, yet 3 periods of 33 ms explain only 0.1 s
+    for i in range(1, 6):
+        g.step((3100 + 33 * i) * MS)
+    assert (g.missing, g.silences, g.period_ns) == (0, 1, 33 * MS)
+    g.step((3100 + 33 * 5 + 66) * MS)  # one frame missing, the period known
+    assert (g.missing, g.silences) == (1, 1)
+
+
 def test_a_restarted_publisher_starts_a_new_sequence() -> None:
     mon = StreamMonitor("/image_raw")
     for i in range(10):

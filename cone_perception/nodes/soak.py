@@ -173,6 +173,7 @@ def soak(frames: list[bytes], compressed: bool, topic: str, rate_hz: float, seco
             resend = time.monotonic() + 2.0
             while primer not in rx.stamps_back and time.monotonic() < resend:
                 time.sleep(0.01)
+        start_stamp = max(start_stamp, primer + 3 * 10**9)  # each resend's stamp is a period later: still 3 s
         t_primed = time.monotonic()
         while rx.diag_at < t_primed + 1.2:  # a report after the primer has settled
             if not alive() or time.monotonic() > end:
