@@ -22,9 +22,9 @@ A box on the ground must also stand up like a cone (``min_height_ratio``, :meth:
 height against the height a cone of its class has, standing where the box's foot maps (the cone model of the
 image attitude fit, :meth:`~cone_perception.attitude.ImageAttitude.model_heights`). A mark painted on the ground
 is flat: its box's top lies on the ground too, so the box is lower than a cone standing at the range its foot row
-says (a worn yellow line taken for yellow cones, issue 26: 0.70 of a cone's height, median, on the rendered drives;
-the cones' own boxes 0.92-1.27); only boxes scoring under :data:`FLAT_MAX_SCORE` (the painted line's score 0.33,
-median: a weak box), so that a true cone whose box the detector drew low is kept where the detector is sure of it.
+says (a worn yellow line taken for yellow cones, issue 26; the measured ratios are in docs/benchmarks.md, "Flat
+boxes"). Only weak boxes (scoring under :data:`FLAT_MAX_SCORE`) are judged, so that a true cone whose box the
+detector drew low is kept where the detector is sure of it.
 Every box dropped is counted by cause in :attr:`ConeMapper.dropped`.
 
 Pixel conventions: boxes are in pixel-EDGE coordinates (a box around pixel
@@ -48,9 +48,8 @@ from .records import BOX_DTYPE, CONE_DTYPE, boxes_to_arrays
 #: callers); the foot above the horizon or beyond ``max_range_m``; a box lower
 #: than ``min_height_ratio`` x a cone's height at the range its foot gives (a mark on the ground)
 DROP_CAUSES = ("second_box", "off_ground", "flat")
-#: The height gate acts only on boxes scoring under this: the painted line's boxes score 0.33 (median), and on the
-#: real validation clips 6 % of the true cones' boxes are under 0.8 of their labels' height, 1.5 % among those scoring
-#: under 0.5 (docs/benchmarks.md, "Flat boxes").
+#: The height gate acts only on boxes scoring under this: painted marks give weak boxes, and on the real validation
+#: clips far fewer true cones' boxes are low among the weak ones (docs/benchmarks.md, "Flat boxes").
 FLAT_MAX_SCORE = 0.5
 
 
