@@ -1,32 +1,27 @@
 """Counting every input and every loss, and the node health that ``/diagnostics`` reports (ROS-free).
 
-* :class:`FrameStats`: frames processed (``ok``) and dropped, by cause. Every message a frame
-  callback receives is counted exactly once, as ok or dropped (``exception_<Type>`` for an
-  unexpected exception).
-* :class:`StampGaps`: what the header stamps of one stream tell: frames **missing** from it (a gap of
-  k periods counts k-1; the period is the camera's nominal one or learnt from the stamp steps, per
-  frame sent where the sequence numbers say how many were), stamps going **backwards** or
-  **repeated**, and a gap longer than the silence threshold, which is a **silence** (the publisher
-  stopped), not missing frames.
-* :class:`StreamMonitor`: per input topic, what reached the processing callback and what did not.
-  An image input is best effort with a queue of one (newest frame only): the frames replaced in the
-  queue never reach the callback. Where the middleware gives the publisher's **sequence number** of
-  each message (rclpy >= Iron, Fast DDS), a step of k between two frames taken means k-1 were sent in
-  between: **replaced** in the queue, or lost in transport (the middleware's **lost** event, then
-  counted **missing**). Where it does not (Humble), a *counting path* (a second subscription that
-  takes every frame as bytes and reads only its stamp, :func:`~cone_perception.records.cdr_stamp_ns`) sees every frame that
-  reaches the node, and a :class:`FrameLedger` matches them with those taken. Also **stale** frames
-  (stamp older than ``max_age_s`` on arrival) and **silence** (no message for ``timeout_s``). With
-  either, every frame sent since the first one taken is accounted for::
+* :class:`FrameStats`: frames processed (``ok``) and dropped, by cause. Every message a frame callback receives
+  is counted exactly once, as ok or dropped (``exception_<Type>`` for an unexpected exception).
+* :class:`StampGaps`: what the header stamps of one stream tell: frames **missing** from it (a gap of k periods
+  counts k-1; the period is the camera's nominal one or learnt from the stamp steps, per frame sent where the
+  sequence numbers say how many were), stamps going **backwards** or **repeated**, and a gap longer than the
+  silence threshold, which is a **silence** (the publisher stopped), not missing frames.
+* :class:`StreamMonitor`: per input topic, what reached the processing callback and what did not. An image input
+  is best effort with a queue of one (newest frame only): the frames replaced in the queue never reach the
+  callback. Where the middleware gives the publisher's **sequence number** of each message (rclpy >= Iron, Fast
+  DDS), a step of k between two frames taken means k-1 were sent in between: **replaced** in the queue, or lost
+  in transport (the middleware's **lost** event, then counted **missing**). Where it does not (Humble), a
+  *counting path* (a second subscription that takes every frame as bytes and reads only its stamp,
+  :func:`~cone_perception.records.cdr_stamp_ns`) sees every frame that reaches the node, and a
+  :class:`FrameLedger` matches them with those taken. Also **stale** frames (stamp older than ``max_age_s`` on
+  arrival) and **silence** (no message for ``timeout_s``). With either, every frame sent since the first one
+  taken is accounted for::
 
       sent = ok + dropped (by cause) + replaced + missing (lost upstream) + queued (0 or 1, in flight)
 
   With neither, ``missing`` holds the replaced frames too (stamp gaps of the frames taken).
-* :class:`NodeHealth`: all of a node's, and :meth:`NodeHealth.assess`: OK / WARN / ERROR with the
-  cause, as the nodes publish it on ``/diagnostics`` once a second: ERROR for silence or a topic
-  without a publisher (a missing or dead upstream node); WARN for drops, replaced or missing
-  frames ("processing 16 of 30 frames/s on /image_raw"), stamp faults or stale frames since the
-  previous report; OK otherwise. The counts are cumulative; the level is of the period.
+* :class:`NodeHealth`: all of a node's, and :meth:`NodeHealth.assess`: OK / WARN / ERROR with the cause, as the
+  nodes publish it on ``/diagnostics`` once a second (cumulative counts; the level is of the period).
 """
 
 from __future__ import annotations
@@ -87,12 +82,11 @@ DEFAULT_SILENCE_S = 1.0
 class StampGaps:
     """Missing frames, stamps going backwards or repeated, and silences in one sequence of stamps (ns).
 
-    ``period_s``: the publisher's nominal period (0 = learnt: the median of the last
-    :data:`PERIOD_WINDOW` positive stamp steps; the gaps seen before it is known are counted once it
-    is). Learning is right when the sequence holds (nearly) every frame sent: the counting path's,
-    not the processing path's, which may see only every other frame. ``silence_s``: a gap longer
-    than this is a silence (the stream stopped and started again), counted in ``silences``, not as
-    missing frames.
+    ``period_s``: the publisher's nominal period (0 = learnt: the median of the last :data:`PERIOD_WINDOW`
+    positive stamp steps; the gaps seen before it is known are judged once it is). Learning is right when the
+    sequence holds (nearly) every frame sent: the counting path's, not the processing path's, which may see only
+    every other frame. ``silence_s``: a gap longer than this is a silence (the stream stopped and started again),
+    counted in ``silences``, not as missing frames.
     """
 
     period_s: float = 0.0
@@ -117,9 +111,9 @@ class StampGaps:
         return max(0, round(delta / period) - frames) if delta > (frames + GAP_FACTOR - 1) * period else 0
 
     def step(self, stamp_ns: int, frames: int = 1) -> list[str]:
-        """The next stamp, ``frames`` publisher frames after the last one (1: the next frame; more
-        when the publisher's sequence numbers say frames were sent in between); returns the faults it
-        shows (``missing``, ``backwards``, ``repeated``, ``silence``)."""
+        """The next stamp, ``frames`` publisher frames after the last one (1: the next frame; more when the
+        publisher's sequence numbers say frames were sent in between); returns the faults it shows (``missing``,
+        ``backwards``, ``repeated``, ``silence``)."""
         last, self.last_ns = self.last_ns, stamp_ns
         if last is None:
             return []
@@ -135,7 +129,7 @@ class StampGaps:
             return ["backwards"]
         period = self.period_ns
         unexplained = delta - (frames - 1) * period if period else delta / frames
-        if self._silent(unexplained):
+        if self.silence_s > 0 and unexplained > self.silence_s * 1e9:
             self.silences += 1
             return ["silence"]
         if self.period_s <= 0:
@@ -144,24 +138,15 @@ class StampGaps:
         period = self.period_ns
         if period is None:  # a step of several frames may still be a silence: only the period tells
             return []
-        n = self._settle(period)
-        self.missing += n
-        return ["missing"] if n else []
-
-    def _silent(self, unexplained: float) -> bool:
-        return self.silence_s > 0 and unexplained > self.silence_s * 1e9
-
-    def _settle(self, period: float) -> int:
-        """The frames missing in the steps not settled yet (those seen before the period was known, and
-        the last); a step the period shows to be a silence counts as one, with no frame missing."""
         n = 0
-        for d, f in self._unsettled:
-            if self._silent(d - (f - 1) * period):
+        for d, f in self._unsettled:  # the steps seen before the period was known, and this one
+            if self.silence_s > 0 and d - (f - 1) * period > self.silence_s * 1e9:
                 self.silences += 1
             else:
                 n += self._gap(d, f, period)
         self._unsettled.clear()
-        return n
+        self.missing += n
+        return ["missing"] if n else []
 
 
 # -- frames replaced before processing -------------------------------------------------------------
@@ -171,14 +156,14 @@ LEDGER_CAP = 4096
 
 
 class FrameLedger:
-    """Matches the frames the counting path saw (:meth:`arrive`) with those the processing path took
-    (:meth:`take`), by stamp, in arrival order; thread-safe (the two paths run on two threads).
+    """Matches the frames the counting path saw (:meth:`arrive`) with those the processing path took (:meth:`take`),
+    by stamp, in arrival order; thread-safe (the two paths run on two threads).
 
-    The processing path's depth-1 queue delivers in arrival order, so when it takes frame T every
-    frame the counting path saw before T and that was not taken never will be: ``replaced``. Either
-    path may run ahead of the other. A frame taken that the counting path passed without seeing
-    (its own queue overflowed) is ``unseen``: it is in the counting path's stamp gaps although it
-    was processed, so the stream subtracts it from its missing frames.
+    The processing path's depth-1 queue delivers in arrival order, so when it takes frame T every frame the
+    counting path saw before T and that was not taken never will be: ``replaced``. Either path may run ahead of
+    the other. A frame taken that the counting path passed without seeing (its own queue overflowed) is
+    ``unseen``: it is in the counting path's stamp gaps although it was processed, so the stream subtracts it
+    from its missing frames.
     """
 
     def __init__(self, cap: int = LEDGER_CAP) -> None:
@@ -248,13 +233,13 @@ class FrameLedger:
 class StreamMonitor:
     """Stamp and arrival bookkeeping of one input topic (stamps and times in ns).
 
-    ``timeout_s``: silence longer than this is an ERROR (0 = never). ``max_age_s``: a frame whose
-    stamp is older than this on arrival is stale (0 = not checked; e.g. a bag played with its
-    original stamps). ``period_s``: the publisher's nominal period (0 = learnt, :class:`StampGaps`).
+    ``timeout_s``: silence longer than this is an ERROR (0 = never). ``max_age_s``: a frame whose stamp is older
+    than this on arrival is stale (0 = not checked; e.g. a bag played with its original stamps). ``period_s``: the
+    publisher's nominal period (0 = learnt, :class:`StampGaps`).
 
-    :meth:`observe` is the processing path (every message its callback gets); :meth:`arrive` the
-    counting path, where the node has one (``counted``): then the stamp faults and gaps are those of
-    the counting path, which sees every frame that reaches the node.
+    :meth:`observe` is the processing path (every message its callback gets); :meth:`arrive` the counting path,
+    where the node has one (``counted``): then the stamp faults and gaps are those of the counting path, which
+    sees every frame that reaches the node.
     """
 
     topic: str
@@ -455,9 +440,9 @@ class NodeHealth:
         return dict(t)
 
     def assess(self, now_ns: int, publishers: dict[str, int] | None = None) -> HealthReport:
-        """The level and cause for this period (since the previous call) and the cumulative counts.
-
-        ``publishers``: topic -> number of publishers now (0: a missing or dead upstream)."""
+        """The level and cause for this period (since the previous call), and the cumulative counts: ERROR for silence
+        or a topic without a publisher (``publishers``: topic -> publishers now; 0: a missing or dead upstream); WARN
+        for drops, replaced or missing frames, stamp faults or stale frames; OK otherwise."""
         errors, warns, rates = [], [], []
         for topic, n in sorted((publishers or {}).items()):
             if n == 0:
