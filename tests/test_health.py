@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import pytest
 
 from cone_perception.stats import ERROR, OK, WARN, NodeHealth, StampGaps, StreamMonitor
@@ -324,7 +326,14 @@ def test_the_stamp_is_read_from_the_serialized_message() -> None:
 @pytest.mark.parametrize("ratio", [2, 5])
 def test_every_frame_is_accounted_for_under_overload_through_dds(ros, accounting, ratio: int) -> None:  # noqa: F811
     """A node that needs ``ratio`` frame periods per frame, spun as run_node spins it (two threads),
-    fed at 60 Hz through DDS: sent = processed + dropped + replaced + missing, and replaced > 0."""
+    fed at 60 Hz through DDS: every frame sent between two the node saw is counted once (processed,
+    dropped, replaced or missing), and replaced > 0.
+
+    The frames a node cannot know of are left out of the sum: those sent before its readers matched the
+    publisher (a DDS reader drops samples of a writer it has not matched yet) and those after the last it
+    saw. So the stream is primed until the node has seen it, the counts are read once it settled, then
+    the ``n`` measured frames and a trailer are sent until the node has seen the last measured one. The
+    topic is this test's own (a namespace): no other publisher in the domain can reach it."""
     import threading
     import time as _time
 
@@ -334,41 +343,70 @@ def test_every_frame_is_accounted_for_under_overload_through_dds(ros, accounting
 
     from cone_perception.nodes.driver_adapter import DriverAdapterNode
 
-    period_s = 1 / 60
+    period_s, step_ns = 1 / 60, int(1e9 / 60)
 
     class SlowAdapter(DriverAdapterNode):
         def on_raw(self, msg):
             _time.sleep(ratio * period_s)
             return super().on_raw(msg)  # "bogus" encoding: dropped, counted
 
+    ns = f"/overload_{os.getpid()}_{ratio}_{accounting.split()[0]}"
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
-    node = SlowAdapter(context=ctx)
+    node = SlowAdapter(context=ctx, namespace=ns)
     ex = MultiThreadedExecutor(num_threads=2, context=ctx)
     ex.add_node(node)
     spinner = threading.Thread(target=ex.spin, daemon=True)
     spinner.start()
     try:
-        pub = ros.node("camera").create_publisher(Image, "image_raw", 10)
+        pub = ros.node("camera").create_publisher(Image, f"{ns}/image_raw", 10)
         subs = 2 if accounting == "counting path" else 1  # the processing (and the counting) path matched
         assert ros.spin_until(lambda: pub.get_subscription_count() >= subs)
-        _time.sleep(0.3)
-        stream = node.health.streams["/image_raw"]
-        n, t0 = 90, _time.monotonic()
-        for i in range(n):
-            m = Image()
-            m.header.stamp.sec, m.header.stamp.nanosec = divmod(10**9 + i * int(period_s * 1e9), 10**9)
-            m.encoding = "bogus"
-            while _time.monotonic() < t0 + i * period_s:
-                _time.sleep(0.001)
-            pub.publish(m)
-        last = 10**9 + (n - 1) * int(period_s * 1e9)
-        end = _time.monotonic() + 5
-        while _time.monotonic() < end and not (stream.last_stamp_ns == last and stream.queued == 0
-                                               and stream.received and node.stats.received == stream.received):
-            _time.sleep(0.05)
-        assert stream.received + stream.replaced + stream.missing + stream.queued == n
-        assert stream.replaced >= n // 3 and stream.queued == 0
+        stream = node.health.streams[f"{ns}/image_raw"]
+        sent, t0 = 0, _time.monotonic()
+
+        def send_until(cond, at_most: int) -> None:
+            nonlocal sent
+            for _ in range(at_most):
+                if cond():
+                    return
+                m = Image()
+                m.header.stamp.sec, m.header.stamp.nanosec = divmod(10**9 + sent * step_ns, 10**9)
+                m.encoding = "bogus"
+                while _time.monotonic() < t0 + sent * period_s:
+                    _time.sleep(0.001)
+                pub.publish(m)
+                sent += 1
+
+        def settled() -> int | None:
+            """The index of the last frame seen, once nothing moves for 0.3 s (None after 5 s)."""
+            end, last, since = _time.monotonic() + 5, None, _time.monotonic()
+            while _time.monotonic() < end:
+                now = (stream.last_stamp_ns, stream.received, stream.arrived)
+                if now != last:
+                    last, since = now, _time.monotonic()
+                elif (_time.monotonic() - since > 0.3 and stream.queued == 0 and stream.received
+                      and node.stats.received == stream.received):
+                    return round((stream.last_stamp_ns - 10**9) / step_ns)
+                _time.sleep(0.02)
+            return None
+
+        seen = (lambda: stream.arrived > 0 and stream.received > 0) if accounting == "counting path" \
+            else (lambda: stream.received > 0)
+        send_until(seen, 600)  # primed: both paths matched
+        first = settled()
+        assert first is not None, f"the node never settled after {sent} primer frames: {stream.counts()}"
+        before, replaced_before = stream.total, stream.replaced
+        n, t0 = 90, _time.monotonic() - sent * period_s
+        send_until(lambda: False, n)
+        target = sent - 1
+        send_until(lambda: (stream.last_stamp_ns or 0) >= 10**9 + target * step_ns, 120)  # the trailer
+        last = settled()
+        assert last is not None and last >= target, f"the measured frames never arrived: {stream.counts()}"
+        c = stream.counts()
+        assert c["backwards"] == c["repeated"] == 0, c  # one publisher, its own topic
+        assert stream.total - before == last - first, c  # every frame between the two seen, counted once
+        assert stream.replaced - replaced_before >= n // 3 and stream.queued == 0, c
         assert stream.ok + stream.dropped == stream.received == node.stats.dropped["unknown_encoding"]
     finally:
         ex.shutdown(timeout_sec=2)
