@@ -110,7 +110,8 @@ def far_reading_for(choice: str, far_model_path: str | Path | None, band_model_p
         return BoxReading(None, table, what), what
     bm, what = box_model_for("model", far, False)
     if bm.input_scale != STRIP_INPUT_SCALE:  # its buckets are model input px: read at the strip's scale
-        what += f", measured at input scale {bm.input_scale:g}, read at the strip's {STRIP_INPUT_SCALE:g}"
+        if bm.source == "measured":
+            what += f", measured at input scale {bm.input_scale:g}, read at the strip's {STRIP_INPUT_SCALE:g}"
         bm = replace(bm, input_scale=STRIP_INPUT_SCALE)
     return BoxReading(bm, (), what), what
 
