@@ -234,6 +234,9 @@ _PIPELINE = (
        "box model, box_model); band or empty = the band's own model; else a model file (its box model: "
        "MODEL.box_model.yaml). Its classes must be the band model's (refused at start-up otherwise)",
        values="auto, band, or a model file"),
+    _p("far_every", 1, "the far band's cadence: its strip runs on every this-many-th frame only, the frames between "
+       "run the band alone (a far cone is seen up to far_every - 1 frames late; the tracker carries it meanwhile; "
+       "docs/detector.md, Far band); 1 = every frame", min=1, max=100),
     _p("track", False, "also the tracker stage: /cones/tracked out (the parameters of cone_tracker); it gets each "
        "frame's attitude, which a separate cone_tracker does not"),
 )

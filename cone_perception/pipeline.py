@@ -7,7 +7,7 @@ Used by the fused ``pipeline`` node, the offline ``replay``, ``detect`` on bags 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -63,34 +63,48 @@ class Pipeline:
     :meth:`close` joins the worker. Stage times with ``far``: ``far_forward`` (the strip's forward),
     ``far_band`` (its detect and the merge, on whichever thread), ``far_wait`` (what it adds to the frame:
     ``far_band`` when sequential, the wait for it after the band's detect plus the merge when concurrent).
+    ``far_every``: with ``far``, the strip runs on every this-many-th frame only (the first frame, then every
+    ``far_every``-th; 1: every frame), the frames between run the band alone (no strip cut): a far cone is seen
+    up to ``far_every - 1`` frames late, the tracker carries it meanwhile (docs/detector.md, "Far band").
     """
 
     def __init__(self, calib: Calibration, detector, attitude: str | None = None, imu=None, far: FarBand | None = None,
                  cones_conf: float | None = None, attitude_config=None, concurrent: bool = False,
-                 min_height_ratio: float = DEFAULT_MIN_HEIGHT_RATIO):
+                 min_height_ratio: float = DEFAULT_MIN_HEIGHT_RATIO, far_every: int = 1):
         self.calib = calib
+        if isinstance(far_every, bool) or not isinstance(far_every, (int, np.integer)) or far_every < 1:
+            raise ValueError(f"far_every must be a whole number of frames >= 1, got {far_every!r}")
+        self.far_every = int(far_every)
+        self._frame_n = 0  # frames processed: the strip runs where frame_n % far_every == 0
         if far is not None:
             far.check_classes(detector)  # a far model of other classes: refused before the first frame
         self._pair = PairRunner(concurrent and far is not None)  # the band's and the strip's detect
         self.far = far  # the far band (full-resolution rows near the horizon, detector/farband.py), or None
         self.adapter = DriverAdapter(calib.crop, calib.image_width, calib.image_height, far.crop if far else None)
+        self._band_adapter = replace(self.adapter, far=None)  # a frame far_every skips: the band alone is cut
         self.detector = detector
         self.mapper = ConeMapper(calib, min_height_ratio)  # its ``dropped``: the boxes dropped, by cause
         self.imu = imu  # an ImuAttitude the caller feeds (modes imu, fused), or None
         self.attitude_mode, self.attitude = attitude_estimator(self.mapper, attitude, imu, attitude_config)
         self.cones_conf = cones_conf
         #: frames with the far strip, and those where the attitude would have moved it out of the image
-        #: (clamped to it): the replay summary and the node's /diagnostics report them
+        #: (clamped to it): the replay summary and the node's /diagnostics report them (``skipped``: frames
+        #: without it by ``far_every``, only where that is above 1)
         self.strip_counts = {"frames": 0, "clamped": 0}
+        if far is not None and self.far_every > 1:
+            self.strip_counts["skipped"] = 0
         self.strip_rows: tuple[int, int] | None = None  # the last frame's strip rows (V0, V1)
         self._strip_attitude = np.zeros(2)  # (pitch, roll) the strip follows: the previous frame's attitude
         self._strip_body: np.ndarray | None = None  # the IMU's reading at the previous frame's stamp
 
     def _far_crop(self, stamp_ns: int | None):
-        """(this frame's strip crop, clamped), or (None, False) without a far band: moved with the previous
-        frame's attitude, plus what the IMU (modes imu, fused) turned since then, read at this frame's stamp."""
+        """(this frame's strip crop, clamped), or (None, False) without a far band or on a frame ``far_every``
+        skips: moved with the previous frame's attitude, plus what the IMU (modes imu, fused) turned since then,
+        read at this frame's stamp (read on a skipped frame too: the next strip adds only what it turned since)."""
         if self.far is None:
             return None, False
+        due = self._frame_n % self.far_every == 0
+        self._frame_n += 1
         att = self._strip_attitude
         if self.imu is not None and self.far.plan is not None:
             # not counted here: the attitude estimator reads the IMU at this stamp too, and counts it there
@@ -98,6 +112,9 @@ class Pipeline:
             if body is not None and self._strip_body is not None:
                 att = att + (body - self._strip_body)
             self._strip_body = body
+        if not due:
+            self.strip_counts["skipped"] += 1
+            return None, False
         return self.far.crop_for(float(att[0]), float(att[1]))
 
     def _run(self, band: np.ndarray, t_adapter_s: float, strip: np.ndarray | None, stamp_ns: int | None,
@@ -169,7 +186,8 @@ class Pipeline:
         self._check_stamp(stamp_ns)
         t0 = time.perf_counter()
         far, clamped = self._far_crop(stamp_ns)
-        band, strip = self.adapter.bands_from_raw(encoding, width, height, step, data, far)
+        adapter = self.adapter if far is not None else self._band_adapter
+        band, strip = adapter.bands_from_raw(encoding, width, height, step, data, far)
         return self._run(band, time.perf_counter() - t0, strip, stamp_ns, far, clamped)
 
     def process_compressed(self, data, stamp_ns: int | None = None) -> FrameResult:
@@ -178,5 +196,6 @@ class Pipeline:
         self._check_stamp(stamp_ns)
         t0 = time.perf_counter()
         far, clamped = self._far_crop(stamp_ns)
-        band, strip = self.adapter.bands_from_compressed(data, far)
+        adapter = self.adapter if far is not None else self._band_adapter
+        band, strip = adapter.bands_from_compressed(data, far)
         return self._run(band, time.perf_counter() - t0, strip, stamp_ns, far, clamped)

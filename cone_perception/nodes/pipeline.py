@@ -104,7 +104,8 @@ class PipelineNode(PerceptionNode):
                                                   far_model if far_rows.crop is not None else None)
         self.pipeline = Pipeline(calib, detector, mode, imu, self._far_band(far_rows, far_model),
                                  attitude_config=att_config, concurrent=plan.concurrent,
-                                 min_height_ratio=float(declare(self, "min_height_ratio")))
+                                 min_height_ratio=float(declare(self, "min_height_ratio")),
+                                 far_every=int(declare(self, "far_every")))
         self.health.watch("boxes_dropped", self.pipeline.mapper.dropped)  # by cause (mapping.DROP_CAUSES)
         report_attitude(self, self.pipeline.attitude_mode, self.pipeline.attitude, box_model)
         if self.pipeline.far is not None:  # /diagnostics: frames with the strip, those clamped to the image (WARN)

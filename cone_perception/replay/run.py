@@ -61,6 +61,9 @@ def run_replay(args: argparse.Namespace) -> int:
     why = PARAMS["min_height_ratio"].check(args.min_height_ratio)
     if why:
         raise ConfigError("--min-height-ratio", None, why)
+    why = PARAMS["far_every"].check(args.far_every)
+    if why:
+        raise ConfigError("--far-every", None, why)
     if args.live and args.min_height_ratio != PARAMS["min_height_ratio"].default:
         raise ConfigError("--min-height-ratio", None, "works offline only (live: the nodes' min_height_ratio)")
     if args.max_range is not None:
@@ -150,7 +153,8 @@ def _run_offline(args, calib) -> dict:
                                       far_real.box_model if far_real is not None else None,
                                       far_rendered_table=far_table.table if far_table is not None else ())
     pipeline = Pipeline(calib, det, args.attitude, imu, far, cones_conf=args.conf if args.track_conf is not None else None,
-                        attitude_config=att_cfg, concurrent=plan.concurrent, min_height_ratio=args.min_height_ratio)
+                        attitude_config=att_cfg, concurrent=plan.concurrent, min_height_ratio=args.min_height_ratio,
+                        far_every=args.far_every)
     with pipeline:  # joins the strip's worker thread, if one ran
         res = offline_replay(args.bag, pipeline, args.topic, args.out, args.gt_topic,
                              _progress(args.no_progress), imu_topic=args.imu_topic, tracking=tracking)
@@ -196,7 +200,7 @@ def format_strip_counts(pipeline) -> str:
     s = strip_summary(pipeline)
     how = "moved with the attitude" if s["moves"] else "fixed"
     return (f"rows {s['rows'][0]}-{s['rows'][1]} at the calibration's attitude ({how}), {s['frames']} frames, "
-            f"clamped to the image in {s['clamped']}")
+            f"clamped to the image in {s['clamped']}" + (f", skipped (far_every) in {s['skipped']}" if "skipped" in s else ""))
 
 
 def tracker_config(settings: list[str]) -> TrackerConfig:
@@ -246,6 +250,8 @@ def _run_live(args, calib) -> dict:
         params["box_model"] = box_model_choice(args)
     if args.far_rows is not None:
         params["far_rows"] = args.far_rows
+    if args.far_every != PARAMS["far_every"].default:
+        params["far_every"] = args.far_every
     if args.band_rows is not None:
         params["band_rows"] = args.band_rows
     if far_model_given(args.far_model):
