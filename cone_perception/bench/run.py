@@ -17,6 +17,7 @@ from ..bench.pipeline import bench_adapter, bench_pipeline, bench_tracker, load_
 from ..bench.table import crop_for_setting, run_table
 from ..resources import far_model_for, far_model_given
 from ..detector import default_model_path
+from ..detector.fartiles import FarTiles
 from ..detector.farband import FarBand, SplitDetector, band_rows_for, band_split_for, far_rows_for
 from ..detector.parallel import ForwardPlan
 from ..errors import ConfigError
@@ -42,9 +43,10 @@ def _bench_pipeline(args: argparse.Namespace, calib) -> dict:
     far_rows = far_rows_for(args.far_rows, calib, "--far-rows")  # a bad value fails before any model loads
     if far_model_given(args.far_model) and far_rows.crop is None:
         raise ConfigError("--far-model", None, f"needs a far band ({far_rows.what})")
-    why = PARAMS["far_every"].check(args.far_every)
-    if why:
-        raise ConfigError("--far-every", None, why)
+    for name in ("far_every", "far_tiles"):
+        why = PARAMS[name].check(getattr(args, name))
+        if why:
+            raise ConfigError("--" + name.replace("_", "-"), None, why)
     plan = forward_plan(args.threads, far_rows.crop is not None, args.sequential)
     split = band_split_for(args.band_split, calib, "--band-split")
     if split.upper is None:
@@ -54,8 +56,10 @@ def _bench_pipeline(args: argparse.Namespace, calib) -> dict:
                                  threads=plan.network_threads, bf16=args.bf16)
     far = FarBand.for_calibration(far_model_for(args.far_model, det.source), args.far_rows, calib, "--far-rows", "--far-model",
                                   backend=args.backend, threads=plan.network_threads, bf16=args.bf16)
+    tiles = FarTiles.for_setting(far.detector.source if far else None, args.far_tiles, far, args.far_every,
+                                 "--far-tiles", backend=args.backend, threads=plan.network_threads, bf16=args.bf16)
     result = bench_pipeline(calib, det, rendered_frames(calib, max(1, args.scenes)), args.frames, args.warmup, far,
-                            plan.concurrent, args.far_every)
+                            plan.concurrent, args.far_every, tiles)
     result["far_rows"] = f"{far.crop.v0},{far.crop.v1}" if far is not None else "none"
     result["far_band"] = far_rows.what if split.upper is None else f"{far_rows.what}; {split.what}"
     result["band_split"] = split.what
@@ -77,6 +81,7 @@ def _repeat_pipeline(args: argparse.Namespace) -> int:
     cmd += (["--far-rows", args.far_rows] if args.far_rows is not None else []) + (["--far-model", args.far_model] if args.far_model else [])
     cmd += ["--sequential"] if args.sequential else []
     cmd += ["--far-every", str(args.far_every)] if args.far_every != PARAMS["far_every"].default else []
+    cmd += ["--far-tiles", str(args.far_tiles)] if args.far_tiles != PARAMS["far_tiles"].default else []
     cmd += ["--band-rows", args.band_rows] if args.band_rows is not None else []
     cmd += ["--band-split", args.band_split] if args.band_split is not None else []
     runs = []

@@ -22,6 +22,7 @@ from ..data.bags import read_attitude_truth, read_ground_truth, read_twists
 from ..data.outfiles import print_written, refuse_existing, remove_bag
 from ..resources import far_model_for, far_model_given
 from ..detector import Detector, default_model_path
+from ..detector.fartiles import FarTiles
 from ..detector.farband import FarBand, SplitDetector, band_rows_for, band_split_for, far_rows_for
 from ..detector.parallel import ForwardPlan
 from ..detector.model_files import attitude_config_for, box_model_or_default, far_reading_for
@@ -61,9 +62,10 @@ def run_replay(args: argparse.Namespace) -> int:
     why = PARAMS["min_height_ratio"].check(args.min_height_ratio)
     if why:
         raise ConfigError("--min-height-ratio", None, why)
-    why = PARAMS["far_every"].check(args.far_every)
-    if why:
-        raise ConfigError("--far-every", None, why)
+    for name in ("far_every", "far_tiles"):
+        why = PARAMS[name].check(getattr(args, name))
+        if why:
+            raise ConfigError("--" + name.replace("_", "-"), None, why)
     if args.live and args.min_height_ratio != PARAMS["min_height_ratio"].default:
         raise ConfigError("--min-height-ratio", None, "works offline only (live: the nodes' min_height_ratio)")
     if args.max_range is not None:
@@ -154,7 +156,9 @@ def _run_offline(args, calib) -> dict:
                                       far_rendered_table=far_table.table if far_table is not None else ())
     pipeline = Pipeline(calib, det, args.attitude, imu, far, cones_conf=args.conf if args.track_conf is not None else None,
                         attitude_config=att_cfg, concurrent=plan.concurrent, min_height_ratio=args.min_height_ratio,
-                        far_every=args.far_every)
+                        far_every=args.far_every, far_tiles=FarTiles.for_setting(
+                            far_model, args.far_tiles, far, args.far_every, "--far-tiles", backend=args.backend, conf=conf,
+                            threads=plan.network_threads or None, bf16=args.bf16))
     with pipeline:  # joins the strip's worker thread, if one ran
         res = offline_replay(args.bag, pipeline, args.topic, args.out, args.gt_topic,
                              _progress(args.no_progress), imu_topic=args.imu_topic, tracking=tracking)
@@ -250,8 +254,9 @@ def _run_live(args, calib) -> dict:
         params["box_model"] = box_model_choice(args)
     if args.far_rows is not None:
         params["far_rows"] = args.far_rows
-    if args.far_every != PARAMS["far_every"].default:
-        params["far_every"] = args.far_every
+    for name in ("far_every", "far_tiles"):
+        if getattr(args, name) != PARAMS[name].default:
+            params[name] = getattr(args, name)
     if args.band_rows is not None:
         params["band_rows"] = args.band_rows
     if far_model_given(args.far_model):

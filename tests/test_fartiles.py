@@ -1,0 +1,159 @@
+"""The far strip only where it is needed (issue 26): its cadence (``far_every``: which frames run the strip) and
+the tiles between (detector/fartiles.py: windows around the last frame's far cones, one mosaic, boxes back in
+full-image px), and their bad values refused naming the parameter."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cone_perception.crop import CropSpec
+from cone_perception.detector.farband import FarBand
+from cone_perception.detector.fartiles import FILL, TILE_GAP_PX, TILE_MARGIN_PX, FarTiles, mosaic_widths
+from cone_perception.errors import ConfigError
+from cone_perception.geometry.calib import load_calibration
+from cone_perception.params import PARAMS
+from cone_perception.pipeline import Pipeline
+from cone_perception.records import boxes_from_arrays
+
+CALIB = load_calibration("example_mainhoop")
+STRIP = CropSpec(370, 466, 0, 1920, 1)
+
+
+class _Boxes:
+    """A detector double: records each call's image and crop and returns the boxes ``boxes(bgr, crop)`` says
+    (``[(u1, v1, u2, v2), ...]`` in the image it is given, mapped to full-image px as a Detector does)."""
+
+    def __init__(self, boxes=None):
+        self.calls, self.boxes = [], boxes or (lambda bgr, crop: [])
+        self.timing = {"preprocess_ms": 0.0, "forward_ms": 0.0, "postprocess_ms": 0.0}
+
+    def detect(self, bgr, crop):
+        self.calls.append((bgr.copy(), crop))
+        a = np.array(self.boxes(bgr, crop), np.float32).reshape(-1, 4)
+        a = crop.boxes_to_full(a) if len(a) else a
+        return boxes_from_arrays(a, np.full(len(a), 0.9, np.float32), np.zeros(len(a), np.uint8))
+
+
+def _frame() -> bytes:
+    u = np.arange(1920, dtype=np.uint16) % 251  # each column's value says which column it is (mod 251)
+    return np.ascontiguousarray(np.dstack([np.broadcast_to(u.astype(np.uint8), (1080, 1920))] * 3)).tobytes()
+
+
+def _run(pipe: Pipeline, n: int) -> None:
+    for i in range(n):
+        pipe.process_raw("bgr8", 1920, 1080, 5760, _frame(), stamp_ns=i)
+
+
+def test_the_strip_runs_on_every_nth_frame_and_the_band_alone_between():
+    """far_every 3: the strip on frames 0, 3, 6 (cut and run), the band on every frame; counted."""
+    band, strip = _Boxes(), _Boxes()
+    pipe = Pipeline(CALIB, band, "fixed", far=FarBand(STRIP, strip), far_every=3)
+    _run(pipe, 7)
+    assert len(band.calls) == 7 and len(strip.calls) == 3
+    assert pipe.strip_counts == {"frames": 3, "clamped": 0, "skipped": 4}
+    every = Pipeline(CALIB, _Boxes(), "fixed", far=FarBand(STRIP, strip))  # the default: every frame
+    _run(every, 2)
+    assert len(strip.calls) == 5 and every.strip_counts == {"frames": 2, "clamped": 0}
+
+
+@pytest.mark.parametrize("bad", [0, -2, 1.5, True, "2"])
+def test_bad_far_every_is_refused_naming_it(bad):
+    with pytest.raises(ValueError, match="far_every"):
+        Pipeline(CALIB, _Boxes(), "fixed", far=FarBand(STRIP, _Boxes()), far_every=bad)
+    assert "far_every" in (PARAMS["far_every"].check(bad) or "")
+
+
+def test_windows_merge_stay_even_inside_the_image_and_overflow_to_none():
+    tiles = FarTiles({640: _Boxes()})
+    b = boxes_from_arrays(np.array([[1001, 400, 1011, 420], [1050, 400, 1060, 420], [5, 400, 15, 420],
+                                    [1900, 400, 1915, 420]], np.float32), np.ones(4, np.float32), np.zeros(4, np.uint8))
+    m = TILE_MARGIN_PX
+    want = [(0, 15 + m + 1), (1000 - m, 1060 + m), (1900 - m, 1920)]
+    assert tiles.windows(b, 1920) == want
+    assert all(a % 2 == 0 and c % 2 == 0 for a, c in want)
+    assert tiles.windows(b[:0], 1920) == []
+    assert FarTiles({192: _Boxes()}).windows(b, 1920) is None  # three windows do not fit 192 columns
+
+
+def test_tile_boxes_land_in_full_image_coordinates_and_cut_ones_are_dropped():
+    """Two windows in one mosaic: a cone in the second window's middle comes back at its place in the image; one
+    crossing the gap between the windows and one touching a window's inner side are dropped; the mosaic holds
+    the strip's columns and the grey between."""
+    a, b = (100, 228), (1000, 1128)
+    x2 = (a[1] - a[0]) + TILE_GAP_PX  # the second window's first column in the mosaic
+
+    def boxes(bgr, crop):
+        return [(x2 + 50, 20, x2 + 62, 60),  # a cone inside window 2: full image u 1050-1062, v 390-430
+                (x2 - 10, 20, x2 + 6, 60),  # across the gap
+                (x2 + 120, 20, x2 + 127.5, 60)]  # touching window 2's right side (the image goes on)
+
+    det, narrow = _Boxes(boxes), _Boxes()
+    tiles = FarTiles({256: narrow, 512: det})  # the two windows need 272 columns: the 512 one runs
+    strip = np.ascontiguousarray(np.broadcast_to((np.arange(1920) % 251).astype(np.uint8)[None, :, None], (96, 1920, 3)))
+    out = tiles.detect(strip, STRIP, [a, b], 1920)
+    assert len(out) == 1
+    assert (out["u1"][0], out["v1"][0], out["u2"][0], out["v2"][0]) == (1050, 390, 1062, 430)
+    canvas, crop = det.calls[-1]
+    assert canvas.shape == (96, 512, 3) and (crop.v0, crop.v1, crop.u0) == (370, 466, 0)
+    assert canvas[0, 0, 0] == 100 % 251 and canvas[0, x2 + 5, 0] == 1005 % 251
+    assert (canvas[:, a[1] - a[0]:x2] == FILL).all() and (canvas[:, x2 + 128:] == FILL).all()
+    assert not narrow.calls
+    tiles.detect(strip, STRIP, [b], 1920)  # one window: the narrowest mosaic
+    assert narrow.calls[-1][0].shape == (96, 256, 3) and len(det.calls) == 1
+
+
+def test_mosaic_widths_step_up_to_the_setting():
+    assert mosaic_widths(1152) == [256, 512, 768, 1024, 1152] and mosaic_widths(256) == [256]
+    assert mosaic_widths(192) == [192]
+
+
+def test_pipeline_runs_tiles_around_the_last_frames_far_cones_between_the_strips():
+    """far_every 2 with tiles: frame 0 runs the strip, which finds a cone at u 1500; frame 1 runs the tiles, one
+    window around it, and the tile's box comes back at u 1500; frame 2 the strip again, which finds nothing;
+    frame 3 has no far cone to look for: the band alone."""
+    found = {"strip": True}
+
+    def strip_boxes(bgr, crop):
+        return [(1500, 20, 1510, 40)] if found["strip"] else []
+
+    def tile_boxes(bgr, crop):  # the cone where it is in the mosaic: its window starts at 1500 - margin
+        return [(TILE_MARGIN_PX, 20, TILE_MARGIN_PX + 10, 40)]
+
+    strip, tile = _Boxes(strip_boxes), _Boxes(tile_boxes)
+    pipe = Pipeline(CALIB, _Boxes(), "fixed", far=FarBand(STRIP, strip), far_every=2, far_tiles=FarTiles({256: tile}))
+    _run(pipe, 2)
+    assert len(strip.calls) == 1 and len(tile.calls) == 1
+    mosaic = tile.calls[0][0]
+    assert mosaic[0, TILE_MARGIN_PX, 0] == 1500 % 251  # the window's columns, from the full-resolution strip
+    found["strip"] = False
+    res = pipe.process_raw("bgr8", 1920, 1080, 5760, _frame(), stamp_ns=2)
+    assert len(res.boxes) == 0 and len(strip.calls) == 2
+    _run(pipe, 1)
+    assert len(tile.calls) == 1 and len(strip.calls) == 2  # nothing to look for: the band alone
+    assert pipe.strip_counts == {"frames": 2, "clamped": 0, "skipped": 2, "tiles": 1, "tiles_full": 0}
+
+
+def test_tile_box_comes_back_on_the_frame_result():
+    strip = _Boxes(lambda bgr, crop: [(1500, 20, 1510, 40)])
+    tile = _Boxes(lambda bgr, crop: [(TILE_MARGIN_PX + 4, 22, TILE_MARGIN_PX + 14, 42)])
+    pipe = Pipeline(CALIB, _Boxes(), "fixed", far=FarBand(STRIP, strip), far_every=2, far_tiles=FarTiles({256: tile}))
+    pipe.process_raw("bgr8", 1920, 1080, 5760, _frame(), stamp_ns=0)
+    res = pipe.process_raw("bgr8", 1920, 1080, 5760, _frame(), stamp_ns=1)
+    assert len(res.boxes) == 1 and (res.boxes["u1"][0], res.boxes["v1"][0]) == (1504, 392)
+
+
+@pytest.mark.parametrize("width", [100, 650, 4000])
+def test_bad_far_tiles_widths_are_refused_naming_the_option(width):
+    far = FarBand(STRIP, _Boxes())
+    with pytest.raises(ConfigError, match="--far-tiles"):
+        FarTiles.for_setting(None, width, far, 2, "--far-tiles")
+    assert FarTiles.for_setting(None, 0, far, 2) is None and FarTiles.for_setting(None, 640, far, 1) is None
+
+
+def test_replay_refuses_bad_far_every_and_far_tiles(tmp_path, capsys):
+    from cone_perception.cli import main
+
+    for args, name in ((["--far-every", "0"], "--far-every"), (["--far-tiles", "-1"], "--far-tiles")):
+        assert main(["replay", str(tmp_path / "nothing"), *args, "--no-progress"]) == 2
+        assert name in capsys.readouterr().err
