@@ -7,6 +7,7 @@ Used by the fused ``pipeline`` node, the offline ``replay``, ``detect`` on bags 
 from __future__ import annotations
 
 import time
+from collections import deque
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -82,7 +83,8 @@ class Pipeline:
         self.far_every = int(far_every)
         self._frame_n = 0  # frames processed: the strip runs where frame_n % far_every == 0
         self.far_tiles = far_tiles if far is not None and self.far_every > 1 else None
-        self._far_seen = np.zeros(0, BOX_DTYPE)  # the last frame's boxes in its strip's rows: where the tiles look
+        # the last frames' boxes whole in their strip's rows (far_tiles.memory frames): where the tiles look
+        self._far_seen: deque[np.ndarray] = deque(maxlen=far_tiles.memory if self.far_tiles is not None else 1)
         self._frame_rows: tuple[int, int] | None = None  # this frame's strip rows (also where it does not run)
         if far is not None:
             far.check_classes(detector)  # a far model of other classes: refused before the first frame
@@ -129,7 +131,8 @@ class Pipeline:
         self.strip_counts["skipped"] += 1
         if self.far_tiles is None:
             return None, False, None
-        windows = self.far_tiles.windows(self._far_seen, self.calib.image_width)
+        seen = np.concatenate(self._far_seen) if self._far_seen else np.zeros(0, BOX_DTYPE)
+        windows = self.far_tiles.windows(seen, self.calib.image_width)
         if windows is None:  # too many far cones for the mosaic: the whole strip
             self.strip_counts["tiles_full"] += 1
             return crop, clamped, None
@@ -172,7 +175,7 @@ class Pipeline:
         boxes = one_box_per_cone(boxes)  # a second box of one cone (two classes, or twice small) goes
         self.mapper.dropped["second_box"] += n_boxes - len(boxes)
         if self.far_tiles is not None:  # where the next frame's tiles look: this frame's cones whole in its strip's rows
-            self._far_seen = drop_cut_boxes(boxes, replace(self.far.crop, v0=self._frame_rows[0], v1=self._frame_rows[1]))
+            self._far_seen.append(drop_cut_boxes(boxes, replace(self.far.crop, v0=self._frame_rows[0], v1=self._frame_rows[1])))
         weak = None
         if self.cones_conf is not None:
             strong = boxes["score"] >= self.cones_conf

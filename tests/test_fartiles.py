@@ -109,29 +109,31 @@ def test_mosaic_widths_step_up_to_the_setting():
 
 
 def test_pipeline_runs_tiles_around_the_last_frames_far_cones_between_the_strips():
-    """far_every 2 with tiles: frame 0 runs the strip, which finds a cone at u 1500; frame 1 runs the tiles, one
-    window around it, and the tile's box comes back at u 1500; frame 2 the strip again, which finds nothing;
-    frame 3 has no far cone to look for: the band alone."""
-    found = {"strip": True}
+    """far_every 2 with tiles (memory: the last two frames): frame 0 runs the strip, which finds a cone at u 1500;
+    frame 1 runs the tiles, one window around it, and the tile's box comes back at u 1500; from frame 2 on nothing
+    is found: frame 2 the strip; frame 3 the tiles still (frame 1 saw the cone); frame 4 the strip; frame 5 has
+    no far cone to look for in its last two frames: the band alone."""
+    found = {"cone": True}
 
     def strip_boxes(bgr, crop):
-        return [(1500, 20, 1510, 40)] if found["strip"] else []
+        return [(1500, 20, 1510, 40)] if found["cone"] else []
 
     def tile_boxes(bgr, crop):  # the cone where it is in the mosaic: its window starts at 1500 - margin
-        return [(TILE_MARGIN_PX, 20, TILE_MARGIN_PX + 10, 40)]
+        return [(TILE_MARGIN_PX, 20, TILE_MARGIN_PX + 10, 40)] if found["cone"] else []
 
     strip, tile = _Boxes(strip_boxes), _Boxes(tile_boxes)
     pipe = Pipeline(CALIB, _Boxes(), "fixed", far=FarBand(STRIP, strip), far_every=2, far_tiles=FarTiles({256: tile}))
-    _run(pipe, 2)
-    assert len(strip.calls) == 1 and len(tile.calls) == 1
-    mosaic = tile.calls[0][0]
-    assert mosaic[0, TILE_MARGIN_PX, 0] == 1500 % 251  # the window's columns, from the full-resolution strip
-    found["strip"] = False
-    res = pipe.process_raw("bgr8", 1920, 1080, 5760, _frame(), stamp_ns=2)
-    assert len(res.boxes) == 0 and len(strip.calls) == 2
     _run(pipe, 1)
-    assert len(tile.calls) == 1 and len(strip.calls) == 2  # nothing to look for: the band alone
-    assert pipe.strip_counts == {"frames": 2, "clamped": 0, "skipped": 2, "tiles": 1, "tiles_full": 0}
+    res = pipe.process_raw("bgr8", 1920, 1080, 5760, _frame(), stamp_ns=1)
+    assert len(strip.calls) == 1 and len(tile.calls) == 1
+    assert tile.calls[0][0][0, TILE_MARGIN_PX, 0] == 1500 % 251  # the window's columns, from the full-resolution strip
+    assert len(res.boxes) == 1 and (res.boxes["u1"][0], res.boxes["v1"][0]) == (1500, 390)
+    found["cone"] = False
+    for frame, (strips, tiles) in enumerate(((2, 1), (2, 2), (3, 2), (3, 2)), start=2):
+        res = pipe.process_raw("bgr8", 1920, 1080, 5760, _frame(), stamp_ns=frame)
+        assert (len(strip.calls), len(tile.calls)) == (strips, tiles), frame
+        assert len(res.boxes) == 0
+    assert pipe.strip_counts == {"frames": 3, "clamped": 0, "skipped": 3, "tiles": 2, "tiles_full": 0}
 
 
 def test_tile_box_comes_back_on_the_frame_result():
@@ -157,3 +159,14 @@ def test_replay_refuses_bad_far_every_and_far_tiles(tmp_path, capsys):
     for args, name in ((["--far-every", "0"], "--far-every"), (["--far-tiles", "-1"], "--far-tiles")):
         assert main(["replay", str(tmp_path / "nothing"), *args, "--no-progress"]) == 2
         assert name in capsys.readouterr().err
+
+
+def test_far_cones_the_mosaic_cannot_hold_run_the_whole_strip():
+    """Three far cones across the width need three windows, more than a 192-column mosaic: frame 1 runs the whole
+    strip (counted as tiles_full), the tiles' network never."""
+    strip = _Boxes(lambda bgr, crop: [(200, 20, 210, 40), (900, 20, 910, 40), (1700, 20, 1710, 40)])
+    tile = _Boxes()
+    pipe = Pipeline(CALIB, _Boxes(), "fixed", far=FarBand(STRIP, strip), far_every=2, far_tiles=FarTiles({192: tile}))
+    _run(pipe, 2)
+    assert len(strip.calls) == 2 and not tile.calls
+    assert pipe.strip_counts == {"frames": 2, "clamped": 0, "skipped": 1, "tiles": 0, "tiles_full": 1}

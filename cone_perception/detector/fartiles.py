@@ -25,7 +25,9 @@ from .detector import Detector
 from .farband import EDGE_PX, drop_cut_boxes
 
 #: Columns each side of a far cone's last box (full-image px): its motion between two frames and the yaw's.
-TILE_MARGIN_PX = 32
+TILE_MARGIN_PX = 64
+#: The tiles look around the far cones of this many last frames: one a tile missed once is looked for again.
+TILE_MEMORY_FRAMES = 2
 #: Grey columns between two windows in the mosaic; windows nearer than this merge.
 TILE_GAP_PX = 16
 #: The mosaics' widths: every this many columns up to ``far_tiles`` (a network built for each, loaded warm).
@@ -49,6 +51,7 @@ class FarTiles:
     detectors: dict  # width -> anything with detect(bgr, crop) -> BOX_DTYPE and a timing dict
     margin_px: int = TILE_MARGIN_PX
     gap_px: int = TILE_GAP_PX
+    memory: int = TILE_MEMORY_FRAMES  # the tiles look around the boxes of this many last frames
 
     def __post_init__(self) -> None:
         self.detectors = dict(sorted(self.detectors.items()))
@@ -124,8 +127,9 @@ class FarTiles:
         keep = np.zeros(len(boxes), bool)
         shift = np.zeros(len(boxes), np.float32)
         for (a, b), x in zip(windows, xs):
-            left = x + (EDGE_PX if a > 0 else -np.inf)  # a window's side at the image's border cuts nothing
-            right = x + (b - a) - (EDGE_PX if b < image_width else -np.inf)
+            side = self.margin_px // 2  # a cone cut by the side may come out as a whole, smaller box short of it
+            left = x + (side if a > 0 else -np.inf)  # a window's side at the image's border cuts nothing
+            right = x + (b - a) - (side if b < image_width else -np.inf)
             inside = (boxes["u1"] > left) & (boxes["u2"] < right)
             keep |= inside
             shift[inside] = a - x
@@ -135,4 +139,4 @@ class FarTiles:
         return drop_cut_boxes(boxes, crop)
 
 
-__all__ = ["FILL", "FarTiles", "MIN_WIDTH", "TILE_GAP_PX", "TILE_MARGIN_PX", "TILE_STEP_PX", "mosaic_widths"]
+__all__ = ["FILL", "FarTiles", "MIN_WIDTH", "TILE_MEMORY_FRAMES", "TILE_GAP_PX", "TILE_MARGIN_PX", "TILE_STEP_PX", "mosaic_widths"]
