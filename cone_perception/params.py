@@ -238,9 +238,10 @@ _PIPELINE = (
        "run the band alone (a far cone is seen up to far_every - 1 frames late; the tracker carries it meanwhile; "
        "docs/detector.md, Far band); 1 = every frame", min=1, max=100),
     _p("far_tiles", 0, "with far_every above 1, on the frames between: the strip's full-resolution windows around the "
-       "last frame's far cones (64 px each side), side by side in one mosaic this many columns wide, one forward of "
-       "the far model (the whole strip where they do not fit; the band alone where there are none; docs/detector.md, "
-       "Far band); 0 = off (the band alone between); else a multiple of 32 from 192 to the strip's width", min=0,
+       "last two frames' far cones (64 px each side), side by side in one mosaic at most this many columns wide, one "
+       "forward of the far model (the whole strip where they do not fit; the band alone where there are none; "
+       "docs/detector.md, Far band); 0 = off (the band alone between); else a multiple of 32 from 192 to the strip's "
+       "width", min=0,
        max=8192),
     _p("track", False, "also the tracker stage: /cones/tracked out (the parameters of cone_tracker); it gets each "
        "frame's attitude, which a separate cone_tracker does not"),

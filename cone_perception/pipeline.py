@@ -112,7 +112,8 @@ class Pipeline:
     def _far_crop(self, stamp_ns: int | None):
         """(this frame's strip crop, clamped, tile windows), or (None, False, None) without a far band or on a
         frame ``far_every`` skips without tiles (windows: None for the whole strip); the strip is moved with the
-        previous frame's attitude, plus what the IMU (modes imu, fused) turned since then, read at this frame's stamp (read on a skipped frame too: the next strip adds only what it turned since)."""
+        previous frame's attitude, plus what the IMU (modes imu, fused) turned since then, read at this frame's
+        stamp (read on a skipped frame too: the next strip adds only what it turned since)."""
         if self.far is None:
             return None, False, None
         due = self._frame_n % self.far_every == 0

@@ -126,7 +126,7 @@ def run_bench(args: argparse.Namespace) -> int:
               f"{result['boxes_per_frame']:.1f} boxes/frame; {result['far_band']}")
         print(format_table(result["stages"]))
         if (result["far_every"] or 1) > 1:  # bimodal: frames with the strip and without
-            print(f"far strip on every {result['far_every']}th frame only: frames/s over the mean end to end "
+            print(f"far strip on one frame in {result['far_every']}: frames/s over the mean end to end "
                   f"{result['fps_mean']:.1f}")
         print(f"frames/s (median end to end): {result['fps']:.1f}   everything but the forward: "
               f"{result['non_forward_median_ms']:.2f} ms   peak RSS: {result['peak_rss_mb']:.0f} MiB")

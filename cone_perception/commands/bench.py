@@ -65,7 +65,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "mean (frames/s over the mean end to end)")
     p.add_argument("--far-tiles", type=int, default=PARAMS["far_tiles"].default, metavar="W",
                    help="pipeline, with --far-every above 1: on the frames between, the strip's windows around the last "
-                        "frame's far cones in one mosaic W columns wide (the node's far_tiles; default %(default)s = off)")
+                        "two frames' far cones in one mosaic at most W columns wide (the node's far_tiles; default "
+                        "%(default)s = off). The rendered scenes cycle: the tiles look where another scene's far cones "
+                        "were (docs/experiments/far_cadence_cost.py measures them on a drive's frames)")
     p.add_argument("--band-rows", default=None, metavar="crop|auto|V0,V1",
                    help="pipeline: the band's rows (docs/detector.md 'Band rows'): crop (default) = the calibration's crop, "
                         "auto = placed from the calibration, V0,V1 = these rows")

@@ -73,8 +73,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "is seen up to N-1 frames late; docs/detector.md 'Far band'; default %(default)s = every frame). "
                         "Live: the pipeline node's far_every (fused only)")
     p.add_argument("--far-tiles", type=int, default=PARAMS["far_tiles"].default, metavar="W",
-                   help="with --far-every above 1, on the frames between: the strip's windows around the last frame's "
-                        "far cones in one mosaic W columns wide (docs/detector.md 'Far band'); 0 (default) = off, the "
+                   help="with --far-every above 1, on the frames between: the strip's windows around the last two frames' "
+                        "far cones in one mosaic at most W columns wide (docs/detector.md 'Far band'); 0 (default) = off, the "
                         "band alone between. Live: the pipeline node's far_tiles (fused only)")
     p.add_argument("--band-split", default=None, metavar="none|auto|N0,U1",
                    help="offline: the band in two (docs/detector.md 'Row-scaled band'): none (default) = one band; auto = "

@@ -1,16 +1,18 @@
-"""Far tiles: on the frames between the far strip's (``far_every``), full-resolution windows of the strip only
-around the far cones the frame before had, run as one mosaic (issue 26, "the strip only where it is needed").
+"""Far tiles: on the frames between the far strip's (``far_every``), full-resolution windows of the strip only around
+the far cones the last frames had, run as one mosaic (issue 26, "the strip only where it is needed").
 
-A far cone moves a few pixels from one frame to the next at 15-40 m, so the last frame's boxes in the strip's
-rows say where to look. Each such box gets a window of the strip's rows (this frame's, moved with the attitude)
-and its own columns plus ``margin_px`` each side; windows closer than ``gap_px`` merge. The windows are laid side
-by side, ``gap_px`` apart on the letterbox grey, in a mosaic as wide as the smallest of the far model's
-networks that holds them (built for the strip's height and every ``TILE_STEP_PX`` columns up to ``far_tiles``,
-and ``far_tiles`` itself), and one forward runs on it: the tiles cost what the far cones' columns need. Its boxes go back to their window's place in the full
-image; a box crossing into a gap, or touching a window's inner side edge (a cone cut by the window, where the
-image goes on), is dropped, as are the strip's cut cones at its top and bottom (``farband.drop_cut_boxes``).
-Windows that do not fit the mosaic: :meth:`FarTiles.windows` says None and the pipeline runs the whole strip.
-New far cones are found by the whole strip, every ``far_every``-th frame.
+A far cone moves a few pixels from one frame to the next at 15-40 m, so the last frames' boxes whole in the strip's
+rows (``memory``: two frames, so a cone a tile missed once is looked for again) say where to look. Each such box
+gets a window of the strip's rows (this frame's, moved with the attitude) and its own columns plus ``margin_px``
+each side; windows closer than ``gap_px`` merge. The windows are laid side by side, ``gap_px`` apart on the
+letterbox grey, in a mosaic as wide as the smallest of the far model's networks that holds them (built for the
+strip's height and every ``TILE_STEP_PX`` columns up to ``far_tiles``, and ``far_tiles`` itself), and one forward
+runs on it: the tiles cost what the far cones' columns need. Its boxes go back to their window's place in the full
+image; a box crossing into a gap, or within half the margin of a window's inner side (a cone cut by the window,
+where the image goes on, may come out as a whole, smaller box short of the side), is dropped, as are the strip's
+cut cones at its top and bottom (``farband.drop_cut_boxes``). Windows that do not fit the mosaic:
+:meth:`FarTiles.windows` says None and the pipeline runs the whole strip. New far cones are found by the whole
+strip, every ``far_every``-th frame.
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ import numpy as np
 from ..crop import CropSpec
 from ..errors import ConfigError
 from .detector import Detector
-from .farband import EDGE_PX, drop_cut_boxes
+from .farband import drop_cut_boxes
 
 #: Columns each side of a far cone's last box (full-image px): its motion between two frames and the yaw's.
 TILE_MARGIN_PX = 64

@@ -32,10 +32,10 @@ Parameters (generated from cone_perception/params.py by ``cone-perception params
     frame only, the frames between run the band alone (a far cone is seen up to far_every - 1 frames
     late; the tracker carries it meanwhile; docs/detector.md, Far band); 1 = every frame
   far_tiles (int, default 0; 0 .. 8192): with far_every above 1, on the frames between: the strip's
-    full-resolution windows around the last frame's far cones (64 px each side), side by side in one
-    mosaic this many columns wide, one forward of the far model (the whole strip where they do not
-    fit; the band alone where there are none; docs/detector.md, Far band); 0 = off (the band alone
-    between); else a multiple of 32 from 192 to the strip's width
+    full-resolution windows around the last two frames' far cones (64 px each side), side by side in
+    one mosaic at most this many columns wide, one forward of the far model (the whole strip where
+    they do not fit; the band alone where there are none; docs/detector.md, Far band); 0 = off (the
+    band alone between); else a multiple of 32 from 192 to the strip's width
   track (bool, default false): also the tracker stage: /cones/tracked out (the parameters of
     cone_tracker); it gets each frame's attitude, which a separate cone_tracker does not
   Also those of driver_adapter (calibration, input_transport); those of detection (model, backend,

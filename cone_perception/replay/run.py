@@ -204,7 +204,9 @@ def format_strip_counts(pipeline) -> str:
     s = strip_summary(pipeline)
     how = "moved with the attitude" if s["moves"] else "fixed"
     return (f"rows {s['rows'][0]}-{s['rows'][1]} at the calibration's attitude ({how}), {s['frames']} frames, "
-            f"clamped to the image in {s['clamped']}" + (f", skipped (far_every) in {s['skipped']}" if "skipped" in s else ""))
+            f"clamped to the image in {s['clamped']}" + (f", skipped (far_every) in {s['skipped']}" if "skipped" in s else "")
+            + (f", of those run as tiles {s['tiles']}, as the whole strip (tiles too wide) {s['tiles_full']}"
+               if "tiles" in s else ""))
 
 
 def tracker_config(settings: list[str]) -> TrackerConfig:
