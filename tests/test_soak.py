@@ -24,6 +24,17 @@ def _windows(rss, p99):
             for i, (r, p) in enumerate(zip(rss, p99))]
 
 
+def test_a_soak_never_shares_a_domain_with_a_test_run() -> None:
+    """A soak started while a test run is on (or by a test) picks a ROS_DOMAIN_ID no test run uses."""
+    from conftest import TEST_DOMAINS
+
+    from cone_perception.replay.soak import SOAK_DOMAINS, default_domain_id
+
+    ids = {default_domain_id(pid) for pid in range(1, 5000)}
+    assert ids == set(SOAK_DOMAINS) and max(ids) <= 232  # every one used, and all valid for DDS
+    assert not ids & set(TEST_DOMAINS)
+
+
 def test_the_soak_counts_the_frames_of_the_run_only() -> None:
     base = _values(ok=3, replaced=1)  # the primer
     final = _values(ok=3 + 500, replaced=1 + 480, missing=10, queued=0, dropped={"too_large": 10})

@@ -38,7 +38,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="another node parameter (repeatable), e.g. --param threads:=1")
     p.add_argument("--window", type=float, default=10.0, help="seconds per row of the time table (default %(default)s)")
     p.add_argument("--domain-id", type=int, default=None,
-                   help="ROS_DOMAIN_ID of the soak (default: one from this process id, 150-229)")
+                   help="ROS_DOMAIN_ID of the soak (default: one from this process id, 200-232)")
     p.add_argument("--json", type=Path, default=None, help="also write the result as JSON")
     p.add_argument("--plot", type=Path, default=None, help="also draw rates, RSS and latency over time (PNG)")
     p.add_argument("--force", action="store_true", help="overwrite existing --json / --plot")

@@ -20,6 +20,15 @@ from ..data.outfiles import print_written, refuse_existing
 from ..errors import ConfigError
 
 
+#: The soak's own ROS_DOMAIN_IDs: apart from the test runs' 100-199 (tests/conftest.py), so a soak never sees a test's nodes.
+SOAK_DOMAINS = range(200, 233)
+
+
+def default_domain_id(pid: int) -> int:
+    """The soak's ROS_DOMAIN_ID without ``--domain-id``: one of :data:`SOAK_DOMAINS`, from the process id."""
+    return SOAK_DOMAINS[pid % len(SOAK_DOMAINS)]
+
+
 def run_soak(args: argparse.Namespace) -> int:
     if not args.rate > 0 or not args.seconds > 0 or not args.window > 0:
         raise ConfigError("soak", None, "--rate, --seconds and --window must be > 0")
@@ -30,7 +39,7 @@ def run_soak(args: argparse.Namespace) -> int:
     for p in args.param:
         if ":=" not in p:
             raise ConfigError("--param", None, f"expected NAME:=VALUE, got {p!r}")
-    os.environ["ROS_DOMAIN_ID"] = str(args.domain_id if args.domain_id is not None else 150 + os.getpid() % 80)
+    os.environ["ROS_DOMAIN_ID"] = str(args.domain_id if args.domain_id is not None else default_domain_id(os.getpid()))
 
     from ..nodes import soak as player  # rclpy and the localhost DDS environment: on use only
 
