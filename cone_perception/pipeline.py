@@ -69,9 +69,9 @@ class Pipeline:
     ``far_every``-th; 1: every frame), the frames between run the band alone (no strip cut): a far cone is seen
     up to ``far_every - 1`` frames late, the tracker carries it meanwhile (docs/detector.md, "Far band").
     ``far_tiles``: with ``far_every`` > 1, a :class:`~cone_perception.detector.fartiles.FarTiles`: on the frames
-    between, the strip's windows around the last frame's boxes in the strip's rows run as one mosaic, as narrow as
-    they allow (the whole
-    strip where they do not fit it; the band alone where there are none); None: the band alone between.
+    between, the strip's windows around the last frames' boxes whole in the strip's rows run as one mosaic, as
+    narrow as they allow (the whole strip where they do not fit it; the band alone where there are none); None:
+    the band alone between.
     """
 
     def __init__(self, calib: Calibration, detector, attitude: str | None = None, imu=None, far: FarBand | None = None,
@@ -148,16 +148,13 @@ class Pipeline:
         far_boxes = None  # the far strip's boxes: the image attitude reads those kept through the far model's box model
         if self.far is not None and strip is not None:  # two forwards, at once with a concurrent plan
             if windows is None:
-                far_det = self.far.detector
-
                 def second():
                     return self.far.detect(strip, far_crop)
-            else:  # the tiles: the strip's windows around the last frame's far cones, one mosaic
-                far_det = self.far_tiles.detector
-
+            else:  # the tiles: the strip's windows around the last frames' far cones, one mosaic
                 def second():
                     return self.far_tiles.detect(strip, far_crop, windows, self.calib.image_width)
             boxes, far_boxes, t = self._pair.run(lambda: self.detector.detect(band, self.calib.crop), second)
+            far_det = self.far.detector if windows is None else self.far_tiles.detector  # the network that ran
             t0 = time.perf_counter()
             boxes = merge_boxes(boxes, far_boxes, getattr(self.far.detector, "iou", DEFAULT_IOU))
             t_merge = (time.perf_counter() - t0) * 1e3

@@ -136,13 +136,19 @@ def test_pipeline_runs_tiles_around_the_last_frames_far_cones_between_the_strips
     assert pipe.strip_counts == {"frames": 3, "clamped": 0, "skipped": 3, "tiles": 2, "tiles_full": 0}
 
 
-def test_tile_box_comes_back_on_the_frame_result():
+def test_tile_box_comes_back_on_the_frame_result_and_its_network_times_the_frame():
+    """The tile frame's box in full-image px on the FrameResult; its far_forward is the mosaic's network's (of the
+    two widths, the one that ran), the strip frame's the strip's."""
     strip = _Boxes(lambda bgr, crop: [(1500, 20, 1510, 40)])
     tile = _Boxes(lambda bgr, crop: [(TILE_MARGIN_PX + 4, 22, TILE_MARGIN_PX + 14, 42)])
-    pipe = Pipeline(CALIB, _Boxes(), "fixed", far=FarBand(STRIP, strip), far_every=2, far_tiles=FarTiles({256: tile}))
-    pipe.process_raw("bgr8", 1920, 1080, 5760, _frame(), stamp_ns=0)
+    wide = _Boxes()
+    strip.timing["forward_ms"], tile.timing["forward_ms"], wide.timing["forward_ms"] = 6.0, 1.5, 3.0
+    tiles = FarTiles({256: tile, 512: wide})
+    pipe = Pipeline(CALIB, _Boxes(), "fixed", far=FarBand(STRIP, strip), far_every=2, far_tiles=tiles)
+    assert pipe.process_raw("bgr8", 1920, 1080, 5760, _frame(), stamp_ns=0).timing_ms["far_forward"] == 6.0
     res = pipe.process_raw("bgr8", 1920, 1080, 5760, _frame(), stamp_ns=1)
     assert len(res.boxes) == 1 and (res.boxes["u1"][0], res.boxes["v1"][0]) == (1504, 392)
+    assert res.timing_ms["far_forward"] == 1.5 and not wide.calls
 
 
 @pytest.mark.parametrize("width", [100, 650, 4000])
@@ -156,7 +162,8 @@ def test_bad_far_tiles_widths_are_refused_naming_the_option(width):
 def test_replay_refuses_bad_far_every_and_far_tiles(tmp_path, capsys):
     from cone_perception.cli import main
 
-    for args, name in ((["--far-every", "0"], "--far-every"), (["--far-tiles", "-1"], "--far-tiles")):
+    for args, name in ((["--far-every", "0"], "--far-every"), (["--far-tiles", "-1"], "--far-tiles"),
+                       (["--far-every", "2", "--far-tiles", "640", "--box-behaviour", "real"], "--far-tiles")):
         assert main(["replay", str(tmp_path / "nothing"), *args, "--no-progress"]) == 2
         assert name in capsys.readouterr().err
 

@@ -66,6 +66,8 @@ def run_replay(args: argparse.Namespace) -> int:
         why = PARAMS[name].check(getattr(args, name))
         if why:
             raise ConfigError("--" + name.replace("_", "-"), None, why)
+    if args.far_tiles and args.box_behaviour == "real":
+        raise ConfigError("--far-tiles", None, "not with --box-behaviour real (it acts on the far band's own network)")
     if args.live and args.min_height_ratio != PARAMS["min_height_ratio"].default:
         raise ConfigError("--min-height-ratio", None, "works offline only (live: the nodes' min_height_ratio)")
     if args.max_range is not None:

@@ -5,7 +5,8 @@
 
 Each design runs `bench pipeline`'s timing (cone_perception.bench.run's loaders and
 cone_perception.bench.pipeline.bench_pipeline: rendered 1920x1080 YUYV frames, the example calibration, the
-default model, ONNX Runtime, the shipped thread rule of detector/parallel.py) in a fresh process; `--rounds`
+default model (the strip: the default far model, since session 14; the band's own model before, a network of
+the same size), ONNX Runtime, the shipped thread rule of detector/parallel.py) in a fresh process; `--rounds`
 interleaves all designs that many times and prints one line per run: frames/s (median end to end), its
 ratio to the round's first design of the same thread count, the load average before the run, and the
 process's CPU time per frame in the pipeline (``cpu_ms``, median; all threads: on one thread the frame's
