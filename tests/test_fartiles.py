@@ -108,7 +108,8 @@ def test_mosaic_widths_step_up_to_the_setting():
     assert mosaic_widths(192) == [192]
 
 
-def test_pipeline_runs_tiles_around_the_last_frames_far_cones_between_the_strips():
+@pytest.mark.parametrize("concurrent", [False, True])
+def test_pipeline_runs_tiles_around_the_last_frames_far_cones_between_the_strips(concurrent):
     """far_every 2 with tiles (memory: the last two frames): frame 0 runs the strip, which finds a cone at u 1500;
     frame 1 runs the tiles, one window around it, and the tile's box comes back at u 1500; from frame 2 on nothing
     is found: frame 2 the strip; frame 3 the tiles still (frame 1 saw the cone); frame 4 the strip; frame 5 has
@@ -122,7 +123,8 @@ def test_pipeline_runs_tiles_around_the_last_frames_far_cones_between_the_strips
         return [(TILE_MARGIN_PX, 20, TILE_MARGIN_PX + 10, 40)] if found["cone"] else []
 
     strip, tile = _Boxes(strip_boxes), _Boxes(tile_boxes)
-    pipe = Pipeline(CALIB, _Boxes(), "fixed", far=FarBand(STRIP, strip), far_every=2, far_tiles=FarTiles({256: tile}))
+    pipe = Pipeline(CALIB, _Boxes(), "fixed", far=FarBand(STRIP, strip), far_every=2, far_tiles=FarTiles({256: tile}),
+                    concurrent=concurrent)  # concurrent: the strip's or the tiles' detect on a worker thread
     _run(pipe, 1)
     res = pipe.process_raw("bgr8", 1920, 1080, 5760, _frame(), stamp_ns=1)
     assert len(strip.calls) == 1 and len(tile.calls) == 1
@@ -134,6 +136,7 @@ def test_pipeline_runs_tiles_around_the_last_frames_far_cones_between_the_strips
         assert (len(strip.calls), len(tile.calls)) == (strips, tiles), frame
         assert len(res.boxes) == 0
     assert pipe.strip_counts == {"frames": 3, "clamped": 0, "skipped": 3, "tiles": 2, "tiles_full": 0}
+    pipe.close()
 
 
 def test_tile_box_comes_back_on_the_frame_result_and_its_network_times_the_frame():
