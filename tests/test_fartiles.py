@@ -16,6 +16,8 @@ from cone_perception.params import PARAMS
 from cone_perception.pipeline import Pipeline
 from cone_perception.records import boxes_from_arrays
 
+from rosutil import ros  # noqa: F401 (a fixture)
+
 CALIB = load_calibration("example_mainhoop")
 STRIP = CropSpec(370, 466, 0, 1920, 1)
 
@@ -180,3 +182,25 @@ def test_far_cones_the_mosaic_cannot_hold_run_the_whole_strip():
     _run(pipe, 2)
     assert len(strip.calls) == 2 and not tile.calls
     assert pipe.strip_counts == {"frames": 2, "clamped": 0, "skipped": 1, "tiles": 0, "tiles_full": 1}
+
+
+def test_pipeline_node_far_every_and_far_tiles(ros):  # noqa: F811 (ros is a fixture)
+    """The node's far_every / far_tiles: the Pipeline gets the cadence and one tile network per mosaic width, the
+    counts reach /diagnostics; a bad width or cadence stops the node naming the parameter."""
+    from rclpy.exceptions import InvalidParameterValueException
+    from rclpy.parameter import Parameter
+
+    from cone_perception.nodes.pipeline import PipelineNode
+
+    node = ros.add(PipelineNode(context=ros.context, parameter_overrides=[Parameter("far_every", value=2),
+                                                                          Parameter("far_tiles", value=512)]))
+    p = node.pipeline
+    assert p.far_every == 2 and sorted(p.far_tiles.detectors) == [256, 512]
+    assert all(d.input_size_for(w, 96) == (w, 96) for w, d in p.far_tiles.detectors.items())
+    values = dict(node.health.assess(10**9).values)
+    assert values["far_strip:skipped"] == "0" and values["far_strip:tiles"] == "0"
+    with pytest.raises(ConfigError, match="parameter far_tiles: must be 0 .* a multiple of 32"):
+        PipelineNode(context=ros.context, parameter_overrides=[Parameter("far_every", value=2),
+                                                               Parameter("far_tiles", value=100)])
+    with pytest.raises(InvalidParameterValueException, match="far_every out of range"):  # rclpy checks the range
+        PipelineNode(context=ros.context, parameter_overrides=[Parameter("far_every", value=0)])
