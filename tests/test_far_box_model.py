@@ -234,3 +234,45 @@ def test_far_range_cut_holds_when_sizes_are_averaged():
         res = est.fit(boxes, cls, sizes=est.sizes, far=mask)
         used[name] = res[2]
     assert used["band"] == 8 and used["strip"] == 14, used
+
+
+def test_far_box_model_measured_at_another_scale_is_read_at_the_strip_scale(tmp_path):
+    """A box model's buckets are px at the model input. A far model's box model measured at another scale than the
+    strip's (here the car-sized frames run at downscale 2, input scale 0.5: where one model-input px is one px of
+    the real clips' own detail) is read at the strip's full resolution: a strip box 20 px tall is 20 px at the far
+    model's input and gets the 12-24 px bucket's offsets, not those of the 8-12 px bucket its own scale would give."""
+    from cone_perception.evaluation.boxfit import measure_box_model
+    from cone_perception.evaluation.groundtruth import EvalImage
+
+    rng = np.random.default_rng(5)
+    images = []
+    for _ in range(10):
+        h = rng.uniform(17.0, 46.0, 12)  # image px: 8.5-23 px at the model input (scale 0.5)
+        u, v = rng.uniform(50, 1800, 12), rng.uniform(300, 400, 12)
+        labels = np.column_stack([u, v, u + 0.7 * h, v + h])
+        top = np.where(h * 0.5 < 12.0, 0.10, 0.02)  # tops 10 % low under 12 px at the input, 2 % above
+        preds = labels.copy()
+        preds[:, 1] += top * h
+        cls = rng.integers(0, 4, 12)
+        images.append(EvalImage("f.jpg", 1920, 1080, labels, cls, np.zeros(12, bool), None, preds, np.full(12, 0.9), cls, 0.5))
+    bm = measure_box_model(images, band=(240, 600))
+    assert bm.input_scale == 0.5 and bm.counts[0] > 20 and bm.counts[1] > 20
+    np.testing.assert_allclose(bm.top_low[:2], (0.10, 0.02), atol=1e-9)
+    far = tmp_path / "far.pt"
+    far.write_bytes(b"")
+    write_box_model(tmp_path / "far.pt.box_model.yaml", bm)
+    r, what = far_reading_for("model", far, default_model_path(), False)
+    assert r.box_model.input_scale == 1.0 and "measured at input scale 0.5, read at the strip's 1" in what
+    box = np.array([[100.0, 300.0, 114.0, 320.0]])  # 20 px tall in the strip = 20 px at the far model's input
+    np.testing.assert_allclose(r.box_model.at(np.array([20.0]))[1], 0.02)
+    assert bm.at(np.array([20.0]))[1][0] == pytest.approx(0.10)  # at its own scale: the 8-12 px bucket
+    label_h = 20.0 / r.box_model.at(np.array([20.0]))[0][0]
+    assert r.box_model.correct(box)[0, 1] == pytest.approx(300.0 - 0.02 * label_h)
+
+
+def test_shipped_far_box_model_covers_the_strip_cone_sizes():
+    """On the car the strip's cones are 8-21 px at the far model's input (full resolution): the shipped far box
+    model has measured cones in its 8-12 and 12-24 px buckets (measured where one model-input px is one px of the
+    real clips' own detail, not on the clips upscaled 3x, where no cone is under 18 px)."""
+    r, _ = far_reading_for("model", default_far_model_path(), default_model_path(), False)
+    assert r.box_model.source == "measured" and r.box_model.counts[0] >= 30 and r.box_model.counts[1] >= 30

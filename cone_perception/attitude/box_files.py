@@ -7,12 +7,13 @@ write, the conservative default for a model without one, and which box model a r
 from __future__ import annotations
 
 import logging
+from dataclasses import replace
 from pathlib import Path
 
 import yaml
 
 from ..errors import ConfigError
-from .boxes import DEFAULT_BOX_MODEL, RENDERED_TABLES, BoxModel, BoxReading
+from .boxes import DEFAULT_BOX_MODEL, RENDERED_TABLES, STRIP_INPUT_SCALE, BoxModel, BoxReading
 
 log = logging.getLogger(__name__)
 
@@ -92,7 +93,8 @@ def far_reading_for(choice: str, far_model_path: str | Path | None, band_model_p
     band's) where there is no strip (``far_model_path`` None) or the strip runs the band's own model. Else, as
     :func:`box_model_for` decides for the band: the far model's rendered table (:data:`~cone_perception.attitude.boxes.RENDERED_TABLES`;
     a model without one: the band's table, as before) or its measured box model (a model without one: the
-    conservative default, warned). ValueError for an unknown choice."""
+    conservative default, warned), looked up at the strip's input scale (:data:`~cone_perception.attitude.boxes.STRIP_INPUT_SCALE`,
+    full resolution) whatever scale it was measured at. ValueError for an unknown choice."""
     if choice not in BOX_MODEL_CHOICES:
         raise ValueError(f"unknown box model choice {choice!r}; known: {', '.join(BOX_MODEL_CHOICES)}")
     if far_model_path is None:
@@ -107,6 +109,10 @@ def far_reading_for(choice: str, far_model_path: str | Path | None, band_model_p
         what = f"rendered table of {far.with_suffix('.pt').name}"
         return BoxReading(None, table, what), what
     bm, what = box_model_for("model", far, False)
+    if bm.input_scale != STRIP_INPUT_SCALE:  # its buckets are model input px: read at the strip's scale
+        if bm.source == "measured":
+            what += f", measured at input scale {bm.input_scale:g}, read at the strip's {STRIP_INPUT_SCALE:g}"
+        bm = replace(bm, input_scale=STRIP_INPUT_SCALE)
     return BoxReading(bm, (), what), what
 
 

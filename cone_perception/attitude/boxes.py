@@ -205,6 +205,12 @@ def read_boxes(boxes: np.ndarray, far: np.ndarray | None, band: BoxReading, far_
     return out, extra, rel, scatter
 
 
+#: Model input px per full-image px of the far strip: it runs at full resolution (``detector/farband.py``), so the
+#: strip's network's box model is looked up at the strip's own px (:func:`~cone_perception.attitude.box_files.far_reading_for`),
+#: whatever scale it was measured at: a box model's buckets are px at the model input, and its measurement is best
+#: made where one model-input px is one px of the labelled frames' own detail (docs/attitude.md, "Box model").
+STRIP_INPUT_SCALE = 1.0
+
 #: The shipped far model's box-top table on rendered drives (``models/cone_detector_far.pt`` run at full
 #: resolution in the strip; (box height px, px), full-image px): the median top-row residual at the true
 #: attitude per box height (negative: its box tops lie below the cones' tips), measured on tuning drives with

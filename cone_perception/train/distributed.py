@@ -13,6 +13,7 @@ differs: batch-norm statistics per process (B / W images, not B) and floating-po
 from __future__ import annotations
 
 import datetime
+import gc
 import os
 from dataclasses import dataclass
 
@@ -77,8 +78,12 @@ def setup(device: str = "auto", batch: int | None = None) -> DistInfo:
 
 
 def cleanup(info: DistInfo) -> None:
-    """Leave the process group (after a last barrier)."""
+    """Leave the process group (after a last barrier). What is left of the run (its DDP wrapper, which may
+    sit in reference cycles) is collected first, while the interpreter is whole: Gloo objects left for the
+    interpreter's exit to free are a known way a rank aborts there (pytorch/pytorch PR 179291), and a rank
+    of the 2-process test once aborted after its last epoch ("terminate called without an active exception")."""
     if info.ddp:
+        gc.collect()
         if dist.is_initialized():
             dist.barrier()
             dist.destroy_process_group()
