@@ -234,6 +234,15 @@ _PIPELINE = (
        "box model, box_model); band or empty = the band's own model; else a model file (its box model: "
        "MODEL.box_model.yaml). Its classes must be the band model's (refused at start-up otherwise)",
        values="auto, band, or a model file"),
+    _p("far_every", 1, "the far band's cadence: its strip runs on every this-many-th frame only, the frames between "
+       "run the band alone (a far cone is seen up to far_every - 1 frames late; the tracker carries it meanwhile; "
+       "docs/detector.md, Far band); 1 = every frame", min=1, max=100),
+    _p("far_tiles", 0, "with far_every above 1, on the frames between: the strip's full-resolution windows around the "
+       "last two frames' far cones (64 px each side), side by side in one mosaic at most this many columns wide, one "
+       "forward of the far model (the whole strip where they do not fit; the band alone where there are none; "
+       "docs/detector.md, Far band); 0 = off (the band alone between); else a multiple of 32 from 192 to the strip's "
+       "width", min=0,
+       max=8192),
     _p("track", False, "also the tracker stage: /cones/tracked out (the parameters of cone_tracker); it gets each "
        "frame's attitude, which a separate cone_tracker does not"),
 )

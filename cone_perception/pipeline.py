@@ -7,16 +7,18 @@ Used by the fused ``pipeline`` node, the offline ``replay``, ``detect`` on bags 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from collections import deque
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from .adapter import DriverAdapter
 from .attitude import FIXED, Attitude, attitude_estimator, attitude_for_boxes
-from .detector.farband import FarBand, drawn_by_far, merge_boxes
+from .detector.farband import FarBand, drawn_by_far, drop_cut_boxes, merge_boxes
 from .detector.parallel import PairRunner
 from .geometry.calib import Calibration
 from .mapping import ConeMapper, one_box_per_cone
+from .records import BOX_DTYPE
 from .params import DEFAULT_IOU, DEFAULT_MIN_HEIGHT_RATIO
 
 STAGES = ("adapter", "preprocess", "forward", "postprocess", "far_forward", "far_band", "far_wait", "attitude", "mapping")
@@ -63,34 +65,59 @@ class Pipeline:
     :meth:`close` joins the worker. Stage times with ``far``: ``far_forward`` (the strip's forward),
     ``far_band`` (its detect and the merge, on whichever thread), ``far_wait`` (what it adds to the frame:
     ``far_band`` when sequential, the wait for it after the band's detect plus the merge when concurrent).
+    ``far_every``: with ``far``, the strip runs on every this-many-th frame only (the first frame, then every
+    ``far_every``-th; 1: every frame), the frames between run the band alone (no strip cut): a far cone is seen
+    up to ``far_every - 1`` frames late, the tracker carries it meanwhile (docs/detector.md, "Far band").
+    ``far_tiles``: with ``far_every`` > 1, a :class:`~cone_perception.detector.fartiles.FarTiles`: on the frames
+    between, the strip's windows around the last frames' boxes whole in the strip's rows run as one mosaic, as
+    narrow as they allow (the whole strip where they do not fit it; the band alone where there are none); None:
+    the band alone between.
     """
 
     def __init__(self, calib: Calibration, detector, attitude: str | None = None, imu=None, far: FarBand | None = None,
                  cones_conf: float | None = None, attitude_config=None, concurrent: bool = False,
-                 min_height_ratio: float = DEFAULT_MIN_HEIGHT_RATIO):
+                 min_height_ratio: float = DEFAULT_MIN_HEIGHT_RATIO, far_every: int = 1, far_tiles=None):
         self.calib = calib
+        if isinstance(far_every, bool) or not isinstance(far_every, (int, np.integer)) or far_every < 1:
+            raise ValueError(f"far_every must be a whole number of frames >= 1, got {far_every!r}")
+        self.far_every = int(far_every)
+        self._frame_n = 0  # frames processed: the strip runs where frame_n % far_every == 0
+        self.far_tiles = far_tiles if far is not None and self.far_every > 1 else None
+        # the last frames' boxes whole in their strip's rows (far_tiles.memory frames): where the tiles look
+        self._far_seen: deque[np.ndarray] = deque(maxlen=far_tiles.memory if self.far_tiles is not None else 1)
+        self._frame_rows: tuple[int, int] | None = None  # this frame's strip rows (also where it does not run)
         if far is not None:
             far.check_classes(detector)  # a far model of other classes: refused before the first frame
         self._pair = PairRunner(concurrent and far is not None)  # the band's and the strip's detect
         self.far = far  # the far band (full-resolution rows near the horizon, detector/farband.py), or None
         self.adapter = DriverAdapter(calib.crop, calib.image_width, calib.image_height, far.crop if far else None)
+        self._band_adapter = replace(self.adapter, far=None)  # a frame far_every skips: the band alone is cut
         self.detector = detector
         self.mapper = ConeMapper(calib, min_height_ratio)  # its ``dropped``: the boxes dropped, by cause
         self.imu = imu  # an ImuAttitude the caller feeds (modes imu, fused), or None
         self.attitude_mode, self.attitude = attitude_estimator(self.mapper, attitude, imu, attitude_config)
         self.cones_conf = cones_conf
         #: frames with the far strip, and those where the attitude would have moved it out of the image
-        #: (clamped to it): the replay summary and the node's /diagnostics report them
+        #: (clamped to it): the replay summary and the node's /diagnostics report them (``skipped``: frames
+        #: without it by ``far_every``, only where that is above 1)
         self.strip_counts = {"frames": 0, "clamped": 0}
+        if far is not None and self.far_every > 1:
+            self.strip_counts["skipped"] = 0
+            if self.far_tiles is not None:  # frames run as tiles, and those whose tiles did not fit (the whole strip)
+                self.strip_counts.update(tiles=0, tiles_full=0)
         self.strip_rows: tuple[int, int] | None = None  # the last frame's strip rows (V0, V1)
         self._strip_attitude = np.zeros(2)  # (pitch, roll) the strip follows: the previous frame's attitude
         self._strip_body: np.ndarray | None = None  # the IMU's reading at the previous frame's stamp
 
     def _far_crop(self, stamp_ns: int | None):
-        """(this frame's strip crop, clamped), or (None, False) without a far band: moved with the previous
-        frame's attitude, plus what the IMU (modes imu, fused) turned since then, read at this frame's stamp."""
+        """(this frame's strip crop, clamped, tile windows), or (None, False, None) without a far band or on a
+        frame ``far_every`` skips without tiles (windows: None for the whole strip); the strip is moved with the
+        previous frame's attitude, plus what the IMU (modes imu, fused) turned since then, read at this frame's
+        stamp (read on a skipped frame too: the next strip adds only what it turned since)."""
         if self.far is None:
-            return None, False
+            return None, False, None
+        due = self._frame_n % self.far_every == 0
+        self._frame_n += 1
         att = self._strip_attitude
         if self.imu is not None and self.far.plan is not None:
             # not counted here: the attitude estimator reads the IMU at this stamp too, and counts it there
@@ -98,24 +125,45 @@ class Pipeline:
             if body is not None and self._strip_body is not None:
                 att = att + (body - self._strip_body)
             self._strip_body = body
-        return self.far.crop_for(float(att[0]), float(att[1]))
+        crop, clamped = self.far.crop_for(float(att[0]), float(att[1]))
+        self._frame_rows = (crop.v0, crop.v1)
+        if due:
+            return crop, clamped, None
+        self.strip_counts["skipped"] += 1
+        if self.far_tiles is None:
+            return None, False, None
+        seen = np.concatenate(self._far_seen) if self._far_seen else np.zeros(0, BOX_DTYPE)
+        windows = self.far_tiles.windows(seen, self.calib.image_width)
+        if windows is None:  # too many far cones for the mosaic: the whole strip
+            self.strip_counts["tiles_full"] += 1
+            return crop, clamped, None
+        if not windows:  # no far cone to look for: the band alone
+            return None, False, None
+        self.strip_counts["tiles"] += 1
+        return crop, clamped, windows
 
     def _run(self, band: np.ndarray, t_adapter_s: float, strip: np.ndarray | None, stamp_ns: int | None,
-             far_crop=None, clamped: bool = False) -> FrameResult:
+             far_crop=None, clamped: bool = False, windows=None) -> FrameResult:
         timing = {"adapter": t_adapter_s * 1e3}
         far_boxes = None  # the far strip's boxes: the image attitude reads those kept through the far model's box model
         if self.far is not None and strip is not None:  # two forwards, at once with a concurrent plan
-            boxes, far_boxes, t = self._pair.run(lambda: self.detector.detect(band, self.calib.crop),
-                                                 lambda: self.far.detect(strip, far_crop))
+            if windows is None:
+                def second():
+                    return self.far.detect(strip, far_crop)
+            else:  # the tiles: the strip's windows around the last frames' far cones, one mosaic
+                def second():
+                    return self.far_tiles.detect(strip, far_crop, windows, self.calib.image_width)
+            boxes, far_boxes, t = self._pair.run(lambda: self.detector.detect(band, self.calib.crop), second)
+            far_det = self.far.detector if windows is None else self.far_tiles.detector  # the network that ran
             t0 = time.perf_counter()
             boxes = merge_boxes(boxes, far_boxes, getattr(self.far.detector, "iou", DEFAULT_IOU))
             t_merge = (time.perf_counter() - t0) * 1e3
             timing.update({k.removesuffix("_ms"): v for k, v in self.detector.timing.items()})
-            if "forward_ms" in getattr(self.far.detector, "timing", {}):
-                timing["far_forward"] = self.far.detector.timing["forward_ms"]
+            if "forward_ms" in getattr(far_det, "timing", {}):
+                timing["far_forward"] = far_det.timing["forward_ms"]
             timing["far_band"] = t["second"] + t_merge  # the strip's own time, on whichever thread
             timing["far_wait"] = t["wall"] - t["first"] + t_merge  # what it adds to the frame
-            self.strip_counts["frames"] += 1
+            self.strip_counts["frames"] += int(windows is None)
             self.strip_counts["clamped"] += int(clamped)
             self.strip_rows = (far_crop.v0, far_crop.v1) if far_crop is not None else None
         else:
@@ -124,6 +172,8 @@ class Pipeline:
         n_boxes = len(boxes)
         boxes = one_box_per_cone(boxes)  # a second box of one cone (two classes, or twice small) goes
         self.mapper.dropped["second_box"] += n_boxes - len(boxes)
+        if self.far_tiles is not None:  # where the next frame's tiles look: this frame's cones whole in its strip's rows
+            self._far_seen.append(drop_cut_boxes(boxes, replace(self.far.crop, v0=self._frame_rows[0], v1=self._frame_rows[1])))
         weak = None
         if self.cones_conf is not None:
             strong = boxes["score"] >= self.cones_conf
@@ -168,15 +218,17 @@ class Pipeline:
         ``FrameError`` for a bad frame."""
         self._check_stamp(stamp_ns)
         t0 = time.perf_counter()
-        far, clamped = self._far_crop(stamp_ns)
-        band, strip = self.adapter.bands_from_raw(encoding, width, height, step, data, far)
-        return self._run(band, time.perf_counter() - t0, strip, stamp_ns, far, clamped)
+        far, clamped, windows = self._far_crop(stamp_ns)
+        adapter = self.adapter if far is not None else self._band_adapter
+        band, strip = adapter.bands_from_raw(encoding, width, height, step, data, far)
+        return self._run(band, time.perf_counter() - t0, strip, stamp_ns, far, clamped, windows)
 
     def process_compressed(self, data, stamp_ns: int | None = None) -> FrameResult:
         """sensor_msgs/CompressedImage data (JPEG/PNG) -> :class:`FrameResult`; ``stamp_ns`` as
         :meth:`process_raw`."""
         self._check_stamp(stamp_ns)
         t0 = time.perf_counter()
-        far, clamped = self._far_crop(stamp_ns)
-        band, strip = self.adapter.bands_from_compressed(data, far)
-        return self._run(band, time.perf_counter() - t0, strip, stamp_ns, far, clamped)
+        far, clamped, windows = self._far_crop(stamp_ns)
+        adapter = self.adapter if far is not None else self._band_adapter
+        band, strip = adapter.bands_from_compressed(data, far)
+        return self._run(band, time.perf_counter() - t0, strip, stamp_ns, far, clamped, windows)

@@ -28,15 +28,18 @@ BYTES_PER_PX = {"yuv422_yuy2": 2, "bgr8": 3, "rgb8": 3}
 
 
 def bench_pipeline(calib, det, frames: list[bytes], n_frames: int, warmup: int = 20, far=None,
-                   concurrent: bool = False) -> dict:
+                   concurrent: bool = False, far_every: int = 1, far_tiles=None) -> dict:
     """Time ``det`` in the fused pipeline of ``calib`` (its crop and downscale) on raw YUYV ``frames``
     (cycled): per stage, end to end with the packing of ``cone_boxes`` and ``/cones``. The result
     of ``bench pipeline`` (and one row of ``bench table``). ``far``: a far band (``detector/farband.py``) or None;
-    ``concurrent``: its forward at the same time as the band's (``detector/parallel.py``). The image attitude reads
+    ``concurrent``: its forward at the same time as the band's (``detector/parallel.py``); ``far_every``: its strip
+    on every this-many-th frame only (the frame rate is then bimodal: ``fps_mean`` reads the mean), ``far_tiles``
+    its tiles between (``detector/fartiles.py``). The image attitude reads
     the boxes as the nodes' ``box_model: auto`` does (the model's box model, the rendered table for a synthetic
     camera), so its stage costs what it costs on the car."""
     bm, _ = box_model_for("auto", det.source, calib.camera == "synth")
-    with Pipeline(calib, det, far=far, concurrent=concurrent, attitude_config=ImageAttitudeConfig(box_model=bm)) as pipe:
+    with Pipeline(calib, det, far=far, concurrent=concurrent, attitude_config=ImageAttitudeConfig(box_model=bm),
+                  far_every=far_every, far_tiles=far_tiles) as pipe:
         return _time_pipeline(pipe, calib, det, frames, n_frames, warmup)
 
 
@@ -76,6 +79,7 @@ def _time_pipeline(pipe: Pipeline, calib, det, frames: list[bytes], n_frames: in
         "model": det.source,
         "backend": det.backend,
         "fps": 1000.0 / s["end_to_end"]["median_ms"],
+        "fps_mean": 1000.0 / s["end_to_end"]["mean_ms"],
         "boxes_per_frame": n_boxes / n_frames,
         "non_forward_median_ms": s["end_to_end"]["median_ms"] - s["forward"]["median_ms"],
         "stages": s,

@@ -17,9 +17,11 @@ from ..bench.pipeline import bench_adapter, bench_pipeline, bench_tracker, load_
 from ..bench.table import crop_for_setting, run_table
 from ..resources import far_model_for, far_model_given
 from ..detector import default_model_path
+from ..detector.fartiles import FarTiles
 from ..detector.farband import FarBand, SplitDetector, band_rows_for, band_split_for, far_rows_for
 from ..detector.parallel import ForwardPlan
 from ..errors import ConfigError
+from ..params import PARAMS
 from ..geometry.calib import load_calibration
 from ..timing import format_runs, format_table, summarize_runs
 from ..words import plural
@@ -41,6 +43,10 @@ def _bench_pipeline(args: argparse.Namespace, calib) -> dict:
     far_rows = far_rows_for(args.far_rows, calib, "--far-rows")  # a bad value fails before any model loads
     if far_model_given(args.far_model) and far_rows.crop is None:
         raise ConfigError("--far-model", None, f"needs a far band ({far_rows.what})")
+    for name in ("far_every", "far_tiles"):
+        why = PARAMS[name].check(getattr(args, name))
+        if why:
+            raise ConfigError("--" + name.replace("_", "-"), None, why)
     plan = forward_plan(args.threads, far_rows.crop is not None, args.sequential)
     split = band_split_for(args.band_split, calib, "--band-split")
     if split.upper is None:
@@ -50,13 +56,16 @@ def _bench_pipeline(args: argparse.Namespace, calib) -> dict:
                                  threads=plan.network_threads, bf16=args.bf16)
     far = FarBand.for_calibration(far_model_for(args.far_model, det.source), args.far_rows, calib, "--far-rows", "--far-model",
                                   backend=args.backend, threads=plan.network_threads, bf16=args.bf16)
+    tiles = FarTiles.for_setting(far.detector.source if far else None, args.far_tiles, far, args.far_every,
+                                 "--far-tiles", backend=args.backend, threads=plan.network_threads, bf16=args.bf16)
     result = bench_pipeline(calib, det, rendered_frames(calib, max(1, args.scenes)), args.frames, args.warmup, far,
-                            plan.concurrent)
+                            plan.concurrent, args.far_every, tiles)
     result["far_rows"] = f"{far.crop.v0},{far.crop.v1}" if far is not None else "none"
     result["far_band"] = far_rows.what if split.upper is None else f"{far_rows.what}; {split.what}"
     result["band_split"] = split.what
     result["far_model"] = far.detector.source if far is not None and args.far_model else ""
     result["forwards"] = plan.describe() if far is not None else ""
+    result["far_every"] = args.far_every if far is not None else None
     result["setting"] = args.input or "calibration"
     result["threads"] = args.threads
     return result
@@ -71,6 +80,8 @@ def _repeat_pipeline(args: argparse.Namespace) -> int:
     cmd += ["--input", args.input] if args.input else []
     cmd += (["--far-rows", args.far_rows] if args.far_rows is not None else []) + (["--far-model", args.far_model] if args.far_model else [])
     cmd += ["--sequential"] if args.sequential else []
+    cmd += ["--far-every", str(args.far_every)] if args.far_every != PARAMS["far_every"].default else []
+    cmd += ["--far-tiles", str(args.far_tiles)] if args.far_tiles != PARAMS["far_tiles"].default else []
     cmd += ["--band-rows", args.band_rows] if args.band_rows is not None else []
     cmd += ["--band-split", args.band_split] if args.band_split is not None else []
     runs = []
@@ -114,6 +125,9 @@ def run_bench(args: argparse.Namespace) -> int:
               f"({result['backend']}, {plural(result['threads'], 'thread')}), {args.frames} frames, "
               f"{result['boxes_per_frame']:.1f} boxes/frame; {result['far_band']}")
         print(format_table(result["stages"]))
+        if (result["far_every"] or 1) > 1:  # bimodal: frames with the strip and without
+            print(f"far strip on one frame in {result['far_every']}: frames/s over the mean end to end "
+                  f"{result['fps_mean']:.1f}")
         print(f"frames/s (median end to end): {result['fps']:.1f}   everything but the forward: "
               f"{result['non_forward_median_ms']:.2f} ms   peak RSS: {result['peak_rss_mb']:.0f} MiB")
         if result["forwards"]:

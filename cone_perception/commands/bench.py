@@ -34,7 +34,7 @@ from ..bench.run import run_bench
 from ..bench.table import INPUT_SETTINGS
 from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, RUNTIME_THREADS
 from ..geometry.calib import DEFAULT_CAMERA
-from ..params import DEFAULT_CONF
+from ..params import DEFAULT_CONF, PARAMS
 from ._args import parse_crop
 
 
@@ -59,6 +59,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--far-rows", default=None, metavar="auto|none|V0,V1",
                    help="pipeline: the far band, image rows also run at full resolution (docs/detector.md 'Far band'): "
                         "auto (default) = the calibration's far strip; V0,V1 = these rows; none (or off) = the band alone")
+    p.add_argument("--far-every", type=int, default=PARAMS["far_every"].default, metavar="N",
+                   help="pipeline: the far band's strip on every N-th frame only, the band alone between (the pipeline "
+                        "node's far_every; default %(default)s = every frame); the frame rate is then bimodal: read the "
+                        "mean (frames/s over the mean end to end)")
+    p.add_argument("--far-tiles", type=int, default=PARAMS["far_tiles"].default, metavar="W",
+                   help="pipeline, with --far-every above 1: on the frames between, the strip's windows around the last "
+                        "two frames' far cones in one mosaic at most W columns wide (the node's far_tiles; default "
+                        "%(default)s = off). The rendered scenes cycle: the tiles look where another scene's far cones "
+                        "were (docs/experiments/far_cadence_cost.py measures them on a drive's frames)")
     p.add_argument("--band-rows", default=None, metavar="crop|auto|V0,V1",
                    help="pipeline: the band's rows (docs/detector.md 'Band rows'): crop (default) = the calibration's crop, "
                         "auto = placed from the calibration, V0,V1 = these rows")

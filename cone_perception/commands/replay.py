@@ -68,6 +68,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the far band, image rows also run at full resolution, the whole width (docs/detector.md "
                         "'Far band'): auto (default) = the calibration's far strip, moved each frame with the attitude; "
                         "V0,V1 = these rows, fixed; none (or off) = the band alone. Live: the pipeline node's far_rows (fused only)")
+    p.add_argument("--far-every", type=int, default=PARAMS["far_every"].default, metavar="N",
+                   help="the far band's cadence: its strip on every N-th frame only, the band alone between (a far cone "
+                        "is seen up to N-1 frames late; docs/detector.md 'Far band'; default %(default)s = every frame). "
+                        "Live: the pipeline node's far_every (fused only)")
+    p.add_argument("--far-tiles", type=int, default=PARAMS["far_tiles"].default, metavar="W",
+                   help="with --far-every above 1, on the frames between: the strip's windows around the last two frames' "
+                        "far cones in one mosaic at most W columns wide (docs/detector.md 'Far band'); 0 (default) = off, the "
+                        "band alone between. Live: the pipeline node's far_tiles (fused only)")
     p.add_argument("--band-split", default=None, metavar="none|auto|N0,U1",
                    help="offline: the band in two (docs/detector.md 'Row-scaled band'): none (default) = one band; auto = "
                         "split from the calibration, the near rows at a quarter of full resolution; N0,U1 = the near band "

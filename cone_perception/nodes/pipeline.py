@@ -28,6 +28,14 @@ Parameters (generated from cone_perception/params.py by ``cone-perception params
     more small cones; the image attitude reads its boxes through its own box model, box_model); band
     or empty = the band's own model; else a model file (its box model: MODEL.box_model.yaml). Its
     classes must be the band model's (refused at start-up otherwise)
+  far_every (int, default 1; 1 .. 100): the far band's cadence: its strip runs on every this-many-th
+    frame only, the frames between run the band alone (a far cone is seen up to far_every - 1 frames
+    late; the tracker carries it meanwhile; docs/detector.md, Far band); 1 = every frame
+  far_tiles (int, default 0; 0 .. 8192): with far_every above 1, on the frames between: the strip's
+    full-resolution windows around the last two frames' far cones (64 px each side), side by side in
+    one mosaic at most this many columns wide, one forward of the far model (the whole strip where
+    they do not fit; the band alone where there are none; docs/detector.md, Far band); 0 = off (the
+    band alone between); else a multiple of 32 from 192 to the strip's width
   track (bool, default false): also the tracker stage: /cones/tracked out (the parameters of
     cone_tracker); it gets each frame's attitude, which a separate cone_tracker does not
   Also those of driver_adapter (calibration, input_transport); those of detection (model, backend,
@@ -72,10 +80,23 @@ class PipelineNode(PerceptionNode):
         det = self.loader.load((fr.crop.out_width, fr.crop.out_height), model)
         return FarBand(fr.crop, det, "parameter far_model", fr.plan)
 
+    def _far_tiles(self, far, every: int, model):
+        """The far tiles of ``far_tiles`` (detector/fartiles.py; a detector of the far band's ``model`` built for the
+        mosaic) between the far band ``far``'s strips, every ``every``-th frame, or None."""
+        from ..detector.fartiles import FarTiles, mosaic_widths
+
+        width = int(declare(self, "far_tiles"))
+        if not FarTiles.wanted(width, far, every, "parameter far_tiles"):
+            return None
+        return FarTiles({w: self.loader.load((w, far.crop.height_full_px), model) for w in mosaic_widths(width)})
+
     def _set_threshold(self, name: str, value) -> None:
         self.loader.set_threshold(self.pipeline.detector, name, value)
         if self.pipeline.far is not None:
             self.loader.set_threshold(self.pipeline.far.detector, name, value)
+        if self.pipeline.far_tiles is not None:
+            for det in self.pipeline.far_tiles.detectors.values():
+                self.loader.set_threshold(det, name, value)
 
     def __init__(self, **node_kwargs):
         super().__init__("pipeline", **node_kwargs)
@@ -102,9 +123,11 @@ class PipelineNode(PerceptionNode):
         # the box model of each network: the band's, and the far strip's own model's for its boxes
         att_config, box_model = declare_box_model(self, calib, self.loader.model,
                                                   far_model if far_rows.crop is not None else None)
-        self.pipeline = Pipeline(calib, detector, mode, imu, self._far_band(far_rows, far_model),
+        far, every = self._far_band(far_rows, far_model), int(declare(self, "far_every"))
+        self.pipeline = Pipeline(calib, detector, mode, imu, far,
                                  attitude_config=att_config, concurrent=plan.concurrent,
-                                 min_height_ratio=float(declare(self, "min_height_ratio")))
+                                 min_height_ratio=float(declare(self, "min_height_ratio")),
+                                 far_every=every, far_tiles=self._far_tiles(far, every, far_model))
         self.health.watch("boxes_dropped", self.pipeline.mapper.dropped)  # by cause (mapping.DROP_CAUSES)
         report_attitude(self, self.pipeline.attitude_mode, self.pipeline.attitude, box_model)
         if self.pipeline.far is not None:  # /diagnostics: frames with the strip, those clamped to the image (WARN)

@@ -22,6 +22,7 @@ from ..data.bags import read_attitude_truth, read_ground_truth, read_twists
 from ..data.outfiles import print_written, refuse_existing, remove_bag
 from ..resources import far_model_for, far_model_given
 from ..detector import Detector, default_model_path
+from ..detector.fartiles import FarTiles
 from ..detector.farband import FarBand, SplitDetector, band_rows_for, band_split_for, far_rows_for
 from ..detector.parallel import ForwardPlan
 from ..detector.model_files import attitude_config_for, box_model_or_default, far_reading_for
@@ -61,6 +62,12 @@ def run_replay(args: argparse.Namespace) -> int:
     why = PARAMS["min_height_ratio"].check(args.min_height_ratio)
     if why:
         raise ConfigError("--min-height-ratio", None, why)
+    for name in ("far_every", "far_tiles"):
+        why = PARAMS[name].check(getattr(args, name))
+        if why:
+            raise ConfigError("--" + name.replace("_", "-"), None, why)
+    if args.far_tiles and args.box_behaviour == "real":
+        raise ConfigError("--far-tiles", None, "not with --box-behaviour real (it acts on the far band's own network)")
     if args.live and args.min_height_ratio != PARAMS["min_height_ratio"].default:
         raise ConfigError("--min-height-ratio", None, "works offline only (live: the nodes' min_height_ratio)")
     if args.max_range is not None:
@@ -150,7 +157,10 @@ def _run_offline(args, calib) -> dict:
                                       far_real.box_model if far_real is not None else None,
                                       far_rendered_table=far_table.table if far_table is not None else ())
     pipeline = Pipeline(calib, det, args.attitude, imu, far, cones_conf=args.conf if args.track_conf is not None else None,
-                        attitude_config=att_cfg, concurrent=plan.concurrent, min_height_ratio=args.min_height_ratio)
+                        attitude_config=att_cfg, concurrent=plan.concurrent, min_height_ratio=args.min_height_ratio,
+                        far_every=args.far_every, far_tiles=FarTiles.for_setting(
+                            far_model, args.far_tiles, far, args.far_every, "--far-tiles", backend=args.backend, conf=conf,
+                            threads=plan.network_threads or None, bf16=args.bf16))
     with pipeline:  # joins the strip's worker thread, if one ran
         res = offline_replay(args.bag, pipeline, args.topic, args.out, args.gt_topic,
                              _progress(args.no_progress), imu_topic=args.imu_topic, tracking=tracking)
@@ -196,7 +206,9 @@ def format_strip_counts(pipeline) -> str:
     s = strip_summary(pipeline)
     how = "moved with the attitude" if s["moves"] else "fixed"
     return (f"rows {s['rows'][0]}-{s['rows'][1]} at the calibration's attitude ({how}), {s['frames']} frames, "
-            f"clamped to the image in {s['clamped']}")
+            f"clamped to the image in {s['clamped']}" + (f", skipped (far_every) in {s['skipped']}" if "skipped" in s else "")
+            + (f", of those run as tiles {s['tiles']}, as the whole strip (tiles too wide) {s['tiles_full']}"
+               if "tiles" in s else ""))
 
 
 def tracker_config(settings: list[str]) -> TrackerConfig:
@@ -246,6 +258,9 @@ def _run_live(args, calib) -> dict:
         params["box_model"] = box_model_choice(args)
     if args.far_rows is not None:
         params["far_rows"] = args.far_rows
+    for name in ("far_every", "far_tiles"):
+        if getattr(args, name) != PARAMS[name].default:
+            params[name] = getattr(args, name)
     if args.band_rows is not None:
         params["band_rows"] = args.band_rows
     if far_model_given(args.far_model):
