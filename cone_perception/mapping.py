@@ -128,6 +128,72 @@ def one_box_per_cone(records: np.ndarray, iou: float = CROSS_CLASS_IOU, small_px
     return records[keep]
 
 
+#: :func:`one_cone_per_ray`'s ways to make one cone of a pair: ``drop`` (the better-scored cone as it was),
+#: ``keep`` (its position, its covariance stretched along the pair to cover the other's), ``merge`` (the
+#: score-weighted mean of their positions and the moment-matched covariance)
+RAY_MERGE_MODES = ("drop", "keep", "merge")
+
+
+def one_cone_per_ray(cones: np.ndarray, camera_xy, across_m: float, along_m: float, along_frac: float = 0.0,
+                     mode: str = "keep", max_range_m: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
+    """(:data:`CONE_DTYPE` records, mask of the input records kept) after making one cone of each pair of cones
+    of one class standing nearly on one viewing ray: the other cone less than ``across_m`` (m) off the ray from
+    the camera's ground point ``camera_xy`` through the better-scored one, and less than ``max(along_m,
+    along_frac x its range)`` (m) before or behind it along that ray, the better-scored one nearer than
+    ``max_range_m`` (m from the camera). Two boxes of one far cone a few pixels
+    apart map about 1.5 m apart along the ray (a pixel of foot row is metres there), on the same bearing; two
+    cones of a row stand 2-5 m apart and off one ray unless the row points at the camera (docs/benchmarks.md).
+
+    Greedy, best score first: a kept cone takes every lower-scored cone (ties: the later) that pairs with it;
+    ``mode`` (:data:`RAY_MERGE_MODES`) says what the kept cone becomes. The output keeps the input order."""
+    if mode not in RAY_MERGE_MODES:
+        raise ValueError(f"mode must be one of {RAY_MERGE_MODES}, got {mode!r}")
+    n = len(cones)
+    keep = np.ones(n, dtype=bool)
+    if n < 2 or across_m <= 0:
+        return cones, keep
+    xy = np.c_[cones["x"], cones["y"]].astype(np.float64)
+    ray = xy - np.asarray(camera_xy, np.float64)
+    rng = np.linalg.norm(ray, axis=1)
+    u = ray / np.maximum(rng, 1e-9)[:, None]
+    d = xy[None, :, :] - xy[:, None, :]  # d[i, j] = xy[j] - xy[i]
+    along = np.einsum("ijk,ik->ij", d, u)  # along cone i's ray
+    across = np.abs(d[..., 0] * u[:, 1:2] - d[..., 1] * u[:, 0:1])
+    score = np.asarray(cones["score"], np.float64)
+    pair = ((cones["class_id"][:, None] == cones["class_id"][None, :]) & (across < across_m)
+            & (np.abs(along) < np.maximum(along_m, along_frac * rng)[:, None]) & (rng < max_range_m)[:, None])
+    np.fill_diagonal(pair, False)
+    if not pair.any():
+        return cones, keep
+    out = cones.copy()
+    for i in np.argsort(-score, kind="stable"):
+        if not keep[i]:
+            continue
+        takes = np.flatnonzero(pair[i] & keep & (score <= score[i]))
+        takes = takes[takes != i]
+        if takes.size == 0:
+            continue
+        keep[takes] = False
+        if mode == "drop":
+            continue
+        grp = np.r_[i, takes]
+        cov = np.stack([np.stack([cones["cov_xx"][grp], cones["cov_xy"][grp]], -1),
+                        np.stack([cones["cov_xy"][grp], cones["cov_yy"][grp]], -1)], -2).astype(np.float64)
+        if mode == "keep":  # where it was; every other position within one sigma along the pair
+            dd = xy[takes] - xy[i]
+            c = cov[0] + np.einsum("ni,nj->ij", dd, dd)
+            p = xy[i]
+        else:  # the score-weighted mixture's mean and covariance
+            w = np.maximum(score[grp], 1e-6)
+            w = w / w.sum()
+            p = w @ xy[grp]
+            dd = xy[grp] - p
+            c = np.einsum("n,nij->ij", w, cov + dd[:, :, None] * dd[:, None, :])
+        out["x"][i], out["y"][i] = p
+        out["cov_xx"][i], out["cov_xy"][i], out["cov_yy"][i] = c[0, 0], c[0, 1], c[1, 1]
+    return out[keep], keep
+
+
 class ConeMapper:
     """Boxes -> cones for one calibrated camera."""
 

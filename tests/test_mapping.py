@@ -318,3 +318,61 @@ def test_pipeline_drops_flat_boxes_by_default_and_counts_every_dropped_box() -> 
     assert p.mapper.dropped == {"second_box": 1, "off_ground": 0, "flat": 1}
     q = Pipeline(calib, Fixed(), "fixed", min_height_ratio=0.0)
     assert len(q.process_raw("bgr8", 1920, 1080, 5760, frame).cones) == 2 and q.mapper.dropped["flat"] == 0
+
+
+def _cones(rows):
+    """rows of (x, y, score, class_id) -> CONE_DTYPE records with a covariance of 0.5 m along x, 0.1 m along y."""
+    out = np.zeros(len(rows), CONE_DTYPE)
+    for k, (x, y, s, c) in enumerate(rows):
+        out[k]["x"], out[k]["y"], out[k]["score"], out[k]["class_id"] = x, y, s, c
+        out[k]["cov_xx"], out[k]["cov_yy"] = 0.25, 0.01
+    return out
+
+
+def test_one_cone_per_ray_makes_one_cone_of_two_boxes_of_one_far_cone_only() -> None:
+    """Issue 26 (session 15): two boxes of one far cone a few pixels apart map about 1.5 m apart along the viewing
+    ray, on one bearing. Such a pair of one class becomes one cone (the better-scored, its covariance stretched to
+    cover the other); two cones of a row 4 m apart along the ray, a pair off the ray, and two classes stay."""
+    from cone_perception.mapping import one_cone_per_ray
+
+    cam = np.array([1.0, 0.0])
+    c = _cones([(31.0, 0.0, 0.45, BLUE),     # 1.5 m behind the cone below, on its ray: the same cone
+                (29.5, 0.0, 0.70, BLUE),
+                (21.0, 5.0, 0.60, YELLOW),   # a row pointing at the camera: 4 m apart along the ray, both stay
+                (17.0, 4.0, 0.65, YELLOW),
+                (30.0, 3.0, 0.70, BLUE),     # 1.5 m apart along x but 0.6 m off the ray (bearing): two cones
+                (31.5, 3.6, 0.40, BLUE),
+                (16.0, -3.0, 0.70, BLUE),    # one spot, two classes: not this rule's (one_box_per_cone's)
+                (17.0, -3.2, 0.40, YELLOW)])
+    out, keep = one_cone_per_ray(c, cam, across_m=0.2, along_m=2.5, mode="keep")
+    np.testing.assert_array_equal(keep, [False, True, True, True, True, True, True, True])
+    assert len(out) == 7 and out["score"][0] == pytest.approx(0.70)
+    assert (out["x"][0], out["y"][0]) == (pytest.approx(29.5), pytest.approx(0.0))
+    # its covariance covers both positions: the other one within one sigma along the ray, across unchanged
+    d = np.array([31.0 - 29.5, 0.0])
+    cov = np.array([[out["cov_xx"][0], out["cov_xy"][0]], [out["cov_xy"][0], out["cov_yy"][0]]])
+    assert d @ np.linalg.solve(cov, d) <= 1.0
+    assert out["cov_yy"][0] == pytest.approx(0.01)
+    np.testing.assert_array_equal(out[1:], c[2:])  # the others untouched, in order
+    # the rule off (across 0), a single cone, none
+    assert one_cone_per_ray(c, cam, 0.0, 2.5)[1].all()
+    assert len(one_cone_per_ray(c[:1], cam, 0.2, 2.5)[0]) == 1 and len(one_cone_per_ray(c[:0], cam, 0.2, 2.5)[0]) == 0
+    # farther apart than along_m: two cones; a share of the range instead (0.06 x 29.5 m = 1.77 m): one
+    assert one_cone_per_ray(c, cam, 0.2, 1.0)[1].all()
+    assert not one_cone_per_ray(c, cam, 0.2, 1.0, along_frac=0.06)[1][0]
+
+
+def test_one_cone_per_ray_merge_places_the_cone_at_the_score_weighted_mean() -> None:
+    """``merge``: the pair's score-weighted mean position and the mixture's covariance (its own plus the spread);
+    ``drop``: the better cone as it was. A bad mode is refused, naming it."""
+    from cone_perception.mapping import one_cone_per_ray
+
+    c = _cones([(31.0, 0.0, 0.25, BLUE), (29.5, 0.0, 0.75, BLUE)])
+    out, _ = one_cone_per_ray(c, np.zeros(2), 0.2, 2.5, mode="merge")
+    assert len(out) == 1 and out["x"][0] == pytest.approx(0.25 * 31.0 + 0.75 * 29.5)
+    assert out["cov_xx"][0] == pytest.approx(0.25 + 0.25 * 0.75 * 1.5 ** 2, rel=1e-6)
+    assert out["cov_yy"][0] == pytest.approx(0.01) and out["cov_xy"][0] == pytest.approx(0.0)
+    out, _ = one_cone_per_ray(c, np.zeros(2), 0.2, 2.5, mode="drop")
+    np.testing.assert_array_equal(out, c[1:])
+    with pytest.raises(ValueError, match="mode"):
+        one_cone_per_ray(c, np.zeros(2), 0.2, 2.5, mode="mean")

@@ -134,9 +134,13 @@ def gated(mapper: ConeMapper, boxes: np.ndarray, att, gate) -> np.ndarray:
     return boxes[~(drop & ok)]
 
 
-def run(data: dict, merge, tracker_kw: dict, gate=None) -> dict:
+def run(data: dict, merge, tracker_kw: dict, gate=None, post=None, post_tracker: bool = True,
+        min_height_ratio: float = 0.0) -> dict:
+    """One design on one recording. ``post``: cones -> cones after the mapping (a ground-plane rule,
+    `false_cones_ray.py`), on `/cones`, and on what the tracker gets too unless ``post_tracker`` is False;
+    ``min_height_ratio``: the mapping's flat-box gate (0 here unless given: the designs above predate it)."""
     calib = load_calibration(data["calib"])
-    mapper = ConeMapper(calib)
+    mapper = ConeMapper(calib, min_height_ratio)
     truth = read_ground_truth(data["bag"], "/cones_gt")
     rep = LocalisationReport(max_range_m=calib.max_range_m, min_visible=GT_MIN_VISIBLE)
     stage, ev = TrackingStage(calib, TrackerConfig(**tracker_kw)), DriveEvaluation(load_drive_truth(f"{data['bag']}_gt.jsonl"))
@@ -146,9 +150,10 @@ def run(data: dict, merge, tracker_kw: dict, gate=None) -> dict:
         if gate is not None:
             boxes = gated(mapper, boxes, fr["attitude"], gate)
         cones = mapper.map_boxes(boxes, fr["attitude"])
+        pub = post(cones) if post is not None else cones
         if stamp in truth:
-            rep.add_frame(cones, truth[stamp])
-        tracked, _ = stage.process(stamp, cones, fr["attitude"])
+            rep.add_frame(pub, truth[stamp])
+        tracked, _ = stage.process(stamp, pub if post_tracker else cones, fr["attitude"])
         ev.add_tracked(stamp, tracked)
     s = rep.summary()
     t = ev.summary()["tracked"]
