@@ -25,6 +25,10 @@ is flat: its box's top lies on the ground too, so the box is lower than a cone s
 says (a worn yellow line taken for yellow cones, issue 26; the measured ratios are in docs/benchmarks.md, "Flat
 boxes"). Only weak boxes (scoring under :data:`FLAT_MAX_SCORE`) are judged, so that a true cone whose box the
 detector drew low is kept where the detector is sure of it.
+After the mapping, two cones nearly on one viewing ray and less than 2 m apart along it, the better-scored nearer
+than ``one_ray_range_m``, are one cone seen twice (:func:`one_cone_per_ray`): two boxes of one far cone a few
+pixels apart in foot row map a metre or two apart along the ray, on one bearing, where the image cannot tell them
+from two cones of a row (issue 26, session 15). The better-scored stays, its covariance stretched to cover the other.
 Every box dropped is counted by cause in :attr:`ConeMapper.dropped`.
 
 Pixel conventions: boxes are in pixel-EDGE coordinates (a box around pixel
@@ -46,8 +50,9 @@ from .records import BOX_DTYPE, CONE_DTYPE, boxes_to_arrays
 
 #: causes of :attr:`ConeMapper.dropped`: a second box of a cone (:func:`one_box_per_cone`, counted by its
 #: callers); the foot above the horizon or beyond ``max_range_m``; a box lower
-#: than ``min_height_ratio`` x a cone's height at the range its foot gives (a mark on the ground)
-DROP_CAUSES = ("second_box", "off_ground", "flat")
+#: than ``min_height_ratio`` x a cone's height at the range its foot gives (a mark on the ground); a second cone
+#: on one viewing ray (:func:`one_cone_per_ray`, ``one_ray_range_m``)
+DROP_CAUSES = ("second_box", "off_ground", "flat", "one_ray")
 #: The height gate acts only on boxes scoring under this: painted marks give weak boxes, and on the real validation
 #: clips far fewer true cones' boxes are low among the weak ones (docs/benchmarks.md, "Flat boxes").
 FLAT_MAX_SCORE = 0.5
@@ -132,17 +137,26 @@ def one_box_per_cone(records: np.ndarray, iou: float = CROSS_CLASS_IOU, small_px
 #: ``keep`` (its position, its covariance stretched along the pair to cover the other's), ``merge`` (the
 #: score-weighted mean of their positions and the moment-matched covariance)
 RAY_MERGE_MODES = ("drop", "keep", "merge")
+#: :class:`ConeMapper`'s :func:`one_cone_per_ray`: two cones (any classes) less than ONE_RAY_ACROSS_M off one viewing
+#: ray and less than ONE_RAY_ALONG_M apart along it are one cone, the better-scored kept where it is (``keep``).
+#: Screened on ten tuning drives (docs/benchmarks.md, "Duplicates on one ray"): two boxes of one cone a few pixels
+#: apart lie 0.1 m (median) across the ray, two cones of a row 0.2 m.
+ONE_RAY_ACROSS_M = 0.15
+ONE_RAY_ALONG_M = 2.0
+ONE_RAY_ANY_CLASS = True
 
 
 def one_cone_per_ray(cones: np.ndarray, camera_xy, across_m: float, along_m: float, along_frac: float = 0.0,
-                     mode: str = "keep", max_range_m: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
+                     mode: str = "keep", max_range_m: float = np.inf, any_class: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """(:data:`CONE_DTYPE` records, mask of the input records kept) after making one cone of each pair of cones
-    of one class standing nearly on one viewing ray: the other cone less than ``across_m`` (m) off the ray from
+    of one class (``any_class``: of any two classes; the better-scored one's class stays) standing nearly on one
+    viewing ray: the other cone less than ``across_m`` (m) off the ray from
     the camera's ground point ``camera_xy`` through the better-scored one, and less than ``max(along_m,
     along_frac x its range)`` (m) before or behind it along that ray, the better-scored one nearer than
     ``max_range_m`` (m from the camera). Two boxes of one far cone a few pixels
     apart map about 1.5 m apart along the ray (a pixel of foot row is metres there), on the same bearing; two
-    cones of a row stand 2-5 m apart and off one ray unless the row points at the camera (docs/benchmarks.md).
+    cones of a row stand 2-5 m apart and off one ray unless the row points at the camera, and cones of the two rows
+    at least a track width (3 m) apart (docs/benchmarks.md, "Duplicates on one ray").
 
     Greedy, best score first: a kept cone takes every lower-scored cone (ties: the later) that pairs with it;
     ``mode`` (:data:`RAY_MERGE_MODES`) says what the kept cone becomes. The output keeps the input order."""
@@ -160,7 +174,7 @@ def one_cone_per_ray(cones: np.ndarray, camera_xy, across_m: float, along_m: flo
     along = np.einsum("ijk,ik->ij", d, u)  # along cone i's ray
     across = np.abs(d[..., 0] * u[:, 1:2] - d[..., 1] * u[:, 0:1])
     score = np.asarray(cones["score"], np.float64)
-    pair = ((cones["class_id"][:, None] == cones["class_id"][None, :]) & (across < across_m)
+    pair = (((cones["class_id"][:, None] == cones["class_id"][None, :]) | any_class) & (across < across_m)
             & (np.abs(along) < np.maximum(along_m, along_frac * rng)[:, None]) & (rng < max_range_m)[:, None])
     np.fill_diagonal(pair, False)
     if not pair.any():
@@ -197,14 +211,20 @@ def one_cone_per_ray(cones: np.ndarray, camera_xy, across_m: float, along_m: flo
 class ConeMapper:
     """Boxes -> cones for one calibrated camera."""
 
-    def __init__(self, calib: Calibration, min_height_ratio: float = 0.0):
+    def __init__(self, calib: Calibration, min_height_ratio: float = 0.0, one_ray_range_m: float = 0.0):
         """``min_height_ratio``: boxes lower than this x the height a cone of their class has where their foot maps,
         scoring under :data:`FLAT_MAX_SCORE`, are dropped as marks on the ground (0: off; needs a mount pose in the
-        calibration, else it cannot act)."""
+        calibration, else it cannot act). ``one_ray_range_m``: two cones nearly on one viewing ray
+        (:func:`one_cone_per_ray` at :data:`ONE_RAY_ACROSS_M`, :data:`ONE_RAY_ALONG_M`), the better-scored nearer
+        than this (m from the camera), are one cone: the other is dropped (0: off)."""
         if not (np.isfinite(min_height_ratio) and 0.0 <= min_height_ratio < 1.0):
             raise ValueError(f"min_height_ratio must be in [0, 1), got {min_height_ratio}")
+        if not (np.isfinite(one_ray_range_m) and one_ray_range_m >= 0.0):
+            raise ValueError(f"one_ray_range_m must be a number of metres >= 0, got {one_ray_range_m}")
         self.calib = calib
         self.min_height_ratio = float(min_height_ratio)
+        self.one_ray_range_m = float(one_ray_range_m)
+        self._ray_origin = calib.camera_ground_xy()  # where the viewing rays start on the ground
         #: boxes dropped by :meth:`map_boxes` so far, by cause (:data:`DROP_CAUSES`); the replay summary and the
         #: nodes' /diagnostics report them
         self.dropped = dict.fromkeys(DROP_CAUSES, 0)
@@ -319,9 +339,9 @@ class ConeMapper:
 
         Boxes whose foot point is above the horizon or beyond ``max_range_m``
         are dropped (they are never published), and with ``min_height_ratio`` boxes too low for a cone
-        standing there (:meth:`height_ratios`) scoring under :data:`FLAT_MAX_SCORE`; each counted in
-        :attr:`dropped`. Raises :class:`FrameError` for a malformed box (the whole message is dropped by
-        the caller).
+        standing there (:meth:`height_ratios`) scoring under :data:`FLAT_MAX_SCORE`, and with ``one_ray_range_m``
+        a second cone on one viewing ray (:meth:`one_per_ray`); each counted in :attr:`dropped`. Raises
+        :class:`FrameError` for a malformed box (the whole message is dropped by the caller).
         ``attitude``: the body's attitude offset for this frame (needs a mount pose); its
         uncertainty is added to each cone's covariance.
         """
@@ -353,7 +373,17 @@ class ConeMapper:
         out["cov_xx"] = cov[:, 0, 0]
         out["cov_xy"] = cov[:, 0, 1]
         out["cov_yy"] = cov[:, 1, 1]
-        return out
+        return self.one_per_ray(out)[0]
+
+    def one_per_ray(self, cones: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(cones, mask of those kept): :func:`one_cone_per_ray` at this mapper's ``one_ray_range_m`` (what
+        :meth:`map_boxes` does last), each cone it drops counted (``one_ray``)."""
+        if self.one_ray_range_m <= 0 or len(cones) < 2:
+            return cones, np.ones(len(cones), dtype=bool)
+        out, keep = one_cone_per_ray(cones, self._ray_origin, ONE_RAY_ACROSS_M, ONE_RAY_ALONG_M, mode="keep",
+                                     max_range_m=self.one_ray_range_m, any_class=ONE_RAY_ANY_CLASS)
+        self.dropped["one_ray"] += int((~keep).sum())
+        return out, keep
 
     def _attitude_covariance(self, uv: np.ndarray, att: Attitude) -> np.ndarray:
         """(N, 2, 2) m^2: J diag(sigma_pitch^2, sigma_roll^2) J^T, J = d(x, y)/d(pitch, roll) (central

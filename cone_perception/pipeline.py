@@ -19,7 +19,7 @@ from .detector.parallel import PairRunner
 from .geometry.calib import Calibration
 from .mapping import ConeMapper, one_box_per_cone
 from .records import BOX_DTYPE
-from .params import DEFAULT_IOU, DEFAULT_MIN_HEIGHT_RATIO
+from .params import DEFAULT_IOU, DEFAULT_MIN_HEIGHT_RATIO, DEFAULT_ONE_RAY_RANGE_M
 
 STAGES = ("adapter", "preprocess", "forward", "postprocess", "far_forward", "far_band", "far_wait", "attitude", "mapping")
 
@@ -57,8 +57,9 @@ class Pipeline:
     attitude), those below are mapped with the same attitude into :attr:`FrameResult.weak_cones`, for the
     tracker only (docs/tracking.md, "Weak detections"). None: no split.
     ``min_height_ratio``: boxes lower than this x a cone's height where their foot maps are dropped as marks on the
-    ground (:class:`~cone_perception.mapping.ConeMapper`; 0: off); :attr:`mapper` ``.dropped`` counts every
-    dropped box by cause.
+    ground (:class:`~cone_perception.mapping.ConeMapper`; 0: off); ``one_ray_range_m``: two cones nearly on one
+    viewing ray, the better-scored nearer than this, are one cone (the mapper's; 0: off); :attr:`mapper`
+    ``.dropped`` counts every dropped box by cause.
     ``concurrent``: with ``far``, run the band's and the strip's detect at the same time, the strip on a
     worker thread (:mod:`cone_perception.detector.parallel`; :class:`~cone_perception.detector.parallel.ForwardPlan`
     says when, and with how many threads each detector is loaded); the same boxes as one after the other.
@@ -76,7 +77,8 @@ class Pipeline:
 
     def __init__(self, calib: Calibration, detector, attitude: str | None = None, imu=None, far: FarBand | None = None,
                  cones_conf: float | None = None, attitude_config=None, concurrent: bool = False,
-                 min_height_ratio: float = DEFAULT_MIN_HEIGHT_RATIO, far_every: int = 1, far_tiles=None):
+                 min_height_ratio: float = DEFAULT_MIN_HEIGHT_RATIO, far_every: int = 1, far_tiles=None,
+                 one_ray_range_m: float = DEFAULT_ONE_RAY_RANGE_M):
         self.calib = calib
         if isinstance(far_every, bool) or not isinstance(far_every, (int, np.integer)) or far_every < 1:
             raise ValueError(f"far_every must be a whole number of frames >= 1, got {far_every!r}")
@@ -93,7 +95,7 @@ class Pipeline:
         self.adapter = DriverAdapter(calib.crop, calib.image_width, calib.image_height, far.crop if far else None)
         self._band_adapter = replace(self.adapter, far=None)  # a frame far_every skips: the band alone is cut
         self.detector = detector
-        self.mapper = ConeMapper(calib, min_height_ratio)  # its ``dropped``: the boxes dropped, by cause
+        self.mapper = ConeMapper(calib, min_height_ratio, one_ray_range_m)  # its ``dropped``: the boxes dropped, by cause
         self.imu = imu  # an ImuAttitude the caller feeds (modes imu, fused), or None
         self.attitude_mode, self.attitude = attitude_estimator(self.mapper, attitude, imu, attitude_config)
         self.cones_conf = cones_conf

@@ -273,7 +273,7 @@ def test_a_box_too_low_for_a_cone_where_its_foot_maps_is_dropped_and_counted() -
     assert len(off.map_boxes(b)) == 5 and off.dropped == dict.fromkeys(DROP_CAUSES, 0)
     kept = on.map_boxes(b)
     assert len(kept) == 4 and set(kept["class_id"].tolist()) == {YELLOW, ORANGE}
-    assert on.dropped == {"second_box": 0, "off_ground": 0, "flat": 1}
+    assert on.dropped == {"second_box": 0, "off_ground": 0, "flat": 1, "one_ray": 0}
     u = _boxes([rows[3][:5] + [UNKNOWN]])
     assert np.isnan(on.height_ratios(u, np.array([[12.0, -1.5]])))[0] and len(on.map_boxes(u)) == 1
     on.map_boxes(_boxes([[900, 100, 920, 120, 0.5, BLUE]]))  # above the horizon: counted off the ground
@@ -315,7 +315,7 @@ def test_pipeline_drops_flat_boxes_by_default_and_counts_every_dropped_box() -> 
     assert p.mapper.min_height_ratio == PARAMS["min_height_ratio"].default > 0.6
     r = p.process_raw("bgr8", 1920, 1080, 5760, frame)
     assert len(r.cones) == 1 and int(r.cones["class_id"][0]) == BLUE
-    assert p.mapper.dropped == {"second_box": 1, "off_ground": 0, "flat": 1}
+    assert p.mapper.dropped == {"second_box": 1, "off_ground": 0, "flat": 1, "one_ray": 0}
     q = Pipeline(calib, Fixed(), "fixed", min_height_ratio=0.0)
     assert len(q.process_raw("bgr8", 1920, 1080, 5760, frame).cones) == 2 and q.mapper.dropped["flat"] == 0
 
@@ -354,6 +354,9 @@ def test_one_cone_per_ray_makes_one_cone_of_two_boxes_of_one_far_cone_only() -> 
     assert d @ np.linalg.solve(cov, d) <= 1.0
     assert out["cov_yy"][0] == pytest.approx(0.01)
     np.testing.assert_array_equal(out[1:], c[2:])  # the others untouched, in order
+    # any_class (the mapper's): the two classes on one spot are one cone too, the better-scored's class
+    np.testing.assert_array_equal(one_cone_per_ray(c, cam, 0.2, 2.5, any_class=True)[1],
+                                  [False, True, True, True, True, True, True, False])
     # the rule off (across 0), a single cone, none
     assert one_cone_per_ray(c, cam, 0.0, 2.5)[1].all()
     assert len(one_cone_per_ray(c[:1], cam, 0.2, 2.5)[0]) == 1 and len(one_cone_per_ray(c[:0], cam, 0.2, 2.5)[0]) == 0
@@ -376,3 +379,45 @@ def test_one_cone_per_ray_merge_places_the_cone_at_the_score_weighted_mean() -> 
     np.testing.assert_array_equal(out, c[1:])
     with pytest.raises(ValueError, match="mode"):
         one_cone_per_ray(c, np.zeros(2), 0.2, 2.5, mode="mean")
+
+
+def test_the_mapper_and_the_pipeline_make_one_cone_of_two_boxes_of_a_far_cone_on_one_ray() -> None:
+    """Two boxes of one far cone 2 px apart in foot row (scores 0.7 and 0.45: one_box_per_cone keeps both) map under 2 m
+    apart along one viewing ray: with one_ray_range_m (the pipeline's default) one cone, the better-scored, and
+    one_ray counted; off, two. Two cones of one row 4 m apart on one ray stay two; so does the pair beyond the range."""
+    from cone_perception.params import PARAMS
+    from cone_perception.pipeline import Pipeline
+
+    calib = load_calibration("example_mainhoop")
+    off = ConeMapper(calib)
+    cam = calib.camera_ground_xy()
+    far = _cone_box(off, (30.0, 1.0), BLUE, 1.0, 0.7)
+    twice = [far, [far[0], far[1] + 2, far[2], far[3] + 2, 0.45, BLUE]]
+    c = off.map_boxes(_boxes(twice))
+    d = np.hypot(c["x"][1] - c["x"][0], c["y"][1] - c["y"][0])
+    assert len(c) == 2 and 0.5 < d < 2.0  # the precondition: nearer, on one bearing, under 2 m along the ray
+    near = np.array([18.0, -2.0])
+    behind = cam + (near - cam) * (1 + 4.0 / np.hypot(*(near - cam)))  # 4 m behind it on its ray
+    row = [_cone_box(off, tuple(near), YELLOW, 1.0, 0.6), _cone_box(off, tuple(behind), YELLOW, 1.0, 0.6)]
+    on = ConeMapper(calib, 0.0, PARAMS["one_ray_range_m"].default)
+    out = on.map_boxes(_boxes(twice + row))
+    assert len(out) == 3 and on.dropped["one_ray"] == 1
+    assert out["score"][0] == pytest.approx(0.7) and (out["x"][0], out["y"][0]) == (c["x"][0], c["y"][0])
+    assert out["cov_xx"][0] + out["cov_yy"][0] > c["cov_xx"][0] + c["cov_yy"][0] + 0.5 * d ** 2
+    assert len(ConeMapper(calib, 0.0, 25.0).map_boxes(_boxes(twice))) == 2  # the better one beyond 25 m: left alone
+    for bad in (-1.0, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="one_ray_range_m"):
+            ConeMapper(calib, 0.0, bad)
+
+    class Fixed:
+        timing: dict = {}
+
+        def detect(self, band, crop):
+            return _boxes(twice)
+
+    frame = np.zeros((1080, 1920, 3), np.uint8).tobytes()
+    p = Pipeline(calib, Fixed(), "fixed")
+    r = p.process_raw("bgr8", 1920, 1080, 5760, frame)
+    assert len(r.boxes) == 2 and len(r.cones) == 1 and p.mapper.dropped["one_ray"] == 1
+    q = Pipeline(calib, Fixed(), "fixed", one_ray_range_m=0.0)
+    assert len(q.process_raw("bgr8", 1920, 1080, 5760, frame).cones) == 2

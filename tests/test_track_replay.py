@@ -94,7 +94,7 @@ def test_replay_weak_detections_reach_the_tracker_only(drive, tmp_path, capsys):
     assert main(base + ["--track-conf", "0.05", "--json", str(tmp_path / "b.json")]) == 0
     a, b = (json.loads((tmp_path / f"{k}.json").read_text()) for k in "ab")
     assert a["localisation"] == b["localisation"]  # /cones unchanged by the weak detections
-    assert set(a["boxes_dropped"]) == {"second_box", "off_ground", "flat"}  # every dropped box, by cause
+    assert set(a["boxes_dropped"]) == {"second_box", "off_ground", "flat", "one_ray"}  # every dropped box, by cause
     assert "weak_hit" not in a["tracking"]["events"]
     assert b["tracking"]["events"].get("weak_hit", 0) + b["tracking"]["events"].get("weak_spawn", 0) > 0
     assert list(b["tracking"]["tracked"]["bands"]) == ["0-7 m", "7-15 m", "15-25 m", "25-40 m"]

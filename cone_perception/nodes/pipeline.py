@@ -40,9 +40,9 @@ Parameters (generated from cone_perception/params.py by ``cone-perception params
     cone_tracker); it gets each frame's attitude, which a separate cone_tracker does not
   Also those of driver_adapter (calibration, input_transport); those of detection (model, backend,
     device, fp16, bf16, threads, conf, iou, max_det, debug_image, debug_image_hz); those of mapping
-    (publish_markers, attitude, imu_rest_deg, box_model, min_height_ratio); those of cone_tracker,
-    with track: true (odom_topic, odom_type, odom_max_age_s, publish_tracked_markers); those of
-    every node (input_timeout_s, max_frame_age_s, input_rate_hz).
+    (publish_markers, attitude, imu_rest_deg, box_model, min_height_ratio, one_ray_range_m); those
+    of cone_tracker, with track: true (odom_topic, odom_type, odom_max_age_s,
+    publish_tracked_markers); those of every node (input_timeout_s, max_frame_age_s, input_rate_hz).
 """
 
 from __future__ import annotations
@@ -127,6 +127,7 @@ class PipelineNode(PerceptionNode):
         self.pipeline = Pipeline(calib, detector, mode, imu, far,
                                  attitude_config=att_config, concurrent=plan.concurrent,
                                  min_height_ratio=float(declare(self, "min_height_ratio")),
+                                 one_ray_range_m=float(declare(self, "one_ray_range_m")),
                                  far_every=every, far_tiles=self._far_tiles(far, every, far_model))
         self.health.watch("boxes_dropped", self.pipeline.mapper.dropped)  # by cause (mapping.DROP_CAUSES)
         report_attitude(self, self.pipeline.attitude_mode, self.pipeline.attitude, box_model)

@@ -62,6 +62,9 @@ def run_replay(args: argparse.Namespace) -> int:
     why = PARAMS["min_height_ratio"].check(args.min_height_ratio)
     if why:
         raise ConfigError("--min-height-ratio", None, why)
+    why = PARAMS["one_ray_range_m"].check(args.one_ray_range)
+    if why:
+        raise ConfigError("--one-ray-range", None, why)
     for name in ("far_every", "far_tiles"):
         why = PARAMS[name].check(getattr(args, name))
         if why:
@@ -70,6 +73,8 @@ def run_replay(args: argparse.Namespace) -> int:
         raise ConfigError("--far-tiles", None, "not with --box-behaviour real (it acts on the far band's own network)")
     if args.live and args.min_height_ratio != PARAMS["min_height_ratio"].default:
         raise ConfigError("--min-height-ratio", None, "works offline only (live: the nodes' min_height_ratio)")
+    if args.live and args.one_ray_range != PARAMS["one_ray_range_m"].default:
+        raise ConfigError("--one-ray-range", None, "works offline only (live: the nodes' one_ray_range_m)")
     if args.max_range is not None:
         calib = replace(calib, max_range_m=float(args.max_range))
     band = band_rows_for(args.band_rows, calib, args.far_rows, "--band-rows")
@@ -158,6 +163,7 @@ def _run_offline(args, calib) -> dict:
                                       far_rendered_table=far_table.table if far_table is not None else ())
     pipeline = Pipeline(calib, det, args.attitude, imu, far, cones_conf=args.conf if args.track_conf is not None else None,
                         attitude_config=att_cfg, concurrent=plan.concurrent, min_height_ratio=args.min_height_ratio,
+                        one_ray_range_m=args.one_ray_range,
                         far_every=args.far_every, far_tiles=FarTiles.for_setting(
                             far_model, args.far_tiles, far, args.far_every, "--far-tiles", backend=args.backend, conf=conf,
                             threads=plan.network_threads or None, bf16=args.bf16))

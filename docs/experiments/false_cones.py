@@ -1,7 +1,7 @@
 """What the false cones within 40 m are (issue 26g): a breakdown per drive of `/cones` and `/cones/tracked`.
 
     .venv/bin/python docs/experiments/false_cones.py BAG [BAG ...] [--out DIR] [--tag T] [--calib-suffix S | --calib C ...] [--reuse]
-        [--no-one-box] [-- REPLAY OPTIONS]
+        [--no-one-box] [-- REPLAY OPTIONS, e.g. --one-ray-range 0]
 
 Each BAG is a `cone-perception synth bag` drive (BAG_calib.yaml, BAG_gt.jsonl beside it). The drive is replayed
 with `cone-perception replay BAG --calib BAG_calib.yaml --gt-topic /cones_gt --track` and the REPLAY OPTIONS
@@ -68,14 +68,25 @@ def record(bag: str, calib: str, out: Path, replay_opts: list[str]) -> dict:
         cur.clear()
         r = orig_run(self, *a, **kw)
         stamp = a[3] if len(a) > 3 else kw.get("stamp_ns")
-        # each merged box's cone (or -1: dropped by the mapping: above the horizon or beyond the range)
+        # each merged box's cone (or -1: dropped by the mapping: above the horizon or beyond the range, flat, or
+        # a second cone on one viewing ray); the mapper's counts left as the replay made them
         cone_of = np.full(len(r.boxes), -1)
         k = 0
+        dropped = dict(self.mapper.dropped)
+        mapped = np.zeros(len(r.boxes), bool)
         for i in range(len(r.boxes)):
-            c = self.mapper.map_boxes(r.boxes[i:i + 1], r.attitude)
-            if len(c):
+            mapped[i] = len(self.mapper.map_boxes(r.boxes[i:i + 1], r.attitude)) == 1
+        ray, self.mapper.one_ray_range_m = self.mapper.one_ray_range_m, 0.0  # the frame's cones before the rule
+        all_cones = self.mapper.map_boxes(r.boxes[mapped], r.attitude)
+        self.mapper.one_ray_range_m = ray
+        _, kept = self.mapper.one_per_ray(all_cones)  # the one-ray rule keeps a subset of them, in order
+        for n, i in enumerate(np.flatnonzero(mapped)):
+            if kept[n]:
                 cone_of[i] = k
                 k += 1
+        assert k == len(r.cones), (k, len(r.cones))
+        self.mapper.dropped.clear()
+        self.mapper.dropped.update(dropped)
         frames[stamp] = {"boxes": r.boxes.copy(), "cones": r.cones.copy(), "cone_of": cone_of, "attitude": r.attitude,
                          "band": cur.get("band"), "far": cur.get("far")}
         return r

@@ -124,8 +124,14 @@ def diag(recs: list[str]) -> None:
                       + f" | {c['x-one']} / {c['x-two']} |")
 
 
-def ray_rule(cam, across, along, frac=0.0, mode="keep", max_range=np.inf):
+def ray_rule(cam, across, along, frac=0.0, mode="keep", max_range=np.inf, any_class=False):
     def f(cones):
+        if any_class:  # (screen only) pairs of any two classes: the better-scored cone stays, its class too
+            one = cones.copy()
+            one["class_id"] = 0
+            out, keep = one_cone_per_ray(one, cam, across, along, frac, mode, max_range)
+            out["class_id"] = cones["class_id"][keep]
+            return out
         return one_cone_per_ray(cones, cam, across, along, frac, mode, max_range)[0]
     return f
 
@@ -139,6 +145,14 @@ for _a, _d, _f, _r in ((0.15, 2.0, 0.0, 25.0), (0.15, 1.5, 0.0, 25.0), (0.1, 2.0
                 f"{' m' if _d else ''}, within {_r:g} m"] = (_a, _d, _f, _mode, True, _r)
 for _mode in ("drop", "keep"):
     DESIGNS[f"{_mode}, across < 0.15 m, along < 2.0 m, within 25 m, cones only"] = (0.15, 2.0, 0.0, _mode, False, 25.0)
+# round 2
+for _a, _d, _r in ((0.15, 2.0, 30.0), (0.15, 1.5, 40.0), (0.2, 2.0, 40.0), (0.15, 2.5, 25.0), (0.2, 2.5, 25.0)):
+    DESIGNS[f"r2 keep, across < {_a} m, along < {_d} m, within {_r:g} m"] = (_a, _d, 0.0, "keep", True, _r)
+DESIGNS["r2 keep, across < 0.15 m, along < 2.0 m, within 40 m, cones only"] = (0.15, 2.0, 0.0, "keep", False, 40.0)
+DESIGNS["r2 keep, across < 0.2 m, along < 1.5 m, within 40 m, cones only"] = (0.2, 1.5, 0.0, "keep", False, 40.0)
+DESIGNS["r2 any class: keep, across < 0.15 m, along < 2.0 m, within 25 m"] = (0.15, 2.0, 0.0, "keep", True, 25.0, True)
+DESIGNS["r2 any class: keep, across < 0.15 m, along < 2.0 m, within 40 m"] = (0.15, 2.0, 0.0, "keep", True, 40.0, True)
+DESIGNS["r2 any class: keep, across < 0.1 m, along < 2.0 m, within 40 m"] = (0.1, 2.0, 0.0, "keep", True, 40.0, True)
 
 
 def screen(recs: list[str], only: str) -> None:
@@ -156,8 +170,8 @@ def screen(recs: list[str], only: str) -> None:
             if spec is None:
                 post, pt = None, True
             else:
-                a, d, fr, mode, pt, rmax = spec
-                post = ray_rule(load_calibration(data["calib"]).camera_ground_xy(), a, d, fr, mode, rmax)
+                a, d, fr, mode, pt, rmax, *anyc = spec
+                post = ray_rule(load_calibration(data["calib"]).camera_ground_xy(), a, d, fr, mode, rmax, *anyc)
             r = run(data, one_box, {}, None, post, pt, DEFAULT_MIN_HEIGHT_RATIO)
             res.append(r)
             print(f"| {name} | {dn} | {r['raw'][0]:.3f} / {r['raw'][1]:.3f}, {r['raw'][2]:.2f} | "
