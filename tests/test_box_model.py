@@ -171,3 +171,62 @@ def test_map_boxes_of_a_prediction_file_runs_one_filter_in_order(tmp_path, capsy
     xy = np.array([[float(o[1]), float(o[2])] for o in out[-12:]])
     err_image, err_fixed = (np.median(np.hypot(*(p - CONES_XY[near]).T)) for p in (xy, fixed))
     assert err_image < 0.2 and err_fixed > 3 * err_image
+
+
+def _two_models(tmp_path, far_top: float):
+    """A band model file whose box model shifts nothing and a far model file whose boxes' tops stand ``far_top`` of
+    the height low (sidecars only: the fit reads nothing else of them)."""
+    band, far = tmp_path / "band.pt", tmp_path / "far.pt"
+    for path, top in ((band, 0.0), (far, far_top)):
+        path.write_bytes(b"")
+        write_box_model(box_model_path(path), BoxModel(height_ratio=(1.0 - top,) * 4, top_low=(top,) * 4,
+                                                       bottom_high=(0.0,) * 4, counts=(9, 9, 9, 9), sigma_rel=0.03,
+                                                       input_scale=1.0, source="measured"), "test")
+    return band, far
+
+
+def test_map_boxes_reads_the_far_strips_boxes_through_the_far_model(tmp_path, capsys):
+    """A prediction file's `far` key (the boxes the far strip drew, as `detect` writes it) makes `map --boxes` read
+    those boxes through the far model's box model, as the node does: boxes of a far network whose tops stand 6 % low,
+    marked, give the pitch that exact boxes give through the band's model; unmarked (read as the band model's), a
+    pitch pulled off."""
+    from cone_perception.cli import main
+
+    band, far = _two_models(tmp_path, 0.06)
+    cal_path = save_calibration(_calib(), tmp_path / "cal.yaml")
+    exact = _cone_boxes(_tilted_camera(0.6, 0.0), CONES_XY, CONES_CLS)
+
+    def pitch_of(boxes, marked):
+        rows = [[*map(float, b), 0.9, int(c)] for b, c in zip(boxes, CONES_CLS)]
+        doc = {"width": 1920, "height": 1080, "boxes": rows, **({"far": list(range(len(rows)))} if marked else {})}
+        pred = tmp_path / "p.jsonl"
+        pred.write_text("\n".join(json.dumps({**doc, "image": f"f{k}"}) for k in range(4)) + "\n")
+        assert main(["map", "--calib", str(cal_path), "--boxes", str(pred), "--attitude", "image",
+                     "--model", str(band), "--far-model", str(far)]) == 0
+        err = capsys.readouterr().err
+        assert f"{4 * len(rows) if marked else 0} boxes of the far strip kept" in err
+        return float([ln for ln in err.splitlines() if ln.startswith("f3")][0].split("pitch ")[1].split()[0])
+
+    reference = pitch_of(exact, False)
+    assert reference == pytest.approx(0.6, abs=0.1)
+    far_boxes = _shrunk(exact, 0.06, 0.0)
+    assert pitch_of(far_boxes, True) == pytest.approx(reference, abs=0.02)
+    assert abs(pitch_of(far_boxes, False) - reference) > 0.2
+
+
+def test_map_boxes_drops_what_the_node_drops(tmp_path, capsys):
+    """`map --boxes` runs the node's steps after the detector: a second box of one cone in another class goes
+    (one_box_per_cone), and the count of what went is printed."""
+    from cone_perception.cli import main
+
+    cal_path = save_calibration(_calib(), tmp_path / "cal.yaml")
+    boxes = _cone_boxes(_tilted_camera(0.0, 0.0), CONES_XY[:4], CONES_CLS[:4])
+    rows = [[*map(float, b), 0.9, int(c)] for b, c in zip(boxes, CONES_CLS[:4])]
+    rows.append([*map(float, boxes[0]), 0.5, 1 - int(CONES_CLS[0])])  # blue <-> yellow on the same spot
+    pred = tmp_path / "p.jsonl"
+    pred.write_text(json.dumps({"image": "f0", "width": 1920, "height": 1080, "boxes": rows}) + "\n")
+    assert main(["map", "--calib", str(cal_path), "--boxes", str(pred), "--attitude", "fixed"]) == 0
+    cap = capsys.readouterr()
+    assert len(cap.out.splitlines()) == 4 and "second_box 1" in cap.err
+    assert main(["map", "--calib", str(cal_path), "--boxes", str(pred), "--min-height-ratio", "2"]) == 2
+    assert "--min-height-ratio" in capsys.readouterr().err

@@ -430,6 +430,24 @@ def test_prediction_input_scale_round_trip_and_bad_value(tmp_path):
         list(read_predictions(p))
 
 
+def test_prediction_far_marks_round_trip_and_bad_values(tmp_path):
+    """The `far` key (which boxes the far strip drew) survives a round trip; indices out of range, repeated or not
+    integers are refused naming the line."""
+    from cone_perception.data.predictions import prediction_line
+
+    boxes = boxes_from_arrays(np.array([[1.0, 2.0, 3.0, 4.0]] * 3), np.array([0.9, 0.8, 0.7]), np.array([BLUE] * 3))
+    p = tmp_path / "p.jsonl"
+    p.write_text(prediction_line("a.jpg", 640, 360, boxes, far=np.array([False, True, True])) + "\n"
+                 + prediction_line("b.jpg", 640, 360, boxes) + "\n")
+    a, b = read_predictions(p)
+    assert a.far.tolist() == [False, True, True] and b.far is None
+    for bad in ([3], [1, 1], [0.5], "1", [True]):
+        p.write_text(json.dumps({"image": "a", "width": 4, "height": 4, "boxes": [[1, 1, 2, 2, 0.9, 0]] * 3,
+                                 "far": bad}) + "\n")
+        with pytest.raises(ConfigError, match="line 1.*far"):
+            list(read_predictions(p))
+
+
 def test_eval_band_clips_cut_cones_and_ignores_those_outside(tmp_path, capsys):
     """`eval --band`: a detector that sees only the band, boxes clipped there as training clips them."""
     from cone_perception.evaluation.groundtruth import EvalImage, restrict_to_band

@@ -180,7 +180,7 @@ def run_table(args: argparse.Namespace, calib) -> int:
                     band.validate(w, h, "--band")
                 c = crop_for_setting(band, setting, w, h)
                 val_input = det.input_size_for(c.out_width, c.out_height)
-                boxes, scale = detect_one(det, img, name, (c.v0, c.v1, c.u0, c.u1), c.downscale)
+                boxes, scale, _ = detect_one(det, img, name, (c.v0, c.v1, c.u0, c.u1), c.downscale)
                 write_prediction(fh, name, w, h, boxes, input_scale=scale)
                 n += 1
         res = evaluate_predictions(pred_path, args.val, args.gt_names, None, args.conf, 0.5, progress=False, verbose=False)

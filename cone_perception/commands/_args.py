@@ -24,3 +24,12 @@ def parse_crop(text: str) -> tuple[int, ...]:
     if len(vals) not in (2, 4):
         raise argparse.ArgumentTypeError(f"crop must be V0,V1 or V0,V1,U0,U1, got {text!r}")
     return vals
+
+
+def add_far_model(p: argparse.ArgumentParser, scope: str = "", after: str = "") -> None:
+    """``--far-model auto|band|PATH``, the far band's model (one text for every command that runs the strip);
+    ``scope``: what it applies to (``"pipeline: "``), ``after``: the command's own note (``"; live: ..."``)."""
+    p.add_argument("--far-model", default=None, metavar="auto|band|PATH",
+                   help=f"{scope}the far band's model: auto (default) = the shipped far-strip model "
+                        f"(models/cone_detector_far.pt), band = the band's own model, or a model file; its classes "
+                        f"must be the band model's{after}")

@@ -20,7 +20,7 @@ from pathlib import Path
 from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND
 from ..params import DEFAULT_CONF, DEFAULT_IOU
 from ..replay.detect import run_detect
-from ._args import parse_crop, size_arg
+from ._args import add_far_model, parse_crop, size_arg
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -48,9 +48,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "boxes (docs/detector.md 'Far band'): auto = the --calib calibration's far strip (the default "
                         "with --calib); V0,V1 = these rows (with --crop or --calib); none (or off) = no far band (the default "
                         "without --calib)")
-    p.add_argument("--far-model", default=None, metavar="auto|band|PATH",
-                   help="the far band's model: auto (default) = the shipped far-strip model (models/cone_detector_far.pt), "
-                        "band = the band's own model, or a model file; its classes must be the band model's")
+    add_far_model(p)
     p.add_argument("--conf", type=float, default=DEFAULT_CONF, help="confidence threshold (default %(default)s)")
     p.add_argument("--iou", type=float, default=DEFAULT_IOU, help="NMS IoU threshold (default %(default)s)")
     p.add_argument("--topic", default=None, help="rosbag: camera topic (default: the only image topic)")

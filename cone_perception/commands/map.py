@@ -13,7 +13,12 @@
   cone-perception map --calib CAL --boxes preds.jsonl [--model MODEL.pt] [--conf 0.25]
       -> the frames of a prediction file of `detect` (JSON lines), mapped IN ORDER with one attitude
          filter as the node runs it: one line ``image,x,y,class_id,score,cov_xx,cov_xy,cov_yy`` per
-         kept cone; the attitude per frame and the fit's outcome counts go to stderr
+         kept cone; the attitude per frame and the fit's outcome counts go to stderr. The boxes the
+         file marks as the far strip's (`detect` with a far strip: ``--calib``) are read through the
+         far model's box model (--far-model), as the node reads them
+
+Boxes go through what the pipeline node does after its detector: a second box of one cone is dropped
+(``one_box_per_cone``), and so is a flat box (--min-height-ratio); the counts go to stderr.
 """
 
 from __future__ import annotations
@@ -22,7 +27,7 @@ import argparse
 from pathlib import Path
 
 from ..geometry.calib import DEFAULT_CAMERA
-from ..params import DEFAULT_CONF
+from ..params import DEFAULT_CONF, PARAMS
 from ..replay.map import run_map
 
 
@@ -57,6 +62,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--box-model", choices=("model", "rendered"), default="model",
                    help="--attitude image: model (the --model's box model, for real frames; default) or rendered (the "
                         "rendered drives' box table, for boxes of a synthetic drive)")
+    p.add_argument("--far-model", default=None, metavar="auto|band|PATH",
+                   help="--attitude image: the model that drew the boxes a prediction file marks as the far strip's "
+                        "(its `far` key); the fit reads them through its box model. auto (default) = the shipped "
+                        "far-strip model, band = the --model")
+    p.add_argument("--min-height-ratio", type=float, default=PARAMS["min_height_ratio"].default, metavar="R",
+                   help="--boxes: a box scoring under 0.5 and lower than R x the height a cone of its class has where "
+                        "its foot maps is dropped as a mark on the ground, as the node does (its min_height_ratio; "
+                        "needs a mount pose; 0 = off; default %(default)s)")
     p.add_argument("--conf", type=float, default=DEFAULT_CONF,
                    help="a .jsonl prediction file: map only boxes of at least this score (default %(default)s)")
 

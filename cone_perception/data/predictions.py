@@ -3,11 +3,13 @@
 One line per image::
 
     {"image": "<file name or stamp>", "width": W, "height": H,
-     "boxes": [[u1, v1, u2, v2, score, class_id], ...], "input_scale": s}
+     "boxes": [[u1, v1, u2, v2, score, class_id], ...], "input_scale": s, "far": [i, ...]}
 
 Boxes are in the image's own pixels; the optional ``input_scale`` is the model input px per image px
-(1/downscale for a band, the letterbox ratio otherwise), so box sizes at the model input are known; class ids in project order. Reading validates every
-line and names the file and line of anything malformed.
+(1/downscale for a band, the letterbox ratio otherwise), so box sizes at the model input are known; class ids in
+project order; the optional ``far`` lists the indices of the boxes the far strip's network drew (``detect`` with a
+far strip writes it, so that ``map --boxes`` reads them through that network's box model, as the node does).
+Reading validates every line and names the file and line of anything malformed.
 """
 
 from __future__ import annotations
@@ -33,10 +35,17 @@ class ImagePrediction:
     boxes: np.ndarray  # BOX_DTYPE, image px
     line: int = 0  # line number in the file it was read from (0: not read from a file)
     input_scale: float | None = None  # model input px per image px, if the file says
+    far: np.ndarray | None = None  # (N,) bool: the boxes the far strip drew, if the file says
 
 
-def prediction_line(image: str, width: int, height: int, boxes: np.ndarray, input_scale: float | None = None) -> str:
-    """One JSON line (without newline) for ``BOX_DTYPE`` records."""
+def far_indices(far: np.ndarray | None) -> list[int] | None:
+    """The ``far`` key of a prediction line for a (N,) bool mask of the boxes the far strip drew (None: no strip)."""
+    return None if far is None else [int(i) for i in np.flatnonzero(far)]
+
+
+def prediction_line(image: str, width: int, height: int, boxes: np.ndarray, input_scale: float | None = None,
+                    far: np.ndarray | None = None) -> str:
+    """One JSON line (without newline) for ``BOX_DTYPE`` records; ``far``: which of them the far strip drew."""
     rows = [
         [round(float(b["u1"]), 2), round(float(b["v1"]), 2), round(float(b["u2"]), 2), round(float(b["v2"]), 2),
          round(float(b["score"]), 4), int(b["class_id"])]
@@ -45,12 +54,14 @@ def prediction_line(image: str, width: int, height: int, boxes: np.ndarray, inpu
     doc = {"image": str(image), "width": int(width), "height": int(height), "boxes": rows}
     if input_scale is not None:
         doc["input_scale"] = round(float(input_scale), 6)
+    if far is not None:
+        doc["far"] = far_indices(far)
     return json.dumps(doc)
 
 
 def write_prediction(fh: IO[str], image: str, width: int, height: int, boxes: np.ndarray,
-                     input_scale: float | None = None) -> None:
-    fh.write(prediction_line(image, width, height, boxes, input_scale) + "\n")
+                     input_scale: float | None = None, far: np.ndarray | None = None) -> None:
+    fh.write(prediction_line(image, width, height, boxes, input_scale, far) + "\n")
 
 
 def iter_json_lines(path: str | os.PathLike, keys: set[str]) -> Iterator[tuple[int, dict]]:
@@ -101,6 +112,20 @@ def read_predictions(path: str | os.PathLike) -> Iterator[ImagePrediction]:
         scale = d.get("input_scale")
         if scale is not None and not (isinstance(scale, (int, float)) and not isinstance(scale, bool) and 0 < scale < 1e3):
             raise ConfigError(str(path), where, f"input_scale must be a positive number, got {scale!r}")
+        far = _far_mask(d.get("far"), len(a), str(path), where)
         yield ImagePrediction(str(d["image"]), int(d["width"]), int(d["height"]),
                               boxes_from_arrays(a[:, :4], a[:, 4], a[:, 5].astype(np.int64)).astype(BOX_DTYPE), i,
-                              float(scale) if scale is not None else None)
+                              float(scale) if scale is not None else None, far)
+
+
+def _far_mask(far, n: int, path: str, where: str) -> np.ndarray | None:
+    """The ``far`` key (indices of the boxes the far strip drew) as a (n,) bool mask; ConfigError for anything else."""
+    if far is None:
+        return None
+    if not isinstance(far, list) or not all(isinstance(i, int) and not isinstance(i, bool) and 0 <= i < n for i in far):
+        raise ConfigError(path, where, f"far must be a list of box indices 0..{n - 1}, got {far!r}")
+    if len(set(far)) != len(far):
+        raise ConfigError(path, where, f"far lists a box twice: {far!r}")
+    mask = np.zeros(n, bool)
+    mask[far] = True
+    return mask

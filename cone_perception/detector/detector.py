@@ -308,10 +308,11 @@ class Detector:
 
 
 def detect_one(det, img: np.ndarray, name: str, crop: tuple[int, ...] | None = None, downscale: int = 1,
-               imgsz: tuple[int, int] | None = None, far=None) -> tuple[np.ndarray, float]:
+               imgsz: tuple[int, int] | None = None, far=None) -> tuple[np.ndarray, float, np.ndarray | None]:
     """Boxes (``BOX_DTYPE``, the image's px) of one full BGR image, as ``detect`` does it: with ``crop``
     (V0,V1[,U0,U1]) the band is cut and downscaled as on the car, else letterboxed to ``imgsz`` or the
-    model input; and the model input px per image px (the prediction file's ``input_scale``).
+    model input; the model input px per image px (the prediction file's ``input_scale``); and which of the
+    boxes the far strip drew ((N,) bool, None without one: the prediction file's ``far``).
     ``far``: a :class:`~.farband.FarBand` whose full-resolution strip runs too (with ``crop``).
     Used by ``detect`` and ``bench table``."""
     h, w = img.shape[:2]
@@ -320,10 +321,11 @@ def detect_one(det, img: np.ndarray, name: str, crop: tuple[int, ...] | None = N
         spec = CropSpec(v0, v1, u0, u1, downscale)
         spec.validate(w, h, f"--crop for {name}")
         boxes = det.detect(crop_bgr(img, spec), spec)
-        if far is not None:
-            boxes = far.merged(boxes, crop_bgr(img, far.crop))
-        return boxes, 1.0 / downscale
+        if far is None:
+            return boxes, 1.0 / downscale, None
+        boxes, drawn = far.merged(boxes, crop_bgr(img, far.crop))
+        return boxes, 1.0 / downscale, drawn
     if imgsz:
         b, s, c = det.infer(img, in_size=imgsz)
-        return boxes_from_arrays(b, s, c), min(imgsz[0] / w, imgsz[1] / h)
-    return det.detect_image(img), min(det.imgsz[0] / w, det.imgsz[1] / h)
+        return boxes_from_arrays(b, s, c), min(imgsz[0] / w, imgsz[1] / h), None
+    return det.detect_image(img), min(det.imgsz[0] / w, det.imgsz[1] / h), None

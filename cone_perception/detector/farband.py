@@ -309,9 +309,14 @@ class FarBand:
         crop = crop or self.crop
         return drop_cut_boxes(self.detector.detect(strip_bgr, crop), crop)
 
-    def merged(self, band_boxes: np.ndarray, strip_bgr: np.ndarray, crop: CropSpec | None = None) -> np.ndarray:
+    def merged(self, band_boxes: np.ndarray, strip_bgr: np.ndarray,
+               crop: CropSpec | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """``(the band's boxes merged with the strip's (:func:`merge_boxes`), which of them the strip drew
+        (:func:`drawn_by_far`))``."""
         iou = getattr(self.detector, "iou", DEFAULT_IOU)
-        return merge_boxes(band_boxes, self.detect(strip_bgr, crop), iou)
+        far_boxes = self.detect(strip_bgr, crop)
+        merged = merge_boxes(band_boxes, far_boxes, iou)
+        return merged, drawn_by_far(merged, far_boxes)
 
 
 #: ``band_split`` values: the band in one piece (the default) and split from the calibration (:func:`band_split_for`).

@@ -119,9 +119,9 @@ def run_detect(args: argparse.Namespace) -> int:
                 skipped.append(f"{name}: {err}")
                 continue
             h, w = img.shape[:2]
-            boxes, scale = detect_one(detector_for(w, h), img, name, args.crop, args.downscale, args.imgsz,
-                                      far_for(w, h))
-            write_prediction(fh, name, w, h, boxes, input_scale=scale)
+            boxes, scale, drawn = detect_one(detector_for(w, h), img, name, args.crop, args.downscale, args.imgsz,
+                                             far_for(w, h))
+            write_prediction(fh, name, w, h, boxes, input_scale=scale, far=drawn)
             n += 1
             if args.save_vis:
                 out = args.save_vis / (Path(name).stem + ".jpg")
