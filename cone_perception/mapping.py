@@ -137,23 +137,25 @@ def one_box_per_cone(records: np.ndarray, iou: float = CROSS_CLASS_IOU, small_px
 #: ``keep`` (its position, its covariance stretched along the pair to cover the other's), ``merge`` (the
 #: score-weighted mean of their positions and the moment-matched covariance)
 RAY_MERGE_MODES = ("drop", "keep", "merge")
-#: :class:`ConeMapper`'s :func:`one_cone_per_ray`: two cones (any classes) less than ONE_RAY_ACROSS_M off one viewing
-#: ray and less than ONE_RAY_ALONG_M apart along it are one cone, the better-scored kept where it is (``keep``).
-#: Screened on ten tuning drives (docs/benchmarks.md, "Duplicates on one ray"): two boxes of one cone a few pixels
-#: apart lie 0.1 m (median) across the ray, two cones of a row 0.2 m.
+#: :class:`ConeMapper`'s :func:`one_cone_per_ray`: two cones of one class (of two classes from
+#: ONE_RAY_CROSS_CLASS_FROM_M on) less than ONE_RAY_ACROSS_M off one viewing ray and less than ONE_RAY_ALONG_M apart
+#: along it are one cone, the better-scored kept where it is (``keep``). Screened on ten tuning drives
+#: (docs/benchmarks.md, "Duplicates on one ray"): two boxes of one cone a few pixels apart lie 0.1 m (median) across
+#: the ray, two cones of a row 0.2 m; pairs of two classes nearer than 10 m were real cones (7-15 m recall).
 ONE_RAY_ACROSS_M = 0.15
 ONE_RAY_ALONG_M = 2.0
-ONE_RAY_ANY_CLASS = True
+ONE_RAY_CROSS_CLASS_FROM_M = 15.0
 
 
 def one_cone_per_ray(cones: np.ndarray, camera_xy, across_m: float, along_m: float, along_frac: float = 0.0,
-                     mode: str = "keep", max_range_m: float = np.inf, any_class: bool = False) -> tuple[np.ndarray, np.ndarray]:
+                     mode: str = "keep", max_range_m: float = np.inf, cross_class_from_m: float = np.inf,
+                     min_range_m: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """(:data:`CONE_DTYPE` records, mask of the input records kept) after making one cone of each pair of cones
-    of one class (``any_class``: of any two classes; the better-scored one's class stays) standing nearly on one
-    viewing ray: the other cone less than ``across_m`` (m) off the ray from
+    of one class (or of two classes where the better-scored one is at least ``cross_class_from_m`` from the camera;
+    its class stays) standing nearly on one viewing ray: the other cone less than ``across_m`` (m) off the ray from
     the camera's ground point ``camera_xy`` through the better-scored one, and less than ``max(along_m,
-    along_frac x its range)`` (m) before or behind it along that ray, the better-scored one nearer than
-    ``max_range_m`` (m from the camera). Two boxes of one far cone a few pixels
+    along_frac x its range)`` (m) before or behind it along that ray, the better-scored one at least
+    ``min_range_m`` and less than ``max_range_m`` (m) from the camera. Two boxes of one far cone a few pixels
     apart map about 1.5 m apart along the ray (a pixel of foot row is metres there), on the same bearing; two
     cones of a row stand 2-5 m apart and off one ray unless the row points at the camera, and cones of the two rows
     at least a track width (3 m) apart (docs/benchmarks.md, "Duplicates on one ray").
@@ -174,8 +176,9 @@ def one_cone_per_ray(cones: np.ndarray, camera_xy, across_m: float, along_m: flo
     along = np.einsum("ijk,ik->ij", d, u)  # along cone i's ray
     across = np.abs(d[..., 0] * u[:, 1:2] - d[..., 1] * u[:, 0:1])
     score = np.asarray(cones["score"], np.float64)
-    pair = (((cones["class_id"][:, None] == cones["class_id"][None, :]) | any_class) & (across < across_m)
-            & (np.abs(along) < np.maximum(along_m, along_frac * rng)[:, None]) & (rng < max_range_m)[:, None])
+    pair = (((cones["class_id"][:, None] == cones["class_id"][None, :]) | (rng >= cross_class_from_m)[:, None])
+            & (across < across_m)
+            & (np.abs(along) < np.maximum(along_m, along_frac * rng)[:, None]) & ((rng >= min_range_m) & (rng < max_range_m))[:, None])
     np.fill_diagonal(pair, False)
     if not pair.any():
         return cones, keep
@@ -381,7 +384,7 @@ class ConeMapper:
         if self.one_ray_range_m <= 0 or len(cones) < 2:
             return cones, np.ones(len(cones), dtype=bool)
         out, keep = one_cone_per_ray(cones, self._ray_origin, ONE_RAY_ACROSS_M, ONE_RAY_ALONG_M, mode="keep",
-                                     max_range_m=self.one_ray_range_m, any_class=ONE_RAY_ANY_CLASS)
+                                     max_range_m=self.one_ray_range_m, cross_class_from_m=ONE_RAY_CROSS_CLASS_FROM_M)
         self.dropped["one_ray"] += int((~keep).sum())
         return out, keep
 

@@ -216,8 +216,8 @@ _MAPPING = (
     _p("min_height_ratio", DEFAULT_MIN_HEIGHT_RATIO, "a box lower than this x the height a cone of its class has "
        "where its foot maps, scoring under 0.5, is a mark on the ground (a painted line), not a cone: dropped, counted on /diagnostics "
        "(boxes_dropped: flat); 0 = off; needs a mount pose in the calibration, else it cannot act", min=0.0, max=0.99),
-    _p("one_ray_range_m", DEFAULT_ONE_RAY_RANGE_M, "two cones nearly on one viewing ray (under 0.15 m across it, under "
-       "2 m apart along it), the better-scored nearer than this (m from the camera), are one cone seen twice (two boxes "
+    _p("one_ray_range_m", DEFAULT_ONE_RAY_RANGE_M, "two cones of one class (of two classes from 15 m on) nearly on one "
+       "viewing ray (under 0.15 m across it, under 2 m apart along it), the better-scored nearer than this (m from the camera), are one cone seen twice (two boxes "
        "of one far cone a few pixels apart): the better-scored stays, its covariance stretched to cover the other, the "
        "other is dropped, counted on /diagnostics (boxes_dropped: one_ray); 0 = off", min=0.0, max=200.0),
 )

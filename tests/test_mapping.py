@@ -355,8 +355,11 @@ def test_one_cone_per_ray_makes_one_cone_of_two_boxes_of_one_far_cone_only() -> 
     assert out["cov_yy"][0] == pytest.approx(0.01)
     np.testing.assert_array_equal(out[1:], c[2:])  # the others untouched, in order
     # any_class (the mapper's): the two classes on one spot are one cone too, the better-scored's class
-    np.testing.assert_array_equal(one_cone_per_ray(c, cam, 0.2, 2.5, any_class=True)[1],
+    np.testing.assert_array_equal(one_cone_per_ray(c, cam, 0.2, 2.5, cross_class_from_m=0.0)[1],
                                   [False, True, True, True, True, True, True, False])
+    # two classes only from cross_class_from_m on: the pair's better cone stands 15.3 m from the camera
+    assert one_cone_per_ray(c, cam, 0.2, 2.5, cross_class_from_m=16.0)[1][7]
+    assert not one_cone_per_ray(c, cam, 0.2, 2.5, cross_class_from_m=15.0)[1][7]
     # the rule off (across 0), a single cone, none
     assert one_cone_per_ray(c, cam, 0.0, 2.5)[1].all()
     assert len(one_cone_per_ray(c[:1], cam, 0.2, 2.5)[0]) == 1 and len(one_cone_per_ray(c[:0], cam, 0.2, 2.5)[0]) == 0

@@ -18,7 +18,8 @@
          far model's box model (--far-model), as the node reads them
 
 Boxes go through what the pipeline node does after its detector: a second box of one cone is dropped
-(``one_box_per_cone``), and so is a flat box (--min-height-ratio); the counts go to stderr.
+(``one_box_per_cone``), and so is a flat box (--min-height-ratio) and a second cone on one viewing ray
+(--one-ray-range); the counts go to stderr.
 """
 
 from __future__ import annotations
@@ -70,6 +71,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="--boxes: a box scoring under 0.5 and lower than R x the height a cone of its class has where "
                         "its foot maps is dropped as a mark on the ground, as the node does (its min_height_ratio; "
                         "needs a mount pose; 0 = off; default %(default)s)")
+    p.add_argument("--one-ray-range", type=float, default=PARAMS["one_ray_range_m"].default, metavar="M",
+                   help="--boxes: two cones nearly on one viewing ray (under 0.15 m across, 2 m along it), the "
+                        "better-scored nearer than M m, are one cone, as the node does (its one_ray_range_m; 0 = off; "
+                        "default %(default)s)")
     p.add_argument("--conf", type=float, default=DEFAULT_CONF,
                    help="a .jsonl prediction file: map only boxes of at least this score (default %(default)s)")
 

@@ -21,11 +21,11 @@ Parameters (generated from cone_perception/params.py by ``cone-perception params
     its class has where its foot maps, scoring under 0.5, is a mark on the ground (a painted line),
     not a cone: dropped, counted on /diagnostics (boxes_dropped: flat); 0 = off; needs a mount pose
     in the calibration, else it cannot act
-  one_ray_range_m (double, default 40.0; 0.0 .. 200.0): two cones nearly on one viewing ray (under
-    0.15 m across it, under 2 m apart along it), the better-scored nearer than this (m from the
-    camera), are one cone seen twice (two boxes of one far cone a few pixels apart): the
-    better-scored stays, its covariance stretched to cover the other, the other is dropped, counted
-    on /diagnostics (boxes_dropped: one_ray); 0 = off
+  one_ray_range_m (double, default 40.0; 0.0 .. 200.0): two cones of one class (of two classes from
+    15 m on) nearly on one viewing ray (under 0.15 m across it, under 2 m apart along it), the
+    better-scored nearer than this (m from the camera), are one cone seen twice (two boxes of one
+    far cone a few pixels apart): the better-scored stays, its covariance stretched to cover the
+    other, the other is dropped, counted on /diagnostics (boxes_dropped: one_ray); 0 = off
   model (string, default ""; a .pt, .onnx or .torchscript path): the model file of the detection
     node that draws cone_boxes, for its box model (box_model); empty = the shipped default model
     (models/cone_detector.pt)

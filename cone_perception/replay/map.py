@@ -30,12 +30,16 @@ def run_map(args: argparse.Namespace) -> int:
         for (u, v), (x, y) in zip(uv, xy):
             out.write(f"{u:g},{v:g},{x:.4f},{y:.4f}\n")
         return 0
-    # boxes: the steps the pipeline node runs after its detector (one box per cone, the flat-box gate, the attitude
+    # boxes: the steps the pipeline node runs after its detector (one box per cone, the flat-box gate, one cone per
+    # ray, the attitude
     # with each network's boxes read through its own box model), so a file is mapped as the node maps a frame
     why = PARAMS["min_height_ratio"].check(args.min_height_ratio)
     if why:
         raise ConfigError("--min-height-ratio", None, why)
-    mapper = ConeMapper(calib, args.min_height_ratio)
+    why = PARAMS["one_ray_range_m"].check(args.one_ray_range)
+    if why:
+        raise ConfigError("--one-ray-range", None, why)
+    mapper = ConeMapper(calib, args.min_height_ratio, args.one_ray_range)
     config = None
     if args.attitude == "image" or args.attitude is None and calib.has_attitude_model:
         model = args.model or default_model_path()

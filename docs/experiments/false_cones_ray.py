@@ -124,15 +124,13 @@ def diag(recs: list[str]) -> None:
                       + f" | {c['x-one']} / {c['x-two']} |")
 
 
-def ray_rule(cam, across, along, frac=0.0, mode="keep", max_range=np.inf, any_class=False):
+def ray_rule(cam, across, along, frac=0.0, mode="keep", max_range=np.inf, any_class=False, min_range=0.0):
+    """``any_class``: True (pairs of two classes at any range), False (one class only) or the range (m) from which
+    pairs of two classes count (nearer: one class only)."""
+    cross = {True: 0.0, False: np.inf}.get(any_class, any_class)
+
     def f(cones):
-        if any_class:  # (screen only) pairs of any two classes: the better-scored cone stays, its class too
-            one = cones.copy()
-            one["class_id"] = 0
-            out, keep = one_cone_per_ray(one, cam, across, along, frac, mode, max_range)
-            out["class_id"] = cones["class_id"][keep]
-            return out
-        return one_cone_per_ray(cones, cam, across, along, frac, mode, max_range)[0]
+        return one_cone_per_ray(cones, cam, across, along, frac, mode, max_range, cross, min_range)[0]
     return f
 
 
@@ -153,6 +151,14 @@ DESIGNS["r2 keep, across < 0.2 m, along < 1.5 m, within 40 m, cones only"] = (0.
 DESIGNS["r2 any class: keep, across < 0.15 m, along < 2.0 m, within 25 m"] = (0.15, 2.0, 0.0, "keep", True, 25.0, True)
 DESIGNS["r2 any class: keep, across < 0.15 m, along < 2.0 m, within 40 m"] = (0.15, 2.0, 0.0, "keep", True, 40.0, True)
 DESIGNS["r2 any class: keep, across < 0.1 m, along < 2.0 m, within 40 m"] = (0.1, 2.0, 0.0, "keep", True, 40.0, True)
+# round 3: the near bands (the default of round 2 cost 7-15 m recall): only beyond a minimum range
+for _anyc in (False, True):
+    for _rmin in (0.0, 10.0, 15.0, 20.0):
+        DESIGNS[f"r3 {'any class' if _anyc else 'one class'}: keep, across < 0.15 m, along < 2.0 m, {_rmin:g}-40 m"] = (
+            0.15, 2.0, 0.0, "keep", True, 40.0, _anyc, _rmin)
+for _x in (7.0, 10.0, 15.0):
+    DESIGNS[f"r4 one class 0-40 m, two classes {_x:g}-40 m: keep, across < 0.15 m, along < 2.0 m"] = (
+        0.15, 2.0, 0.0, "keep", True, 40.0, _x)
 
 
 def screen(recs: list[str], only: str) -> None:
@@ -160,8 +166,9 @@ def screen(recs: list[str], only: str) -> None:
     for p in recs:
         with open(p, "rb") as f:
             datas.append((Path(p).stem, pickle.load(f)))
-    print("| design | drive | /cones 15-25 / 25-40 m, false per frame < 40 m | /cones/tracked 15-25 / 25-40 m, false |")
-    print("|---|---|---|---|")
+    print("| design | drive | /cones 15-25 / 25-40 m, false per frame < 40 m | /cones/tracked 15-25 / 25-40 m, false | "
+          "0-7 / 7-15 m: /cones; tracked |")
+    print("|---|---|---|---|---|")
     for name, spec in DESIGNS.items():
         if only not in name:
             continue
@@ -170,15 +177,17 @@ def screen(recs: list[str], only: str) -> None:
             if spec is None:
                 post, pt = None, True
             else:
-                a, d, fr, mode, pt, rmax, *anyc = spec
-                post = ray_rule(load_calibration(data["calib"]).camera_ground_xy(), a, d, fr, mode, rmax, *anyc)
+                a, d, fr, mode, pt, rmax, *more = spec
+                post = ray_rule(load_calibration(data["calib"]).camera_ground_xy(), a, d, fr, mode, rmax, *more)
             r = run(data, one_box, {}, None, post, pt, DEFAULT_MIN_HEIGHT_RATIO)
             res.append(r)
             print(f"| {name} | {dn} | {r['raw'][0]:.3f} / {r['raw'][1]:.3f}, {r['raw'][2]:.2f} | "
-                  f"{r['tracked'][0]:.3f} / {r['tracked'][1]:.3f}, {r['tracked'][2]:.2f} |", flush=True)
-        m = {k: np.mean([r[k] for r in res], axis=0) for k in ("raw", "tracked")}
+                  f"{r['tracked'][0]:.3f} / {r['tracked'][1]:.3f}, {r['tracked'][2]:.2f} | "
+                  "{:.3f} / {:.3f}; {:.3f} / {:.3f} |".format(*r["near"]), flush=True)
+        m = {k: np.mean([r[k] for r in res], axis=0) for k in ("raw", "tracked", "near")}
         print(f"| **{name}** | mean of {len(res)} | {m['raw'][0]:.3f} / {m['raw'][1]:.3f}, {m['raw'][2]:.2f} | "
-              f"{m['tracked'][0]:.3f} / {m['tracked'][1]:.3f}, {m['tracked'][2]:.2f} |", flush=True)
+              f"{m['tracked'][0]:.3f} / {m['tracked'][1]:.3f}, {m['tracked'][2]:.2f} | "
+              "{:.3f} / {:.3f}; {:.3f} / {:.3f} |".format(*m["near"]), flush=True)
 
 
 if __name__ == "__main__":
