@@ -25,8 +25,8 @@ is flat: its box's top lies on the ground too, so the box is lower than a cone s
 says (a worn yellow line taken for yellow cones, issue 26; the measured ratios are in docs/benchmarks.md, "Flat
 boxes"). Only weak boxes (scoring under :data:`FLAT_MAX_SCORE`) are judged, so that a true cone whose box the
 detector drew low is kept where the detector is sure of it.
-After the mapping, two cones nearly on one viewing ray and less than 2 m apart along it, the better-scored nearer
-than ``one_ray_range_m``, are one cone seen twice (:func:`one_cone_per_ray`): two boxes of one far cone a few
+After the mapping, two cones of one class (of two classes from 15 m on) nearly on one viewing ray and less than 2 m
+apart along it, the better-scored nearer than ``one_ray_range_m``, are one cone seen twice (:func:`one_cone_per_ray`): two boxes of one far cone a few
 pixels apart in foot row map a metre or two apart along the ray, on one bearing, where the image cannot tell them
 from two cones of a row (issue 26, session 15). The better-scored stays, its covariance stretched to cover the other.
 Every box dropped is counted by cause in :attr:`ConeMapper.dropped`.
@@ -176,9 +176,10 @@ def one_cone_per_ray(cones: np.ndarray, camera_xy, across_m: float, along_m: flo
     along = np.einsum("ijk,ik->ij", d, u)  # along cone i's ray
     across = np.abs(d[..., 0] * u[:, 1:2] - d[..., 1] * u[:, 0:1])
     score = np.asarray(cones["score"], np.float64)
+    near_enough = (rng >= min_range_m) & (rng < max_range_m)
     pair = (((cones["class_id"][:, None] == cones["class_id"][None, :]) | (rng >= cross_class_from_m)[:, None])
-            & (across < across_m)
-            & (np.abs(along) < np.maximum(along_m, along_frac * rng)[:, None]) & ((rng >= min_range_m) & (rng < max_range_m))[:, None])
+            & (across < across_m) & (np.abs(along) < np.maximum(along_m, along_frac * rng)[:, None])
+            & near_enough[:, None])
     np.fill_diagonal(pair, False)
     if not pair.any():
         return cones, keep
@@ -187,7 +188,6 @@ def one_cone_per_ray(cones: np.ndarray, camera_xy, across_m: float, along_m: flo
         if not keep[i]:
             continue
         takes = np.flatnonzero(pair[i] & keep & (score <= score[i]))
-        takes = takes[takes != i]
         if takes.size == 0:
             continue
         keep[takes] = False
@@ -218,7 +218,8 @@ class ConeMapper:
         """``min_height_ratio``: boxes lower than this x the height a cone of their class has where their foot maps,
         scoring under :data:`FLAT_MAX_SCORE`, are dropped as marks on the ground (0: off; needs a mount pose in the
         calibration, else it cannot act). ``one_ray_range_m``: two cones nearly on one viewing ray
-        (:func:`one_cone_per_ray` at :data:`ONE_RAY_ACROSS_M`, :data:`ONE_RAY_ALONG_M`), the better-scored nearer
+        (:func:`one_cone_per_ray` at :data:`ONE_RAY_ACROSS_M`, :data:`ONE_RAY_ALONG_M`; of one class, of two from
+        :data:`ONE_RAY_CROSS_CLASS_FROM_M` on), the better-scored nearer
         than this (m from the camera), are one cone: the other is dropped (0: off)."""
         if not (np.isfinite(min_height_ratio) and 0.0 <= min_height_ratio < 1.0):
             raise ValueError(f"min_height_ratio must be in [0, 1), got {min_height_ratio}")
