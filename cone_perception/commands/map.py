@@ -72,9 +72,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "its foot maps is dropped as a mark on the ground, as the node does (its min_height_ratio; "
                         "needs a mount pose; 0 = off; default %(default)s)")
     p.add_argument("--one-ray-range", type=float, default=PARAMS["one_ray_range_m"].default, metavar="M",
-                   help="--boxes: two cones nearly on one viewing ray (under 0.15 m across, 2 m along it), the "
-                        "better-scored nearer than M m, are one cone, as the node does (its one_ray_range_m; 0 = off; "
-                        "default %(default)s)")
+                   help="--boxes: two cones of one class (two classes from 15 m on) nearly on one viewing ray (under "
+                        "0.15 m across, 2 m along it), the better-scored nearer than M m, are one cone, as the node does "
+                        "(its one_ray_range_m; 0 = off; default %(default)s)")
     p.add_argument("--conf", type=float, default=DEFAULT_CONF,
                    help="a .jsonl prediction file: map only boxes of at least this score (default %(default)s)")
 

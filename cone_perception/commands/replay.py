@@ -91,9 +91,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "on the ground, not a cone: dropped and counted (summary: boxes dropped); 0 = off (default "
                         "%(default)s; live: the nodes' min_height_ratio)")
     p.add_argument("--one-ray-range", type=float, default=PARAMS["one_ray_range_m"].default, metavar="M",
-                   help="offline: two cones nearly on one viewing ray (under 0.15 m across, 2 m along it), the "
-                        "better-scored nearer than M m, are one cone seen twice: the other is dropped and counted "
-                        "(summary: boxes dropped, one_ray); 0 = off (default %(default)s; live: the nodes' one_ray_range_m)")
+                   help="offline: two cones of one class (two classes from 15 m on) nearly on one viewing ray (under "
+                        "0.15 m across, 2 m along it), the better-scored nearer than M m, are one cone seen twice: the "
+                        "other is dropped and counted (summary: boxes dropped, one_ray); 0 = off (default %(default)s; "
+                        "live: the nodes' one_ray_range_m)")
     p.add_argument("--live", choices=["fused", "separate"], default=None,
                    help="play the bag into live node processes instead of replaying offline")
     p.add_argument("--pace", choices=["lockstep", "rate"], default="lockstep",
