@@ -230,3 +230,34 @@ def test_map_boxes_drops_what_the_node_drops(tmp_path, capsys):
     assert len(cap.out.splitlines()) == 4 and "second_box 1" in cap.err
     assert main(["map", "--calib", str(cal_path), "--boxes", str(pred), "--min-height-ratio", "2"]) == 2
     assert "--min-height-ratio" in capsys.readouterr().err
+
+
+def test_eval_reads_each_networks_boxes_through_its_box_model(tmp_path, capsys):
+    """`eval --attitude image` reads the predictions as `map --boxes` and the node do: the band model's boxes through
+    --model's box model, those the file marks as the far strip's through --far-model's. Far-network boxes whose tops
+    stand 6 % low, marked: the 7-15 m cones are placed as exact boxes place them; unmarked: worse."""
+    from cone_perception.cli import main
+
+    band, far = _two_models(tmp_path, 0.06)
+    cal_path = save_calibration(_calib(), tmp_path / "cal.yaml")
+    exact = _cone_boxes(_tilted_camera(0.6, 0.0), CONES_XY, CONES_CLS)
+    cones = [{"class_id": int(c), "x_m": float(x), "y_m": float(y), "distance_m": float(np.hypot(x, y)),
+              "box": [float(v) for v in b], "visible_fraction": 1.0} for b, c, (x, y) in zip(exact, CONES_CLS, CONES_XY)]
+    (tmp_path / "gt.jsonl").write_text(json.dumps({"image": "f0.jpg", "width": 1920, "height": 1080, "track": {},
+                                                   "pose": {}, "cones": cones}) + "\n")
+    err = {}
+    for name, boxes, marked in (("exact", exact, False), ("marked", _shrunk(exact, 0.06, 0.0), True),
+                                ("unmarked", _shrunk(exact, 0.06, 0.0), False)):
+        doc = {"image": "f0.jpg", "width": 1920, "height": 1080,
+               "boxes": [[*map(float, b), 0.9, int(c)] for b, c in zip(boxes, CONES_CLS)]}
+        if marked:
+            doc["far"] = list(range(len(boxes)))
+        (tmp_path / "pred.jsonl").write_text(json.dumps(doc) + "\n")
+        assert main(["eval", "--pred", str(tmp_path / "pred.jsonl"), "--gt", str(tmp_path / "gt.jsonl"), "--calib",
+                     str(cal_path), "--out", str(tmp_path / name), "--attitude", "image", "--box-model", "model",
+                     "--model", str(band), "--far-model", str(far), "--worst", "0", "--no-progress"]) == 0
+        assert "image attitude: box model measured (band.pt.box_model.yaml" in capsys.readouterr().out
+        loc = json.loads((tmp_path / name / "metrics.json").read_text())["localisation"]
+        err[name] = loc["groups"]["far 7-15 m"]["median_err_m"]
+    assert err["marked"] == pytest.approx(err["exact"], abs=0.02)
+    assert err["unmarked"] > err["exact"] + 0.1, err

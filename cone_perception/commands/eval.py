@@ -80,6 +80,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="localisation: fixed (the calibration's H, default) or image (each image's camera pitch/roll fitted "
                         "from its own detections first, as `map --boxes --attitude image`; needs mount_pose and "
                         "camera_matrix in the calibration); the table gives each group's median predicted 1-sigma")
+    p.add_argument("--model", type=Path, default=None, metavar="MODEL",
+                   help="--attitude image: the detector that drew the predictions; the fit reads its boxes through its "
+                        "box model (MODEL.box_model.yaml), as the node does. Default: the shipped default model")
+    p.add_argument("--box-model", choices=("auto", "model", "rendered"), default="auto",
+                   help="--attitude image: how the fit reads the boxes: model (the --model's measured box model, real "
+                        "frames), rendered (the rendered drives' box table) or auto (default: rendered for a synthetic "
+                        "camera's calibration, `camera: synth`, else model), as the nodes' box_model")
+    p.add_argument("--far-model", default=None, metavar="auto|band|PATH",
+                   help="--attitude image: the model that drew the predictions the file marks as the far strip's (its "
+                        "`far` key, written by `detect` with a far strip); read through its box model. auto (default) = "
+                        "the shipped far-strip model, band = the --model")
     p.add_argument("--box-model-out", type=Path, default=None, metavar="FILE.yaml",
                    help="also measure the detector's box model (issue 27: median detected/labelled height and top/bottom "
                         "offsets per box height at the model input, and per class; whole labelled cones inside --band, "

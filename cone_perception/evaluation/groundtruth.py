@@ -84,6 +84,7 @@ class EvalImage:
     input_scale: float | None = None  # model input px per image px (from the prediction file)
     path: str | None = None  # the image file, where known
     bag_frame: tuple[str, int] | None = None  # (rosbag folder, header stamp ns) of a bag's frame, where known
+    pred_far: np.ndarray | None = None  # (K,) bool: the predictions the far strip drew (the prediction file's ``far``)
 
 
 def restrict_to_band(images: list[EvalImage], rows: tuple[int, int], min_visible: float = MIN_VISIBLE) -> tuple[list[EvalImage], int]:
@@ -134,7 +135,8 @@ def restrict_to_min_height(images: list[EvalImage], min_height: float, iou: floa
             keep[np.flatnonzero(small_pred)] = np.any((ious >= iou) & same, axis=1)
         n_pred += int((~keep).sum())
         out.append(replace(im, gt_ignore=ign, pred_boxes=im.pred_boxes[keep], pred_scores=im.pred_scores[keep],
-                           pred_classes=im.pred_classes[keep]))
+                           pred_classes=im.pred_classes[keep],
+                           pred_far=im.pred_far[keep] if im.pred_far is not None else None))
     return out, n_gt, n_pred
 
 
@@ -282,7 +284,8 @@ def pair_with_predictions(gt: GroundTruth, preds: list[ImagePrediction], pred_so
             resized += int((g.width, g.height) != (p.width, p.height))
         b, s, c = boxes_to_arrays(p.boxes)
         out.append(EvalImage(p.image, p.width, p.height, g.boxes * np.array([sx, sy, sx, sy]), g.class_ids, g.ignore,
-                             g.xy_m, b.astype(np.float64), s.astype(np.float64), c, p.input_scale, g.path, g.bag_frame))
+                             g.xy_m, b.astype(np.float64), s.astype(np.float64), c, p.input_scale, g.path, g.bag_frame,
+                             p.far))
     missing = [g.image for k, g in enumerate(gt.images) if k not in seen]
     if missing and not only_predicted:
         raise ConfigError(pred_source, None, f"has no line for {len(missing)} of {len(gt.images)} ground-truth images of {gt.source} "

@@ -25,6 +25,7 @@ import numpy as np
 from tqdm import tqdm
 
 from ..attitude import FIXED, attitude_estimator
+from ..attitude.box_files import attitude_config_for
 from ..classes import CLASS_NAMES
 from ..data.outfiles import json_safe
 from ..data.predictions import read_predictions
@@ -33,6 +34,7 @@ from ..geometry.calib import Calibration, load_calibration
 from ..mapping import ConeMapper
 from ..params import DEFAULT_CONF
 from ..records import CONE_DTYPE, boxes_from_arrays
+from ..resources import default_model_path, far_model_for
 from ..words import plural
 from .attitude import AttitudeReport
 from .groundtruth import EvalImage, load_ground_truth, pair_with_predictions, restrict_to_band, restrict_to_min_height
@@ -154,10 +156,13 @@ def lowest_score_note(images: list[EvalImage]) -> str | None:
 
 
 def evaluate(images: list[EvalImage], calib: Calibration | None, conf: float = DEFAULT_CONF, iou: float = 0.5,
-             has_positions: bool = False, progress: bool = False, attitude: str = "fixed") -> EvalResult:
+             has_positions: bool = False, progress: bool = False, attitude: str = "fixed",
+             attitude_config=None) -> EvalResult:
     """Every figure of the report for paired images; ``calib`` maps boxes to metres (optional).
     ``attitude``: ``fixed`` (the calibration's H) or ``image`` (each image's camera attitude fitted from its
-    own detections first, as ``map --boxes --attitude image``; needs a mount pose in the calibration)."""
+    own detections first, as ``map --boxes --attitude image``; needs a mount pose in the calibration), reading the
+    boxes as ``attitude_config`` says (an :class:`~cone_perception.attitude.ImageAttitudeConfig`; None: its
+    defaults, the rendered table), the far strip's (``EvalImage.pred_far``) through its ``far_reading``."""
     notes: list[str] = []
     range_mapper = ConeMapper(replace(calib, max_range_m=math.inf)) if calib is not None else None
     mapper = ConeMapper(calib) if calib is not None else None
@@ -167,7 +172,7 @@ def evaluate(images: list[EvalImage], calib: Calibration | None, conf: float = D
     loc = LocalisationReport(max_range_m=calib.max_range_m) if do_loc else None
     pairs = PairDistanceReport() if do_loc else None
     att_report = AttitudeReport() if do_loc else None
-    att_est = attitude_estimator(mapper, attitude)[1] if do_loc and attitude != "fixed" else None
+    att_est = attitude_estimator(mapper, attitude, None, attitude_config)[1] if do_loc and attitude != "fixed" else None
 
     if calib is not None:
         ratio = calib.image_width / calib.image_height
@@ -200,7 +205,8 @@ def evaluate(images: list[EvalImage], calib: Calibration | None, conf: float = D
             att = FIXED
             if att_est is not None:
                 b = np.column_stack([rec["u1"], rec["v1"], rec["u2"], rec["v2"]]).astype(np.float64)
-                att = att_est.single_frame(b, rec["class_id"].astype(np.intp))
+                att = att_est.single_frame(b, rec["class_id"].astype(np.intp),
+                                           im.pred_far[keep] if im.pred_far is not None else None)
             pred_cones = mapper.map_boxes(rec, att)
             truth = np.zeros(int((~im.gt_ignore).sum()), CONE_DTYPE)
             truth["x"], truth["y"] = im.gt_xy_m[~im.gt_ignore, 0], im.gt_xy_m[~im.gt_ignore, 1]
@@ -456,10 +462,12 @@ def format_summary(res: EvalResult) -> str:
 def evaluate_predictions(pred: Path, gt_path: Path, gt_names: str | None = None, calib_arg: str | None = None,
                          conf: float = DEFAULT_CONF, iou: float = 0.5, only_predicted: bool = False, progress: bool = True,
                          verbose: bool = True, band: tuple[int, int] | None = None, min_height: float | None = None,
-                         attitude: str = "fixed"):
+                         attitude: str = "fixed", box_model: str = "auto", model: str | Path | None = None,
+                         far_model: str | None = None):
     """A prediction file against ground truth -> :class:`~cone_perception.evaluation.report.EvalResult`, as ``eval``
-    computes it (``gt_names`` comma-separated; ``band``, ``min_height``, ``attitude``: as ``eval --band``, ``--min-height``,
-    ``--attitude``). Used by ``eval`` and ``bench table``."""
+    computes it (``gt_names`` comma-separated; ``band``, ``min_height``, ``attitude``, ``box_model``, ``model``,
+    ``far_model``: as ``eval --band``, ``--min-height``, ``--attitude``, ``--box-model``, ``--model``, ``--far-model``).
+    Used by ``eval`` and ``bench table``."""
     names = [n.strip() for n in gt_names.split(",") if n.strip()] if gt_names else None
     gt = load_ground_truth(gt_path, names)
     preds = list(read_predictions(pred))
@@ -479,6 +487,14 @@ def evaluate_predictions(pred: Path, gt_path: Path, gt_names: str | None = None,
         print(f"calibration: {calib_path} (found beside the ground truth)")
     if verbose and gt_path.is_dir() and (gt_path / "gt.jsonl").is_file():
         print(f"note: {gt_path / 'gt.jsonl'} exists; pass it as --gt for localisation and distances from true positions")
-    res = evaluate(images, calib, conf, iou, gt.has_positions, progress=progress, attitude=attitude)
+    att_cfg = None
+    if attitude == "image" and calib is not None:  # the boxes read as the node reads them (docs/attitude.md, Box model)
+        band_model = model or default_model_path()
+        att_cfg, what = attitude_config_for(box_model, band_model, far_model_for(far_model, band_model),
+                                            calib.camera == "synth")
+        if verbose:
+            print(f"image attitude: box model {what}")
+    res = evaluate(images, calib, conf, iou, gt.has_positions, progress=progress, attitude=attitude,
+                   attitude_config=att_cfg)
     res.metrics["ground_truth"] = {"format": gt.kind, **gt.info, **counts}
     return res

@@ -27,7 +27,8 @@ def run_eval(args: argparse.Namespace) -> int:
         raise ConfigError(str(args.pred), None, "prediction file not found")
     res = evaluate_predictions(args.pred, args.gt, args.gt_names, args.calib, args.conf, args.iou, args.only_predicted,
                                progress=not args.no_progress, band=args.band, min_height=args.min_height,
-                               attitude=args.attitude)
+                               attitude=args.attitude, box_model=args.box_model, model=args.model,
+                               far_model=args.far_model)
 
     low = lowest_score_note(res.images)
     if low:
