@@ -349,13 +349,29 @@ class ConeMapper:
         ``attitude``: the body's attitude offset for this frame (needs a mount pose); its
         uncertainty is added to each cone's covariance.
         """
+        out, _ = self._map(records, attitude, self.dropped)
+        return self.one_per_ray(out)[0]
+
+    def box_ranges(self, records: np.ndarray, attitude: Attitude | None = None) -> np.ndarray:
+        """(N,) float64: the distance (m) from the ``rear_axle`` origin of the cone each box maps to by itself (as
+        :meth:`map_boxes` maps it, before :meth:`one_per_ray`), NaN where it maps to none (above the horizon,
+        beyond the range, flat). Nothing is counted in :attr:`dropped`: the debug image's distances, drawn beside
+        the frame's own mapping. Raises :class:`FrameError` as :meth:`map_boxes` does."""
+        out, valid = self._map(records, attitude, dict.fromkeys(DROP_CAUSES, 0))
+        ranges = np.full(len(records), np.nan)
+        ranges[valid] = np.hypot(out["x"].astype(np.float64), out["y"].astype(np.float64))
+        return ranges
+
+    def _map(self, records: np.ndarray, attitude: Attitude | None, dropped: dict) -> tuple[np.ndarray, np.ndarray]:
+        """(the cones of the boxes kept, in order; (N,) bool: which boxes they are), the drops counted in
+        ``dropped``."""
         validate_boxes(records)
         if records.shape[0] == 0:
-            return np.zeros(0, dtype=CONE_DTYPE)
+            return np.zeros(0, dtype=CONE_DTYPE), np.zeros(0, dtype=bool)
         ground = self._ground_for(attitude)
         uv = self.foot_points(records)
         xy, valid = ground.map_pixels(uv)
-        self.dropped["off_ground"] += int((~valid).sum())
+        dropped["off_ground"] += int((~valid).sum())
         off = self.width_offsets(records, uv, ground)[valid] if self._from_width else None
         xy[valid] = self.foot_offsets(xy[valid], records["class_id"][valid], off)
         if self.min_height_ratio > 0 and valid.any():
@@ -364,7 +380,7 @@ class ConeMapper:
             with np.errstate(invalid="ignore"):
                 flat = (self.height_ratios(records[idx], xy[idx]) < self.min_height_ratio) & weak  # NaN: not known, kept
             valid[idx[flat]] = False
-            self.dropped["flat"] += int(flat.sum())
+            dropped["flat"] += int(flat.sum())
         cov = ground.covariance(uv[valid])
         if (self.attitude_model is not None and attitude is not None and valid.any()
                 and (attitude.sigma_pitch_deg > 0 or attitude.sigma_roll_deg > 0)):
@@ -377,7 +393,7 @@ class ConeMapper:
         out["cov_xx"] = cov[:, 0, 0]
         out["cov_xy"] = cov[:, 0, 1]
         out["cov_yy"] = cov[:, 1, 1]
-        return self.one_per_ray(out)[0]
+        return out, valid
 
     def one_per_ray(self, cones: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(cones, mask of those kept): :func:`one_cone_per_ray` at this mapper's ``one_ray_range_m`` (what

@@ -31,6 +31,23 @@ def test_ranges_are_the_mapped_cones_distances():
     assert np.isnan(r[2])  # beyond max_range_m (30 m): no cone, no distance
 
 
+def test_ranges_count_nothing_and_give_every_box_its_own_distance():
+    """The pipeline node draws its debug image with the pipeline's own mapper: the distances must not count the
+    frame's drops a second time (/diagnostics boxes_dropped), and two boxes of one viewing ray, which /cones makes
+    one cone, each show their own distance."""
+    mapper = ConeMapper(CALIB, 0.8, 40.0)
+    boxes = _boxes()
+    twice = np.concatenate([boxes[1:2], boxes[1:2]])  # two boxes of the yellow cone, 2 px apart in foot row
+    twice["v2"][1] += 2
+    twice["score"][0] = 0.9  # both above the flat gate's score
+    twice["score"][1] = 0.55
+    assert len(mapper.map_boxes(twice)) == 1 and mapper.dropped["one_ray"] == 1
+    before = dict(mapper.dropped)
+    r = box_ranges_m(mapper, np.concatenate([boxes, twice]))
+    assert mapper.dropped == before
+    assert np.isnan(r[2]) and np.isfinite(r[[0, 1, 3, 4]]).all() and r[4] < r[3]
+
+
 def test_boxes_drawn_in_band_px_with_class_colours():
     crop = CALIB.crop
     band = np.full((crop.out_height, crop.out_width, 3), 90, np.uint8)
@@ -73,7 +90,7 @@ def test_ranges_one_bad_box_does_not_hide_the_others():
     bad["u2"][1] = bad["u1"][1] - 5  # u2 < u1: map_boxes refuses the whole message
     r = box_ranges_m(mapper, bad)
     assert r[0] == pytest.approx(good[0]) and np.isnan(r[1]) and np.isnan(r[2])
-    many = np.concatenate([boxes] * 100)  # 300 boxes: the tag in the score still tells them apart
+    many = np.concatenate([boxes] * 100)  # 300 boxes, each its own distance
     np.testing.assert_allclose(box_ranges_m(mapper, many), np.tile(good, 100), rtol=1e-6)
 
 

@@ -16,27 +16,18 @@ from .draw import draw_boxes
 
 def box_ranges_m(mapper: ConeMapper, boxes: np.ndarray) -> np.ndarray:
     """(N,) float64: distance (m) from the ``rear_axle`` origin to the cone each of the ``BOX_DTYPE``
-    records maps to, NaN where the box maps to no cone (above the horizon, beyond the range, bad).
+    records maps to, NaN where the box maps to no cone (above the horizon, beyond the range, flat, bad).
 
-    One call of the very mapping of ``/cones`` (``mapper.map_boxes``), which keeps the boxes it maps
-    in order and carries their scores: each box goes in with the score ``(i + 0.5) / N``, so each cone
-    says which box it came from. A message ``map_boxes`` refuses as a whole is mapped box by box.
+    The very mapping of ``/cones`` (:meth:`ConeMapper.box_ranges`), each box by itself and nothing counted (the
+    frame's own mapping counts its drops); a message ``map_boxes`` refuses as a whole is mapped box by box.
     """
     n = len(boxes)
-    out = np.full(n, np.nan)
     if n == 0:
-        return out
-    tagged = np.array(boxes, copy=True)
-    tagged["score"] = (np.arange(n) + 0.5) / n
+        return np.full(0, np.nan)
     try:
-        cones = mapper.map_boxes(tagged)
+        return mapper.box_ranges(boxes)
     except FrameError:
-        for i in range(n):
-            out[i] = box_ranges_m(mapper, boxes[i : i + 1])[0] if n > 1 else np.nan
-        return out
-    idx = np.clip(np.floor(cones["score"].astype(np.float64) * n).astype(np.int64), 0, n - 1)
-    out[idx] = np.hypot(cones["x"].astype(np.float64), cones["y"].astype(np.float64))
-    return out
+        return np.array([box_ranges_m(mapper, boxes[i : i + 1])[0] if n > 1 else np.nan for i in range(n)])
 
 
 def draw_debug_band(band_bgr: np.ndarray, boxes: np.ndarray, crop: CropSpec, ranges_m: np.ndarray | None = None) -> np.ndarray:
