@@ -18,6 +18,7 @@ import textwrap
 from dataclasses import dataclass
 from typing import Union
 
+from .errors import ConfigError
 from .geometry.calib import DEFAULT_CAMERA
 from .resources import FAR_MODEL_DEFAULT
 
@@ -282,6 +283,15 @@ class NodeSpec:
     publishes: tuple[str, ...]
     params: tuple[ParamSpec, ...]
     also: tuple[tuple[str, str], ...] = ()
+
+
+def check_options(options: dict[str, tuple[str, object]]) -> None:
+    """A command's options that stand for node parameters, checked as the nodes check them: ``{option: (parameter
+    name, value)}``; ConfigError naming the option of the first value its parameter refuses."""
+    for option, (name, value) in options.items():
+        why = PARAMS[name].check(value)
+        if why:
+            raise ConfigError(option, None, why)
 
 
 def _by_name(*names: str) -> tuple[ParamSpec, ...]:

@@ -21,7 +21,7 @@ from ..detector.fartiles import FarTiles
 from ..detector.farband import FarBand, SplitDetector, band_rows_for, band_split_for, far_rows_for
 from ..detector.parallel import ForwardPlan
 from ..errors import ConfigError
-from ..params import PARAMS
+from ..params import PARAMS, check_options
 from ..geometry.calib import load_calibration
 from ..timing import format_runs, format_table, summarize_runs
 from ..words import plural
@@ -43,10 +43,7 @@ def _bench_pipeline(args: argparse.Namespace, calib) -> dict:
     far_rows = far_rows_for(args.far_rows, calib, "--far-rows")  # a bad value fails before any model loads
     if far_model_given(args.far_model) and far_rows.crop is None:
         raise ConfigError("--far-model", None, f"needs a far band ({far_rows.what})")
-    for name in ("far_every", "far_tiles"):
-        why = PARAMS[name].check(getattr(args, name))
-        if why:
-            raise ConfigError("--" + name.replace("_", "-"), None, why)
+    check_options({"--far-every": ("far_every", args.far_every), "--far-tiles": ("far_tiles", args.far_tiles)})
     plan = forward_plan(args.threads, far_rows.crop is not None, args.sequential)
     split = band_split_for(args.band_split, calib, "--band-split")
     if split.upper is None:

@@ -16,7 +16,7 @@ from ..detector.model_files import attitude_config_for, default_model_path
 from ..errors import ConfigError, FrameError
 from ..geometry.calib import load_calibration
 from ..mapping import ConeMapper, one_box_per_cone, validate_boxes
-from ..params import PARAMS
+from ..params import check_options
 from ..records import BOX_DTYPE, read_boxes_csv
 from ..resources import far_model_for
 
@@ -33,12 +33,8 @@ def run_map(args: argparse.Namespace) -> int:
     # boxes: the steps the pipeline node runs after its detector (one box per cone, the flat-box gate, one cone per
     # ray, the attitude
     # with each network's boxes read through its own box model), so a file is mapped as the node maps a frame
-    why = PARAMS["min_height_ratio"].check(args.min_height_ratio)
-    if why:
-        raise ConfigError("--min-height-ratio", None, why)
-    why = PARAMS["one_ray_range_m"].check(args.one_ray_range)
-    if why:
-        raise ConfigError("--one-ray-range", None, why)
+    check_options({"--min-height-ratio": ("min_height_ratio", args.min_height_ratio),
+                   "--one-ray-range": ("one_ray_range_m", args.one_ray_range)})
     mapper = ConeMapper(calib, args.min_height_ratio, args.one_ray_range)
     config = None
     if args.attitude == "image" or args.attitude is None and calib.has_attitude_model:

@@ -31,7 +31,7 @@ from ..evaluation import GT_MIN_VISIBLE, LocalisationReport, format_localisation
 from ..evaluation.attitude import attitude_plot, format_attitude_report
 from ..evaluation.tracking import DriveEvaluation, format_drive_evaluation
 from ..geometry.calib import load_calibration, resolve_calibration_path
-from ..params import PARAMS
+from ..params import PARAMS, check_options
 from ..pipeline import Pipeline
 from ..synth.boxlook import real_box_behaviour
 from ..timing import format_table, summarize
@@ -59,16 +59,9 @@ def run_replay(args: argparse.Namespace) -> int:
         raise ConfigError("--max-range", None, f"must be a positive number of metres, got {args.max_range:g}")
     if args.tracker and not args.track:
         raise ConfigError("--tracker", None, "needs --track")
-    why = PARAMS["min_height_ratio"].check(args.min_height_ratio)
-    if why:
-        raise ConfigError("--min-height-ratio", None, why)
-    why = PARAMS["one_ray_range_m"].check(args.one_ray_range)
-    if why:
-        raise ConfigError("--one-ray-range", None, why)
-    for name in ("far_every", "far_tiles"):
-        why = PARAMS[name].check(getattr(args, name))
-        if why:
-            raise ConfigError("--" + name.replace("_", "-"), None, why)
+    check_options({"--min-height-ratio": ("min_height_ratio", args.min_height_ratio),
+                   "--one-ray-range": ("one_ray_range_m", args.one_ray_range),
+                   "--far-every": ("far_every", args.far_every), "--far-tiles": ("far_tiles", args.far_tiles)})
     if args.far_tiles and args.box_behaviour == "real":
         raise ConfigError("--far-tiles", None, "not with --box-behaviour real (it acts on the far band's own network)")
     if args.live and args.min_height_ratio != PARAMS["min_height_ratio"].default:
