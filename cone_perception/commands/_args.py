@@ -33,3 +33,12 @@ def add_far_model(p: argparse.ArgumentParser, scope: str = "", after: str = "") 
                    help=f"{scope}the far band's model: auto (default) = the shipped far-strip model "
                         f"(models/cone_detector_far.pt), band = the band's own model, or a model file; its classes "
                         f"must be the band model's{after}")
+
+
+def add_far_box_reading(p: argparse.ArgumentParser) -> None:
+    """``--far-model`` of the tools that read a `detect` prediction file (``map``, ``eval``): the model that drew the
+    boxes the file marks as the far strip's, whose box model the image attitude reads them through."""
+    p.add_argument("--far-model", default=None, metavar="auto|band|PATH",
+                   help="--attitude image: the model that drew the boxes a prediction file marks as the far strip's (its "
+                        "`far` key, written by `detect` with a far strip); the fit reads them through its box model. "
+                        "auto (default) = the shipped far-strip model, band = the --model")

@@ -18,7 +18,7 @@ from pathlib import Path
 
 from ..evaluation.run import run_eval
 from ..params import DEFAULT_CONF
-from ._args import parse_crop
+from ._args import add_far_box_reading, parse_crop
 
 
 def _unit(text: str) -> float:
@@ -87,10 +87,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="--attitude image: how the fit reads the boxes: model (the --model's measured box model, real "
                         "frames), rendered (the rendered drives' box table) or auto (default: rendered for a synthetic "
                         "camera's calibration, `camera: synth`, else model), as the nodes' box_model")
-    p.add_argument("--far-model", default=None, metavar="auto|band|PATH",
-                   help="--attitude image: the model that drew the predictions the file marks as the far strip's (its "
-                        "`far` key, written by `detect` with a far strip); read through its box model. auto (default) = "
-                        "the shipped far-strip model, band = the --model")
+    add_far_box_reading(p)
     p.add_argument("--box-model-out", type=Path, default=None, metavar="FILE.yaml",
                    help="also measure the detector's box model (issue 27: median detected/labelled height and top/bottom "
                         "offsets per box height at the model input, and per class; whole labelled cones inside --band, "

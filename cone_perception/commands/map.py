@@ -30,6 +30,7 @@ from pathlib import Path
 from ..geometry.calib import DEFAULT_CAMERA
 from ..params import DEFAULT_CONF, PARAMS
 from ..replay.map import run_map
+from ._args import add_far_box_reading
 
 
 def _pixel(text: str) -> tuple[float, float]:
@@ -63,10 +64,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--box-model", choices=("model", "rendered"), default="model",
                    help="--attitude image: model (the --model's box model, for real frames; default) or rendered (the "
                         "rendered drives' box table, for boxes of a synthetic drive)")
-    p.add_argument("--far-model", default=None, metavar="auto|band|PATH",
-                   help="--attitude image: the model that drew the boxes a prediction file marks as the far strip's "
-                        "(its `far` key); the fit reads them through its box model. auto (default) = the shipped "
-                        "far-strip model, band = the --model")
+    add_far_box_reading(p)
     p.add_argument("--min-height-ratio", type=float, default=PARAMS["min_height_ratio"].default, metavar="R",
                    help="--boxes: a box scoring under 0.5 and lower than R x the height a cone of its class has where "
                         "its foot maps is dropped as a mark on the ground, as the node does (its min_height_ratio; "
