@@ -157,3 +157,39 @@ def test_knocked_over_cones_lie_on_the_ground():
         assert b.box[1] > a.box[1] + 2  # no tip sticking up: the box top is lower
         assert (b.box[2] - b.box[0]) / (b.box[3] - b.box[1]) > (a.box[2] - a.box[0]) / (a.box[3] - a.box[1])  # flatter
     assert make_track("autocross", 1, knocked_frac=0.3).cone_fallen.mean() == pytest.approx(0.3, abs=0.1)
+
+
+def _ground_paint(look) -> tuple[float, float]:
+    """Shares of the near ground tiles painted yellow (red well above blue) and white (every channel well above
+    the asphalt's median, grey)."""
+    t = look.near_mosaic.astype(np.int16)
+    lo = t.min(axis=2)
+    white = (lo - np.median(lo) > 40) & (t.max(axis=2) - lo < 30)
+    return float(((t[..., 2] - t[..., 0]) > 60).mean()), float(white.mean())
+
+
+def test_paint_lines_forces_the_colour_and_random_keeps_every_seeds_look():
+    looks = {}
+    for mode in ("random", "yellow", "white"):
+        r = SynthConfig(width=W, height=H, paint_lines=mode).renderer()
+        rng = np.random.default_rng(11)
+        looks[mode] = [r.new_look(rng) for _ in range(6)]
+    # forced: every look has lines of that colour and none of the other
+    for look in looks["yellow"]:
+        yellow, white = _ground_paint(look)
+        assert yellow > 1e-3 and yellow > 5 * white
+    for look in looks["white"]:
+        yellow, white = _ground_paint(look)
+        assert white > 1e-3 and yellow < 1e-4
+    # random: some looks without painted lines (about 30 %), as before the option existed
+    shares = [_ground_paint(look) for look in looks["random"]]
+    assert any(y < 1e-4 and w < 1e-4 for y, w in shares)
+    # the default draws what the renderer drew before the option: the same seed, the same first look
+    assert np.array_equal(looks["random"][0].near_mosaic,
+                          SynthConfig(width=W, height=H).renderer().new_look(np.random.default_rng(11)).near_mosaic)
+
+
+def test_paint_lines_unknown_value_is_refused():
+    from cone_perception.errors import ConfigError
+    with pytest.raises(ConfigError, match="--paint-lines"):
+        SynthConfig(width=W, height=H, paint_lines="pink").validate()

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ..synth.look import PAINT_LINES
 from ..synth.run import run_synth
 
 
@@ -37,6 +38,10 @@ def _common(p: argparse.ArgumentParser) -> None:
     g.add_argument("--missing", type=float, default=0.0, help="fraction of cones removed from each track (default 0)")
     g.add_argument("--stray", type=int, default=0, help="stray cones placed off the track per track (default 0)")
     g.add_argument("--knocked", type=float, default=0.0, help="fraction of cones knocked over, lying on their side (default 0)")
+    g.add_argument("--paint-lines", choices=PAINT_LINES, default="random",
+                   help="the ground's painted lines: random (default: 70 %% of looks, a fifth of them yellow), or yellow "
+                        "/ white in every look (hard negatives: a detector's boxes on no cone stand on yellow paint; "
+                        "docs/training.md)")
     p.add_argument("--no-progress", "--quiet", dest="no_progress", action="store_true",
                    help="no progress bar (--quiet: the same, kept for old scripts)")
 

@@ -15,7 +15,7 @@ from ..geometry.calib import (
     DEFAULT_MAX_RANGE_M, RECOMMENDED_FOOT_OFFSET_M, RECOMMENDED_FOOT_POINTS, Calibration, save_calibration,
 )
 from ..geometry.camera import MountPose, PinholeCamera, default_intrinsics
-from .look import RenderOptions
+from .look import PAINT_LINES, RenderOptions
 from .render import Renderer
 from .scene import ground_visible
 from .track import TRACK_KINDS, Track, make_track
@@ -41,6 +41,7 @@ class SynthConfig:
     knocked_frac: float = 0.0
     car_motion: bool = False  # bags: speed profile, braking pitch, cornering roll, bumps, grade changes (synth/motion.py)
     vary_mount: bool = False  # datasets: new hfov / pitch / height per track (calib.yaml is then the nominal only)
+    paint_lines: str = "random"  # the ground's painted lines: random, or yellow / white in every look (look.PAINT_LINES)
 
     def validate(self) -> None:
         """Raise :class:`ConfigError` for impossible parameters, before any work."""
@@ -54,6 +55,8 @@ class SynthConfig:
             raise ConfigError("--height", None, f"camera height must be > 0 m, got {self.mount.height_m}")
         if not 0.0 <= self.nose_prob <= 1.0:
             raise ConfigError("--nose-prob", None, f"must be within 0..1, got {self.nose_prob}")
+        if self.paint_lines not in PAINT_LINES:
+            raise ConfigError("--paint-lines", None, f"unknown value {self.paint_lines!r}; known: {', '.join(PAINT_LINES)}")
         for k in self.track_kinds:
             if k not in TRACK_KINDS:
                 raise ConfigError("--tracks", None, f"unknown track kind {k!r}; known: {', '.join(TRACK_KINDS)}")
@@ -110,7 +113,8 @@ class SynthConfig:
         return save_calibration(self.calibration(), path, header="Synthetic camera (cone-perception synth): exact H_F_B of the nominal mount")
 
     def renderer(self, **opts) -> Renderer:
-        return Renderer(self.camera(), RenderOptions(nose_prob=self.nose_prob, photometric=self.photometric, **opts))
+        return Renderer(self.camera(), RenderOptions(nose_prob=self.nose_prob, photometric=self.photometric,
+                                                       paint_lines=self.paint_lines, **opts))
 
     def varied(self, rng: np.random.Generator) -> "SynthConfig":
         """A copy with a random viewpoint: hfov 70..120 deg, pitch -4..+16 deg around this one, height +-0.3 m.

@@ -15,6 +15,11 @@ from ..geometry.camera import PinholeCamera
 _PAINT = {BLUE: (205, 110, 20), YELLOW: (25, 200, 240), ORANGE: (20, 105, 245), LARGE_ORANGE: (25, 95, 240), UNKNOWN: (120, 120, 120)}
 
 
+#: ``RenderOptions.paint_lines`` values: the ground's painted lines drawn at random, or in every look in this colour
+#: (hard negatives for the detector: yellow paint is what rendered drives' boxes on no cone stand on)
+PAINT_LINES: tuple[str, ...] = ("random", "yellow", "white")
+
+
 @dataclass
 class RenderOptions:
     """Switches of the renderer."""
@@ -25,6 +30,7 @@ class RenderOptions:
     speed_mps: float = 0.0  # for motion blur; 0 = random per frame in dataset mode
     fps: float = 20.0
     steady_photometric: bool = False  # camera settings fixed per look (videos / bags) instead of per frame
+    paint_lines: str = "random"  # PAINT_LINES: random (70 % of looks, a fifth of them yellow) or every look in one colour
 
 
 def _noise(rng: np.random.Generator, h: int, w: int, scales: tuple[int, ...], weights: tuple[float, ...]) -> np.ndarray:
@@ -91,8 +97,11 @@ def make_look(camera: PinholeCamera, rng: np.random.Generator, options: RenderOp
     for _ in range(int(rng.integers(0, 12))):  # tar cracks
         pts = np.cumsum(rng.normal(0, 12, (8, 2)), axis=0) + rng.integers(0, T, 2)
         cv2.polylines(tex, [pts.astype(np.int32)], False, (grey * 0.7,) * 3, 1, cv2.LINE_AA)
-    if rng.random() < 0.7:  # painted lines (parking lot markings), white or yellow, worn
-        line_col = (235, 235, 235) if rng.random() < 0.8 else (60, 200, 230)
+    # painted lines (parking lot markings), white or yellow, worn (random: the draws of every earlier version)
+    if (rng.random() < 0.7) or options.paint_lines != "random":
+        white = rng.random() < 0.8
+        line_col = (235, 235, 235) if (white if options.paint_lines == "random" else options.paint_lines == "white") \
+            else (60, 200, 230)
         wear = np.clip(_noise(rng, T, T, (4, 30), (0.5, 0.6)) + 0.6, 0, 1)
         lines = np.zeros((T, T), np.float32)
         for _ in range(int(rng.integers(1, 4))):

@@ -38,6 +38,7 @@ def config_from_args(args: argparse.Namespace):
         stray=args.stray,
         knocked_frac=args.knocked,
         vary_mount=getattr(args, "vary_mount", False),
+        paint_lines=getattr(args, "paint_lines", "random"),
     )
 
 
