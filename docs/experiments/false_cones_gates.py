@@ -1,6 +1,6 @@
 """Gates against boxes on no cone, screened on recorded drives (session 16; docs/benchmarks.md "Yellow paint").
 
-    .venv/bin/python docs/experiments/false_cones_gates.py PKL [PKL ...] [--strip-rows 380,456] [--sheet OUT.png]
+    .venv/bin/python docs/experiments/false_cones_gates.py PKL [PKL ...] [--strip-rows 380,456] [--sheet OUT.jpg]
 
 Each PKL is a recording of `docs/experiments/false_cones.py BAG --out DIR --tag T` (DIR/BAG_T.pkl): every
 frame's boxes (band, strip, merged), `/cones` and each cone's box. Screens, each after the fact on `/cones`
@@ -13,8 +13,8 @@ frame's boxes (band, strip, merged), `/cones` and each cone's box. Screens, each
 * ``too tall``: cones whose box is taller than R x the height a cone has where its foot maps
   (`ConeMapper.height_ratios`, the flat gate's ratio the other way): true / false by range and score.
 
-`--sheet OUT.png`: a contact sheet of the phantoms (false_cones.py's class: a box on no true cone's box), each
-patch with the true boxes in green and the phantom in red (the first PKL only).
+`--sheet OUT.jpg`: a contact sheet of the phantoms (false_cones.py's class: a box on no true cone's box), each
+patch with the true boxes in green and the phantom in red (the first PKL only; 24 spread over the drive).
 """
 from __future__ import annotations
 
@@ -92,9 +92,11 @@ def score_frames(frames: list[dict], keep_fn) -> tuple[np.ndarray, float, int, i
     return hit / np.maximum(tot, 1), false / max(len(frames), 1), out_true, out_false
 
 
-def phantom_sheet(data: dict, out: str) -> int:
+def phantom_sheet(data: dict, out: str, most: int = 24) -> int:
     a = fc.analyse(data)
     ph = [r for r in a["rows"] if r["kind"] == "phantom"]
+    n = len(ph)
+    ph = ph[::max(1, -(-n // most))][:most]  # spread over the drive
     imgs = read_bag_images(data["bag"], {r["stamp"] for r in ph})
     gtb = fc.load_gt_boxes(f"{data['bag']}_gt.jsonl")
     s, tiles = 60, []
@@ -110,22 +112,22 @@ def phantom_sheet(data: dict, out: str) -> int:
         y0, x0 = max(cv_ - s, 0), max(cu - 2 * s, 0)
         p = img[y0:y0 + 2 * s, x0:x0 + 4 * s]
         p = cv2.copyMakeBorder(p, 0, 2 * s - p.shape[0], 0, 4 * s - p.shape[1], cv2.BORDER_CONSTANT)
-        p = cv2.resize(p, (6 * s, 3 * s), interpolation=cv2.INTER_NEAREST)
+        p = cv2.resize(p, (4 * s, 2 * s), interpolation=cv2.INTER_AREA)
         cv2.putText(p, f"{r['origin']} {r['range']:.0f} m score {r['score']:.2f} class {int(b['class_id'])}", (4, 16),
-                    cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 255), 1)
+                    cv2.FONT_HERSHEY_SIMPLEX, 0.35, (255, 255, 255), 1)
         tiles.append(p)
     if tiles:
         cols = 4
         tiles += [np.zeros_like(tiles[0])] * (-len(tiles) % cols)
-        cv2.imwrite(out, np.vstack([np.hstack(tiles[i:i + cols]) for i in range(0, len(tiles), cols)]))
-    return len(ph)
+        cv2.imwrite(out, np.vstack([np.hstack(tiles[i:i + cols]) for i in range(0, len(tiles), cols)]), [cv2.IMWRITE_JPEG_QUALITY, 85])
+    return n
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("pkls", nargs="+")
     ap.add_argument("--strip-rows", default="380,456", help="V0,V1: a band box wholly inside is the veto's (default %(default)s)")
-    ap.add_argument("--sheet", default=None, help="contact sheet PNG of the first PKL's phantoms")
+    ap.add_argument("--sheet", default=None, help="contact sheet (JPEG) of the first PKL's phantoms")
     args = ap.parse_args()
     v0, v1 = (float(x) for x in args.strip_rows.split(","))
     datas = [pickle.load(open(p, "rb")) for p in args.pkls]
