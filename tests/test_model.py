@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 import torch
 
-from cone_perception.model import MODEL_SIZES, ConeYOLO, ModelConfig, model_config
+from cone_perception.model import MODEL_SIZES, ConeYOLO, ModelConfig, model_config, model_names
+from cone_perception.model.checkpoint import load_matching
 from cone_perception.model.assign import TaskAlignedAssigner
 from cone_perception.model.decode import decode_outputs, make_anchors, postprocess
 from cone_perception.model.loss import DetectionLoss
@@ -18,9 +19,49 @@ def test_output_layout_any_multiple_of_32(size):
     for w, h in ((960, 288), (320, 96)):
         with torch.no_grad():
             y = m(torch.rand(1, 3, h, w))
-        n_cells = sum((w // s) * (h // s) for s in (8, 16, 32))
+        n_cells = sum((w // s) * (h // s) for s in m.strides)
         assert y.shape == (1, 4 + 5, n_cells)
         assert float(y[:, 4:].min()) >= 0 and float(y[:, 4:].max()) <= 1
+
+
+def test_strides_of_the_sizes():
+    assert model_config("p").strides == (8, 16, 32)
+    assert model_config("p2").strides == (4, 8, 16, 32)
+    # 7650 cells at 960x96 = 240x24 + 120x12 + 60x6 + 30x3: the stride-4 level comes first
+    with torch.no_grad():
+        assert ConeYOLO(model_config("p2")).eval()(torch.rand(1, 3, 96, 960)).shape == (1, 9, 7650)
+
+
+def test_bad_strides_and_p2_on_a_pretrained_backbone_refused():
+    d = model_config("p").to_dict()
+    with pytest.raises(ValueError, match="strides must be"):
+        ModelConfig.from_dict({**d, "strides": [4, 8, 16]})
+    with pytest.raises(ValueError, match="stride-4 level needs the csp backbone"):
+        ModelConfig.from_dict({**d, "strides": [4, 8, 16, 32], "backbone": "mobilenet_v2"})
+    with pytest.raises(KeyError, match="unknown neck size"):
+        model_config("mobilenet_v2-p2")
+    assert "mobilenet_v2-p2" not in model_names() and "p2" in model_names()
+
+
+def test_p2_warm_started_from_p_keeps_the_p_levels_exactly():
+    """The stride-4 level is a side branch: with p's weights loaded, levels 8/16/32 are p's outputs."""
+    torch.manual_seed(1)
+    p = ConeYOLO(model_config("p")).eval()
+    for mod in p.modules():  # non-trivial BN statistics, so a mismatch would show
+        if isinstance(mod, torch.nn.BatchNorm2d):
+            mod.running_mean.uniform_(-0.5, 0.5)
+            mod.running_var.uniform_(0.5, 2.0)
+    p2 = ConeYOLO(model_config("p2")).eval()
+    loaded, fresh = load_matching(p2, p.state_dict())
+    assert loaded == len(p.state_dict())
+    assert fresh and all(k.startswith(("neck.td2.", "head.reg_p2.", "head.cls_p2.")) for k in fresh)
+    x = torch.rand(1, 3, 64, 128)
+    with torch.no_grad():
+        ref, got = p.forward_raw(x), p2.forward_raw(x)
+    assert len(got) == 4 and got[0].shape[2:] == (16, 32)
+    for a, b in zip(ref, got[1:]):
+        assert torch.equal(a, b)
+    assert p2.num_params() - p.num_params() < 0.02 * p.num_params()  # the branch is light
 
 
 def test_named_sizes_p_smaller_than_n():
@@ -136,3 +177,14 @@ def test_loss_finite_with_and_without_targets_and_gradients_flow():
     assert m.head.cls[0][-1].weight.grad.abs().sum() > 0
     loss0, parts0 = crit(m(x), torch.zeros(0, 6))
     assert torch.isfinite(loss0) and parts0[0] == 0 and parts0[2] == 0 and parts0[1] > 0
+
+
+def test_p2_loss_trains_the_stride4_level_on_tiny_boxes():
+    torch.manual_seed(0)
+    m = ConeYOLO(model_config("p2")).train()
+    crit = DetectionLoss(5, m.cfg.reg_max, m.strides)
+    t = torch.tensor([[0, 1, 40, 40, 44, 46], [0, 0, 100, 20, 103, 25]], dtype=torch.float32)  # 6 and 5 px tall
+    loss, parts = crit(m(torch.rand(1, 3, 64, 160)), t)
+    loss.backward()
+    assert torch.isfinite(loss) and torch.all(parts > 0)
+    assert m.head.reg_p2[-1].weight.grad.abs().sum() > 0 and m.neck.td2.cv1.conv.weight.grad.abs().sum() > 0

@@ -34,6 +34,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="first N epochs with the pretrained backbone frozen (default 0)")
     p.add_argument("--freeze-bn", action="store_true",
                    help="keep the pretrained backbone's batch-norm statistics and affine parameters fixed")
+    p.add_argument("--init-from", default="", metavar="PT",
+                   help="start a named --model from this checkpoint's weights wherever names and shapes match "
+                        "(e.g. --model p2 --init-from models/cone_detector_far.pt: every tensor but the stride-4 "
+                        "level's); the rest keep their fresh initialisation (default none)")
     p.add_argument("--teacher", default="", metavar="PT",
                    help="checkpoint of a slower, more accurate detector to distil from: its soft class scores and "
                         "boxes on every training image join the loss (same strides and classes; docs/training.md "

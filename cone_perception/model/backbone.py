@@ -9,12 +9,12 @@ from .blocks import C2f, SPPF, Conv
 
 
 class CSPBackbone(nn.Module):
-    """Image (B, 3, H, W) -> features at strides 8, 16, 32.
+    """Image (B, 3, H, W) -> features at strides 8, 16, 32 (4, 8, 16, 32 when ``p2``).
 
     ``channels`` = (stem, s4, s8, s16, s32); ``depths`` = bottlenecks at s4..s32.
     """
 
-    def __init__(self, channels: tuple[int, ...], depths: tuple[int, ...]):
+    def __init__(self, channels: tuple[int, ...], depths: tuple[int, ...], p2: bool = False):
         super().__init__()
         c0, c1, c2, c3, c4 = channels
         d1, d2, d3, d4 = depths
@@ -23,11 +23,12 @@ class CSPBackbone(nn.Module):
         self.stage8 = nn.Sequential(Conv(c1, c2, 3, 2), C2f(c2, c2, d2))
         self.stage16 = nn.Sequential(Conv(c2, c3, 3, 2), C2f(c3, c3, d3))
         self.stage32 = nn.Sequential(Conv(c3, c4, 3, 2), C2f(c4, c4, d4), SPPF(c4, c4))
-        self.out_channels = (c2, c3, c4)
+        self.p2 = bool(p2)
+        self.out_channels = (c1, c2, c3, c4) if self.p2 else (c2, c3, c4)
 
-    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, ...]:
         x = self.stage4(self.stem(x))
         p3 = self.stage8(x)
         p4 = self.stage16(p3)
         p5 = self.stage32(p4)
-        return p3, p4, p5
+        return (x, p3, p4, p5) if self.p2 else (p3, p4, p5)

@@ -62,6 +62,16 @@ class Checkpoint:
         return model.eval()
 
 
+def load_matching(model: torch.nn.Module, state_dict: dict[str, torch.Tensor]) -> tuple[int, list[str]]:
+    """Copy into ``model`` every tensor of ``state_dict`` whose name and shape match one of its own
+    (a warm start across architectures, e.g. ``p`` -> ``p2``); returns (tensors loaded, names of the
+    model's tensors left as they were)."""
+    own = model.state_dict()
+    fits = {k: v for k, v in state_dict.items() if k in own and tuple(own[k].shape) == tuple(v.shape)}
+    model.load_state_dict(fits, strict=False)
+    return len(fits), sorted(k for k in own if k not in fits)
+
+
 def save_checkpoint(
     path: str | Path,
     model: torch.nn.Module,

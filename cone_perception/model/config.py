@@ -34,7 +34,10 @@ class ModelConfig:
     ``channels`` and ``depths``) or an ImageNet-pretrained one of
     :data:`~cone_perception.model.pretrained.BACKBONES`; with a pretrained
     backbone only ``channels[2:]`` are used, as the neck's widths at strides
-    8/16/32 (``depths`` are unused).
+    8/16/32 (``depths`` are unused). ``strides``: (8, 16, 32), or (4, 8, 16, 32)
+    for a stride-4 output level (P2, ``csp`` backbone only) fed by the stride-4
+    stage: a light side branch of neck and head, ``head_p2_ch`` channels wide, so
+    the 8/16/32 levels are exactly the 3-level model's (same names and weights).
     """
 
     name: str = "n"
@@ -48,6 +51,7 @@ class ModelConfig:
     num_classes: int = NUM_CLASSES
     strides: tuple[int, ...] = field(default=(8, 16, 32))
     backbone: str = "csp"
+    head_p2_ch: int = 16
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -64,13 +68,22 @@ class ModelConfig:
         cfg.validate()
         return cfg
 
+    @property
+    def has_p2(self) -> bool:
+        """Whether the model has a stride-4 output level."""
+        return 4 in tuple(self.strides)
+
     def validate(self) -> None:
         if len(self.channels) != 5 or any(int(c) <= 0 for c in self.channels):
             raise ValueError(f"channels must be 5 positive ints, got {self.channels}")
         if len(self.depths) != 4 or any(int(d) < 0 for d in self.depths):
             raise ValueError(f"depths must be 4 ints >= 0, got {self.depths}")
-        if tuple(self.strides) != (8, 16, 32):
-            raise ValueError(f"strides must be (8, 16, 32), got {self.strides}")
+        if tuple(self.strides) not in ((8, 16, 32), (4, 8, 16, 32)):
+            raise ValueError(f"strides must be (8, 16, 32) or (4, 8, 16, 32), got {self.strides}")
+        if self.has_p2 and self.backbone != "csp":
+            raise ValueError(f"a stride-4 level needs the csp backbone, not {self.backbone!r} (it gives strides 8/16/32 only)")
+        if self.head_p2_ch < 1:
+            raise ValueError(f"head_p2_ch must be >= 1, got {self.head_p2_ch}")
         if not 1 <= self.reg_max <= 32:
             raise ValueError(f"reg_max must be 1..32, got {self.reg_max}")
         if self.backbone != "csp" and self.backbone not in PRETRAINED_BACKBONES:
@@ -80,17 +93,20 @@ class ModelConfig:
 
 
 #: Named sizes. ``n``: YOLO11n width/depth. ``t``: in between (about half the FLOPs of ``n``).
-#: ``p``: the smallest and fastest (a quarter of the FLOPs of ``n``).
+#: ``p``: the smallest and fastest (a quarter of the FLOPs of ``n``). ``p2``: ``p`` with a stride-4 level.
 MODEL_SIZES: dict[str, ModelConfig] = {
     "n": ModelConfig(name="n", channels=(16, 32, 64, 128, 256), depths=(1, 1, 1, 1), neck_depth=1, reg_max=16),
     "t": ModelConfig(name="t", channels=(8, 24, 48, 96, 192), head_reg_ch=32, head_cls_ch=48, reg_max=8),
     "p": ModelConfig(name="p", channels=(8, 16, 32, 64, 128), head_reg_ch=32, head_cls_ch=32, reg_max=8),
+    # ``p`` with a stride-4 output level (issue 26, far cones): 16 channels at stride 4
+    "p2": ModelConfig(name="p2", channels=(8, 16, 32, 64, 128), head_reg_ch=32, head_cls_ch=32, reg_max=8,
+                      strides=(4, 8, 16, 32), head_p2_ch=16),
 }
 
 
 def model_names() -> list[str]:
     """Every name :func:`model_config` takes: the sizes, each pretrained family, each family-size pair."""
-    return list(MODEL_SIZES) + [f"{b}{s}" for b in PRETRAINED_BACKBONES for s in [""] + [f"-{k}" for k in MODEL_SIZES]]
+    return list(MODEL_SIZES) + [f"{b}{s}" for b in PRETRAINED_BACKBONES for s in [""] + [f"-{k}" for k in MODEL_SIZES if not MODEL_SIZES[k].has_p2]]
 
 
 def is_model_name(name: str) -> bool:
@@ -107,8 +123,9 @@ def model_config(size: str, num_classes: int = NUM_CLASSES) -> ModelConfig:
     family, _, neck = size.partition("-")
     if family in PRETRAINED_BACKBONES:
         neck = neck or DEFAULT_NECK_SIZE
-        if neck not in MODEL_SIZES:
-            raise KeyError(f"unknown neck size {neck!r} in {size!r}; known: {sorted(MODEL_SIZES)}")
+        necks = sorted(k for k, c in MODEL_SIZES.items() if not c.has_p2)  # pretrained backbones give strides 8/16/32
+        if neck not in necks:
+            raise KeyError(f"unknown neck size {neck!r} in {size!r}; known: {necks}")
         d = MODEL_SIZES[neck].to_dict()
         d.update(name=f"{family}-{neck}", backbone=family)
     elif size in MODEL_SIZES:

@@ -28,13 +28,15 @@ class ConeYOLO(nn.Module):
         cfg.validate()
         self.cfg = cfg
         if cfg.backbone == "csp":
-            self.backbone = CSPBackbone(cfg.channels, cfg.depths)
+            self.backbone = CSPBackbone(cfg.channels, cfg.depths, p2=cfg.has_p2)
         else:  # ImageNet weights are loaded by the trainer (load_imagenet); a checkpoint brings its own
             self.backbone = PretrainedBackbone(cfg.backbone, tuple(cfg.channels[2:]))
-        self.neck = PAFPN(self.backbone.out_channels, cfg.neck_depth)
+        self.neck = PAFPN(self.backbone.out_channels, cfg.neck_depth, p2_ch=cfg.head_p2_ch if cfg.has_p2 else 0)
+        levels = self.backbone.out_channels[-3:]  # strides 8/16/32; a stride-4 level is a side branch of its own
         self.head = DecoupledHead(
-            self.backbone.out_channels, cfg.num_classes, cfg.reg_max, cfg.strides,
+            levels, cfg.num_classes, cfg.reg_max, cfg.strides,
             reg_ch=cfg.head_reg_ch, cls_ch=cfg.head_cls_ch, dw=cfg.head_dw,
+            p2_in=cfg.head_p2_ch if cfg.has_p2 else 0, p2_ch=cfg.head_p2_ch,
         )
         self.strides = tuple(cfg.strides)
         self.fused = False

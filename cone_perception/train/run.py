@@ -31,7 +31,7 @@ def run_train(args: argparse.Namespace) -> int:
         seed=args.seed, close_mosaic=args.close_mosaic, max_batches=args.max_batches, augment=aug,
         precision=args.precision or "auto", device=args.device, backbone_weights=args.backbone_weights,
         backbone_lr=args.backbone_lr, freeze_backbone=args.freeze_backbone, freeze_bn=args.freeze_bn,
-        teacher=args.teacher, distill=args.distill,
+        teacher=args.teacher, distill=args.distill, init_from=args.init_from,
     )
     if rank == 0:
         print(f"train: run folder {args.out}", file=sys.stderr, flush=True)

@@ -31,7 +31,7 @@ from ..detector.preprocess import round_up32
 from ..errors import ConfigError
 from ..evaluation.metrics import ImageDetections, coco_map
 from ..model import PRETRAINED_BACKBONES, ConeYOLO, is_model_name, model_config, model_names
-from ..model.checkpoint import load_checkpoint, save_checkpoint
+from ..model.checkpoint import load_checkpoint, load_matching, save_checkpoint
 from ..model.decode import postprocess
 from ..model.loss import DetectionLoss
 from ..model.pretrained import PretrainedBackbone, load_imagenet
@@ -76,6 +76,7 @@ class TrainConfig:
     freeze_backbone: int = 0  # first N epochs: pretrained body frozen (no gradient, BN statistics fixed)
     freeze_bn: bool = False  # pretrained body's batch-norms frozen for the whole run (statistics and affine)
     teacher: str = ""  # checkpoint of a detector to distil from (train/distill.py); "" = no teacher
+    init_from: str = ""  # checkpoint whose weights start a named model where names and shapes match ("" = none)
     distill: float = 1.0  # gain of the distillation loss beside the ground-truth loss
     augment: AugmentConfig = field(default_factory=AugmentConfig)
 
@@ -205,7 +206,16 @@ def build_model(cfg: TrainConfig) -> ConeYOLO:
         elif cfg.backbone_weights:
             raise ConfigError("train", "backbone_weights", f"model {cfg.model!r} has no pretrained backbone; "
                               f"choose one of {', '.join(PRETRAINED_BACKBONES)}[-SIZE]")
+        if cfg.init_from:
+            src = load_checkpoint(cfg.init_from).state_dict
+            loaded, fresh = load_matching(model, src)
+            if loaded < len(src) / 2:  # BN counters and a few widths fit anything: a start that is mostly fresh is a mistake
+                raise ConfigError(cfg.init_from, "state_dict", f"only {loaded} of its {len(src)} tensors fit model "
+                                  f"{cfg.model!r} (names and shapes): not a warm start")
+            log.info("init from %s: %d tensors loaded, %d fresh", cfg.init_from, loaded, len(fresh))
         return model
+    if cfg.init_from:
+        raise ConfigError("train", "init_from", "fine-tuning a checkpoint: --init-from starts a named model (--model NAME)")
     if cfg.backbone_weights:
         raise ConfigError("train", "backbone_weights", "fine-tuning a checkpoint: its backbone weights are in it")
     if not Path(cfg.model).suffix and not Path(cfg.model).exists():
