@@ -2,10 +2,8 @@
 
 * :class:`FrameStats`: frames processed (``ok``) and dropped, by cause. Every message a frame callback receives
   is counted exactly once, as ok or dropped (``exception_<Type>`` for an unexpected exception).
-* :class:`StampGaps`: what the header stamps of one stream tell: frames **missing** from it (a gap of k periods
-  counts k-1; the period is the camera's nominal one or learnt from the stamp steps, per frame sent where the
-  sequence numbers say how many were), stamps going **backwards** or **repeated**, and a gap longer than the
-  silence threshold, which is a **silence** (the publisher stopped), not missing frames.
+* :class:`StampGaps`: what one stream's header stamps tell: frames **missing** (a gap of k periods counts k-1),
+  stamps going **backwards** or **repeated**, and a **silence** (a gap longer than the threshold), not missing frames.
 * :class:`StreamMonitor`: per input topic, what reached the processing callback and what did not. An image input
   is best effort with a queue of one (newest frame only): the frames replaced in the queue never reach the
   callback. Where the middleware gives the publisher's **sequence number** of each message (rclpy >= Iron, Fast
@@ -69,23 +67,31 @@ class FrameStats:
 
 # -- stamp gaps ------------------------------------------------------------------------------------
 
-#: Stamp deltas the stream's period is the median of; gaps are counted once this many are seen.
-PERIOD_WINDOW = 16
-MIN_PERIOD_SAMPLES = 4
+#: Stamp deltas the period is learnt from (:func:`learnt_period`); gaps are counted once this many are seen.
+PERIOD_WINDOW, MIN_PERIOD_SAMPLES = 32, 4
+#: :func:`learnt_period`: the single-frame steps are those under this many times the lowest tenth of the steps.
+SINGLE_STEP_FACTOR = 1.7
 #: A stamp delta of more than this many periods counts ``round(delta / period) - 1`` missing frames.
 GAP_FACTOR = 1.5
 #: A stamp gap longer than this is a silence when the stream has no ``timeout_s`` (optional inputs).
 DEFAULT_SILENCE_S = 1.0
 
 
+def learnt_period(deltas: Iterable[float]) -> float:
+    """The period: the median of the single-frame steps (under :data:`SINGLE_STEP_FACTOR` x the lowest tenth), right
+    while a tenth of the steps lose no frame, with jitter up to a quarter period. A plain median is a multiple of the
+    period once half the steps span lost frames (a lossy link, a starved counting path), and counts none missing."""
+    s = sorted(deltas)
+    return median(d for d in s if d < SINGLE_STEP_FACTOR * s[len(s) // 10])
+
+
 @dataclass
 class StampGaps:
     """Missing frames, stamps going backwards or repeated, and silences in one sequence of stamps (ns).
 
-    ``period_s``: the publisher's nominal period (0 = learnt: the median of the last :data:`PERIOD_WINDOW`
-    positive stamp steps; the gaps seen before it is known are judged once it is). Learning is right when the
-    sequence holds (nearly) every frame sent: the counting path's, not the processing path's, which may see only
-    every other frame. ``silence_s``: a gap longer than this is a silence (the stream stopped and started again),
+    ``period_s``: the publisher's nominal period (0 = learnt from the last :data:`PERIOD_WINDOW` positive stamp
+    steps, :func:`learnt_period`; the gaps seen before it is known are judged once it is): right when a tenth
+    of the steps lose no frame (a starved counting path), not for a path that takes every other frame. ``silence_s``: a gap longer than this is a silence (the stream stopped and started again),
     counted in ``silences``, not as missing frames.
     """
 
@@ -101,10 +107,10 @@ class StampGaps:
 
     @property
     def period_ns(self) -> float | None:
-        """The stream's period: ``period_s``, or the median of the last stamp steps once enough are seen."""
+        """The stream's period: ``period_s``, or learnt from the last stamp steps once enough are seen."""
         if self.period_s > 0:
             return self.period_s * 1e9
-        return median(self._deltas) if len(self._deltas) >= MIN_PERIOD_SAMPLES else None
+        return learnt_period(self._deltas) if len(self._deltas) >= MIN_PERIOD_SAMPLES else None
 
     def _gap(self, delta: int, frames: int, period: float) -> int:
         """Frames missing in a stamp step of ``delta`` ns over ``frames`` publisher frames."""
@@ -162,14 +168,10 @@ class FrameLedger:
     The processing path's depth-1 queue delivers in arrival order, so when it takes frame T every frame the
     counting path saw before T and that was not taken never will be: ``replaced``. Either path may run ahead of
     the other. A frame taken that the counting path passed without seeing (its own queue overflowed) is
-    ``unseen``: it is in the counting path's stamp gaps although it was processed, so the stream subtracts it
-    from its missing frames.
-    """
+    ``unseen``: it is in the counting path's stamp gaps although it was processed (the stream subtracts it)."""
 
     def __init__(self, cap: int = LEDGER_CAP) -> None:
-        self.cap = cap
-        self.replaced = 0
-        self.unseen = 0
+        self.cap, self.replaced, self.unseen = cap, 0, 0
         self.first_ns: int | None = None
         self._pending: OrderedDict[int, int] = OrderedDict()  # arrived, not taken yet: stamp -> count
         self._ahead: OrderedDict[int, int] = OrderedDict()  # taken, not arrived yet (counting path behind)
@@ -238,9 +240,7 @@ class StreamMonitor:
     publisher's nominal period (0 = learnt, :class:`StampGaps`).
 
     :meth:`observe` is the processing path (every message its callback gets); :meth:`arrive` the counting path,
-    where the node has one (``counted``): then the stamp faults and gaps are those of the counting path, which
-    sees every frame that reaches the node.
-    """
+    where the node has one (``counted``): then the stamp faults and gaps are those of the counting path."""
 
     topic: str
     timeout_s: float = 1.0

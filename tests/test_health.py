@@ -47,6 +47,35 @@ def test_jitter_is_not_a_gap() -> None:
     assert mon.missing == 0
 
 
+def test_a_stream_that_loses_most_frames_still_counts_them() -> None:
+    """A counting path starved of CPU (or a lossy link) sees two frames in five: most steps span lost frames, so
+    their median is two or three periods. The period is learnt from the single-frame steps, and every lost frame
+    is counted (with 3 ms of stamp jitter, all but a few of the longest gaps' rounding; the bug: a period learnt
+    as the median counted about half of them)."""
+    import random
+
+    for seed in range(5):
+        rng = random.Random(seed)
+        for jitter_ms in (0, 3):
+            g = StampGaps()
+            seen = [i for i in range(2000) if i < 8 or rng.random() < 0.4]
+            for i in seen:
+                g.step(int((i * 33 + rng.uniform(-jitter_ms, jitter_ms)) * MS))
+            lost = seen[-1] + 1 - len(seen)
+            assert abs(g.missing - lost) <= (0 if jitter_ms == 0 else 0.005 * lost), (seed, jitter_ms, g.missing, lost)
+            assert abs(g.period_ns - PERIOD) < 2 * MS, (seed, jitter_ms)
+
+
+def test_a_learnt_period_ignores_a_few_short_steps() -> None:
+    """Two stamps 1 ms apart (a driver's glitch) among a steady stream: the period stays the camera's."""
+    g = StampGaps()
+    stamps = [i * 33 for i in range(40)]
+    stamps[20:20] = [20 * 33 - 1]  # one frame stamped 1 ms early, then its own stamp: steps of 32 and 1 ms
+    for s in stamps:
+        g.step(s * MS)
+    assert g.period_ns == PERIOD and g.missing == 0
+
+
 def test_stamps_backwards_and_repeated() -> None:
     mon = StreamMonitor("/image_raw")
     faults = _feed(mon, [0, 33, 66, 66, 40, 99])
