@@ -91,9 +91,8 @@ class StampGaps:
 
     ``period_s``: the publisher's nominal period (0 = learnt from the last :data:`PERIOD_WINDOW` positive stamp
     steps, :func:`learnt_period`; the gaps seen before it is known are judged once it is): right when a tenth
-    of the steps lose no frame (a starved counting path), not for a path that takes every other frame. ``silence_s``: a gap longer than this is a silence (the stream stopped and started again),
-    counted in ``silences``, not as missing frames.
-    """
+    of the steps lose no frame (a starved counting path), not for a path that takes every other frame.
+    ``silence_s``: a gap longer than this is a silence (the publisher stopped), counted in ``silences``."""
 
     period_s: float = 0.0
     silence_s: float = DEFAULT_SILENCE_S

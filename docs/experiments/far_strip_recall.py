@@ -8,10 +8,15 @@ recall, plus the precision of all detections in the band at the threshold.
 
     .venv/bin/python docs/experiments/far_strip_recall.py PRED.jsonl GT [--gt-names ...] [--band V0,V1]
         [--scale 0.3333] [--bins 0,6,9,12,24,1000] [--conf 0.25 | --at-precision 0.703] [--only-predicted]
+        [--max-range 40]
 
 --at-precision P: instead of --conf, the lowest score threshold of 0.01, 0.02, .. 0.99 whose precision
 is at least P (recall falls as the threshold rises, so this is the most recall at that precision):
 issue 26 compares the far strip's models at equal precision.
+
+--max-range M (ground truth with cone positions: a synth gt.jsonl): cones farther than M m from the rear axle
+are left out, as ignore regions (neither a miss nor a detection on them a false one): issue 26's design range
+is 40 m.
 
 --scale: factor from the prediction's image px to the px the bins count in (1920-px frames of the
 640x360 video: 1/3). Real clips: GT data/real_val_1080 with --gt-names
@@ -43,6 +48,7 @@ def main(argv=None) -> int:
                    help="use the lowest threshold (0.01 steps) whose precision is at least this")
     p.add_argument("--iou", type=float, default=0.5)
     p.add_argument("--only-predicted", action="store_true")
+    p.add_argument("--max-range", type=float, default=None, help="leave out cones farther than this (m)")
     p.add_argument("--json", action="store_true")
     a = p.parse_args(argv)
     gt = load_ground_truth(a.gt, a.gt_names.split(",") if a.gt_names else None)
@@ -76,8 +82,13 @@ def _at(images, conf: float, edges: list[float], a) -> dict:
     tp = fp = 0
     for im in images:
         keep = at_conf(im.pred_scores, conf)
+        gt_ignore = im.gt_ignore
+        if a.max_range is not None:
+            if im.gt_xy_m is None:
+                raise SystemExit(f"--max-range: the ground truth of {im.image} has no cone positions")
+            gt_ignore = gt_ignore | (np.hypot(im.gt_xy_m[:, 0], im.gt_xy_m[:, 1]) > a.max_range)
         to_gt, ignored = match_by_class(im.pred_boxes[keep], im.pred_classes[keep], im.gt_boxes, im.gt_classes,
-                                        im.gt_ignore, a.iou)
+                                        gt_ignore, a.iou)
         found = np.zeros(len(im.gt_boxes), bool)
         found[to_gt[to_gt >= 0]] = True
         tp += int((to_gt >= 0).sum())
@@ -85,7 +96,7 @@ def _at(images, conf: float, edges: list[float], a) -> dict:
         h = (im.gt_boxes[:, 3] - im.gt_boxes[:, 1]) * a.scale
         k = np.searchsorted(edges, h, side="right") - 1
         for j in range(len(edges) - 1):
-            m = (k == j) & ~im.gt_ignore
+            m = (k == j) & ~gt_ignore
             n[j] += int(m.sum())
             hit[j] += int((m & found).sum())
     out = {"conf": conf, "precision": tp / max(tp + fp, 1), "detections": tp + fp,
