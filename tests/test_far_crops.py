@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import cv2
 import numpy as np
 import pytest
@@ -100,3 +102,38 @@ def test_far_crops_cli(tmp_path, capsys):
     assert rc == 0
     assert "2 crops" in capsys.readouterr().out
     assert len(list((tmp_path / "out" / "labels").iterdir())) == 2
+
+
+def _predictions(path, boxes_by_frame):
+    """A `detect` prediction file of the `_dataset` frames: name -> [[u1, v1, u2, v2, score, class], ...]."""
+    path.write_text("".join(json.dumps({"image": f"images/{name}", "width": W, "height": H, "boxes": b}) + "\n"
+                            for name, b in boxes_by_frame.items()))
+    return path
+
+
+def test_far_crops_around_false_detections_cut_hard_negatives(tmp_path):
+    """--around: windows around a model's false detections (a 6x12 px box on the grey at x 200, y 20), not around
+    its true ones (on the small blue cone) nor its weak ones."""
+    data = _dataset(tmp_path / "src", n=3)
+    false_box, on_cone, weak = [197, 14, 203, 26, 0.6, 1], [300, 60, 306, 70, 0.9, 0], [100, 20, 106, 32, 0.1, 1]
+    pred = _predictions(tmp_path / "p.jsonl", {"f0.png": [false_box, on_cone, weak], "f1.png": [on_cone]})
+    rep = far_crops(data, tmp_path / "out", size=(128, 64), per_image=3, seed=1, progress=False, around=pred)
+    # f0: one false detection, one window; f1: only a true one; f2: not in the file
+    assert rep.crops == 1 and rep.without_candidate == 2
+    (img,) = (tmp_path / "out" / "images").iterdir()
+    assert img.stem.startswith("f0")
+    assert cv2.imread(str(img)).shape[:2] == (64, 128)
+    assert "false detections" in (tmp_path / "out" / "data.yaml").read_text()
+
+
+def test_false_detections_are_those_on_no_labelled_cone():
+    from cone_perception.data.farcrops import false_detections
+    from cone_perception.records import boxes_from_arrays
+
+    labels = np.array([[300, 60, 306, 70]], np.float32)
+    pred = boxes_from_arrays(np.array([[300, 61, 306, 71], [297, 60, 303, 70], [200, 20, 206, 30]], np.float32),
+                             np.array([0.9, 0.8, 0.1]), np.array([0, 1, 1]))
+    # the first overlaps the cone (IoU 0.82), the second half of it (IoU 0.33, still a detection of it), the third no cone
+    assert false_detections(pred, labels, 0.05).tolist() == [[200, 20, 206, 30]]
+    assert false_detections(pred, labels, 0.25).shape == (0, 4)  # the third below the score
+    assert len(false_detections(pred, labels[:0], 0.05)) == 3  # no labels: every detection is false

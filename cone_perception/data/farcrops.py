@@ -17,6 +17,12 @@ YAML, with their labels, into a YOLO dataset the trainer reads at the strip's sc
   real bgracing frames come out at their 640x360 source scale and the rendered ones at 1920x1080.
 
 Images with no cone in the range are counted and give no crop.
+
+Hard negatives (``around``): the windows are cut around a model's *false* detections instead, read from a
+``detect`` prediction file of the same images: its boxes of ``min_height..max_height`` px at score >= ``around_conf``
+that overlap no labelled cone (IoU < :data:`FALSE_IOU`, any class). The windows keep every label they show, so the
+model learns the look it took for a cone (e.g. worn yellow paint, ``synth --paint-lines yellow``) as background
+beside the cones it must still find.
 """
 
 from __future__ import annotations
@@ -32,10 +38,15 @@ from tqdm import tqdm
 from ..classes import CLASS_NAMES
 from ..crop import MIN_VISIBLE
 from ..errors import ConfigError
+from ..mapping import box_iou
+from ..records import boxes_from_arrays
 from .datasets import labels_to_xyxy, load_data_yaml, read_image
+from .predictions import read_predictions
 
 #: Box-height bins (px at the crop's scale) of the report.
 HEIGHT_BINS = (0, 8, 12, 24, 48)
+#: Hard negatives: a detection overlapping every labelled cone less than this (IoU) is a false one.
+FALSE_IOU = 0.3
 
 
 @dataclass
@@ -89,11 +100,28 @@ def boxes_in_window(boxes: np.ndarray, cls: np.ndarray, win: tuple[int, int, int
     return b[keep], cls[keep]
 
 
+def false_detections(pred_boxes: np.ndarray, boxes: np.ndarray, conf: float) -> np.ndarray:
+    """(K, 4) x1 y1 x2 y2 of the predictions (:data:`~cone_perception.records.BOX_DTYPE`) at score >= ``conf`` that
+    overlap no labelled box of ``boxes`` (x1 y1 x2 y2) at IoU >= :data:`FALSE_IOU`."""
+    p = pred_boxes[pred_boxes["score"] >= conf]
+    xyxy = np.c_[p["u1"], p["v1"], p["u2"], p["v2"]].astype(np.float32).reshape(-1, 4)
+    if len(p) == 0 or len(boxes) == 0:
+        return xyxy
+    labels = boxes_from_arrays(boxes, np.ones(len(boxes)), np.zeros(len(boxes), np.int64))
+    return xyxy[box_iou(p, labels).max(axis=1) < FALSE_IOU]
+
+
+def _predictions_by_name(path: str | Path) -> dict[str, np.ndarray]:
+    """A ``detect`` prediction file: image file name -> its boxes (the last line of a name wins)."""
+    return {Path(d.image).name: d.boxes for d in read_predictions(path)}
+
+
 def far_crops(data_yaml: str | Path, out: str | Path, split: str = "train", size: tuple[int, int] = (960, 128),
               min_height: float = 4.0, max_height: float = 24.0, per_image: int = 2, seed: int = 0,
-              progress: bool = True) -> FarCropReport:
+              progress: bool = True, around: str | Path | None = None, around_conf: float = 0.25) -> FarCropReport:
     """Cut the far-strip crops of ``split`` (train or val) of ``data_yaml`` into the YOLO dataset ``out``
-    (``images/``, ``labels/``, ``data.yaml`` with the project's class names, ``train: images``)."""
+    (``images/``, ``labels/``, ``data.yaml`` with the project's class names, ``train: images``); with ``around`` (a
+    prediction file of these images), around its false detections instead of around cones (module doc)."""
     if split not in ("train", "val"):
         raise ConfigError("--split", None, f"must be train or val, got {split!r}")
     if size[0] < 32 or size[1] < 32:
@@ -105,6 +133,7 @@ def far_crops(data_yaml: str | Path, out: str | Path, split: str = "train", size
     out = Path(out)
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise ConfigError(str(out), None, "output must be a new or empty folder")
+    preds = _predictions_by_name(around) if around is not None else None
     train, val, _ = load_data_yaml(data_yaml)
     entries = train if split == "train" else val
     if not entries:
@@ -122,7 +151,11 @@ def far_crops(data_yaml: str | Path, out: str | Path, split: str = "train", size
                 img = read_image(path, e.restore_aspect)
                 h, w = img.shape[:2]
                 boxes, cls = labels_to_xyxy(lab, w, h)
-                heights = boxes[:, 3] - boxes[:, 1]
+                centres = boxes
+                if preds is not None:
+                    found = preds.get(path.name)
+                    centres = false_detections(found, boxes, around_conf) if found is not None else boxes[:0]
+                heights = centres[:, 3] - centres[:, 1]
                 cand = np.flatnonzero((heights >= min_height) & (heights <= max_height))
                 if cand.size == 0:
                     rep.without_candidate += 1
@@ -131,7 +164,7 @@ def far_crops(data_yaml: str | Path, out: str | Path, split: str = "train", size
                 for j in rng.permutation(cand):
                     if len(taken) == per_image:
                         break
-                    bx = boxes[j]
+                    bx = centres[j]
                     if any(x0 <= bx[0] and bx[2] <= x1 and y0 <= bx[1] and bx[3] <= y1 for x0, y0, x1, y1 in taken):
                         continue
                     win = window_around(bx, (w, h), size, rng)
@@ -149,11 +182,13 @@ def far_crops(data_yaml: str | Path, out: str | Path, split: str = "train", size
                     idx = np.searchsorted(HEIGHT_BINS, b[:, 3] - b[:, 1], side="right") - 1
                     for i in idx:
                         rep.by_height[_bin_name(int(i))] += 1
+    what = "cones" if around is None else f"false detections (score >= {around_conf:g}) of {around}"
     (out / "data.yaml").write_text(
         f"# written by cone-perception data far-crops from {data_yaml} ({split} split), windows of "
-        f"{size[0]}x{size[1]} px at native scale around cones {min_height:g}-{max_height:g} px tall\n"
+        f"{size[0]}x{size[1]} px at native scale around {what} {min_height:g}-{max_height:g} px tall\n"
         + yaml.safe_dump({"train": "images", "names": list(CLASS_NAMES)}, sort_keys=False), encoding="utf-8")
     return rep
 
 
-__all__ = ["FarCropReport", "HEIGHT_BINS", "boxes_in_window", "far_crops", "window_around"]
+__all__ = ["FALSE_IOU", "FarCropReport", "HEIGHT_BINS", "boxes_in_window", "false_detections", "far_crops",
+           "window_around"]

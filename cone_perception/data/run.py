@@ -15,7 +15,7 @@ def run_data(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(message)s")
     if args.action == "far-crops":
         rep = far_crops(args.data, args.out, args.split, args.size, args.min_height, args.max_height, args.per_image,
-                        args.seed, progress=not args.no_progress)
+                        args.seed, progress=not args.no_progress, around=args.around, around_conf=args.around_conf)
         print(f"wrote {rep.line()} to {args.out}")
         return 0
     if args.action == "fsoco-to-yolo":
