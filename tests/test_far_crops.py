@@ -137,3 +137,19 @@ def test_false_detections_are_those_on_no_labelled_cone():
     assert false_detections(pred, labels, 0.05).tolist() == [[200, 20, 206, 30]]
     assert false_detections(pred, labels, 0.25).shape == (0, 4)  # the third below the score
     assert len(false_detections(pred, labels[:0], 0.05)) == 3  # no labels: every detection is false
+
+
+def test_far_crops_around_leaves_out_detections_on_unlabelled_rendered_cones(tmp_path):
+    """A rendered set's gt.jsonl lists cones its labels leave out (too small, mostly hidden): a detection on one is
+    no false detection (a window around it would teach the model to miss a real cone)."""
+    data = _dataset(tmp_path / "src", n=2)
+    unlabelled = [150, 100, 154, 104]  # a 4x4 px cone: below the label limit, in gt.jsonl only
+    (tmp_path / "src" / "gt.jsonl").write_text("".join(
+        json.dumps({"image": f"images/f{i}.png", "width": W, "height": H,
+                    "cones": [{"class_id": 0, "box": unlabelled, "x_m": 40.0, "y_m": 1.0}]}) + "\n" for i in range(2)))
+    on_it, paint = [148, 96, 156, 106, 0.7, 1], [197, 14, 203, 26, 0.6, 1]
+    pred = _predictions(tmp_path / "p.jsonl", {"f0.png": [on_it], "f1.png": [on_it, paint]})
+    rep = far_crops(data, tmp_path / "out", size=(128, 64), per_image=3, seed=1, progress=False, around=pred)
+    assert rep.crops == 1 and rep.without_candidate == 1  # f1's paint only
+    (img,) = (tmp_path / "out" / "images").iterdir()
+    assert img.stem.startswith("f1")

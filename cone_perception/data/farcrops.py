@@ -20,13 +20,17 @@ Images with no cone in the range are counted and give no crop.
 
 Hard negatives (``around``): the windows are cut around a model's *false* detections instead, read from a
 ``detect`` prediction file of the same images: its boxes of ``min_height..max_height`` px at score >= ``around_conf``
-that overlap no labelled cone (IoU < :data:`FALSE_IOU`, any class). The windows keep every label they show, so the
-model learns the look it took for a cone (e.g. worn yellow paint, ``synth --paint-lines yellow``) as background
-beside the cones it must still find.
+that overlap no labelled cone (IoU < :data:`FALSE_IOU`, any class) and whose centre lies in no cone's box. A
+rendered set (``synth dataset``: a ``gt.jsonl`` beside ``images/``) lists every cone with a visible pixel, also
+those its labels leave out (too small, mostly hidden): a detection on one of those is no false one, and a window
+around it would teach the model to miss real cones. The windows keep every label they show, so the model learns
+the look it took for a cone (e.g. worn yellow paint, ``synth --paint-lines yellow``) as background beside the
+cones it must still find.
 """
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -100,20 +104,44 @@ def boxes_in_window(boxes: np.ndarray, cls: np.ndarray, win: tuple[int, int, int
     return b[keep], cls[keep]
 
 
-def false_detections(pred_boxes: np.ndarray, boxes: np.ndarray, conf: float) -> np.ndarray:
+def false_detections(pred_boxes: np.ndarray, boxes: np.ndarray, conf: float,
+                     unlabelled: np.ndarray | None = None) -> np.ndarray:
     """(K, 4) x1 y1 x2 y2 of the predictions (:data:`~cone_perception.records.BOX_DTYPE`) at score >= ``conf`` that
-    overlap no labelled box of ``boxes`` (x1 y1 x2 y2) at IoU >= :data:`FALSE_IOU`."""
+    overlap no labelled box of ``boxes`` (x1 y1 x2 y2) at IoU >= :data:`FALSE_IOU` and whose centre lies in none
+    of ``boxes`` and ``unlabelled`` (cones without a label, x1 y1 x2 y2)."""
     p = pred_boxes[pred_boxes["score"] >= conf]
     xyxy = np.c_[p["u1"], p["v1"], p["u2"], p["v2"]].astype(np.float32).reshape(-1, 4)
-    if len(p) == 0 or len(boxes) == 0:
+    cones = boxes if unlabelled is None else np.r_[boxes.reshape(-1, 4), unlabelled.reshape(-1, 4)]
+    if len(p) == 0 or len(cones) == 0:
         return xyxy
-    labels = boxes_from_arrays(boxes, np.ones(len(boxes)), np.zeros(len(boxes), np.int64))
-    return xyxy[box_iou(p, labels).max(axis=1) < FALSE_IOU]
+    cu, cv = (xyxy[:, 0] + xyxy[:, 2]) / 2, (xyxy[:, 1] + xyxy[:, 3]) / 2
+    inside = ((cones[None, :, 0] <= cu[:, None]) & (cu[:, None] <= cones[None, :, 2])
+              & (cones[None, :, 1] <= cv[:, None]) & (cv[:, None] <= cones[None, :, 3])).any(axis=1)
+    false = ~inside
+    if len(boxes):
+        labels = boxes_from_arrays(boxes, np.ones(len(boxes)), np.zeros(len(boxes), np.int64))
+        false &= box_iou(p, labels).max(axis=1) < FALSE_IOU
+    return xyxy[false]
 
 
 def _predictions_by_name(path: str | Path) -> dict[str, np.ndarray]:
     """A ``detect`` prediction file: image file name -> its boxes (the last line of a name wins)."""
     return {Path(d.image).name: d.boxes for d in read_predictions(path)}
+
+
+def _rendered_cones(images_dir: Path) -> dict[str, np.ndarray]:
+    """Every cone's box per image file name from the ``gt.jsonl`` of a rendered set (``synth dataset``: beside
+    ``images/``, which holds ``images_dir``); empty where there is none."""
+    for root in (images_dir.parent, images_dir.parent.parent):
+        gt = root / "gt.jsonl"
+        if gt.is_file():
+            out = {}
+            for line in gt.read_text(encoding="utf-8").splitlines():
+                d = json.loads(line) if line.strip() else None
+                if d and isinstance(d.get("cones"), list):
+                    out[Path(d["image"]).name] = np.asarray([c["box"] for c in d["cones"]], np.float32).reshape(-1, 4)
+            return out
+    return {}
 
 
 def far_crops(data_yaml: str | Path, out: str | Path, split: str = "train", size: tuple[int, int] = (960, 128),
@@ -145,6 +173,7 @@ def far_crops(data_yaml: str | Path, out: str | Path, split: str = "train", size
     total = sum(len(e.image_paths) for e in entries)
     with tqdm(total=total, desc="far-crops", unit="image", disable=not progress) as bar:
         for ei, e in enumerate(entries):
+            rendered = _rendered_cones(e.images_dir) if preds is not None else {}
             for path, lab in zip(e.image_paths, e.labels):
                 bar.update(1)
                 rep.images += 1
@@ -154,7 +183,8 @@ def far_crops(data_yaml: str | Path, out: str | Path, split: str = "train", size
                 centres = boxes
                 if preds is not None:
                     found = preds.get(path.name)
-                    centres = false_detections(found, boxes, around_conf) if found is not None else boxes[:0]
+                    centres = (false_detections(found, boxes, around_conf, rendered.get(path.name))
+                               if found is not None else boxes[:0])
                 heights = centres[:, 3] - centres[:, 1]
                 cand = np.flatnonzero((heights >= min_height) & (heights <= max_height))
                 if cand.size == 0:
