@@ -88,6 +88,8 @@ def test_far_crops_bad_input_names_the_option(tmp_path):
         far_crops(data, tmp_path / "o1", min_height=30, max_height=20, progress=False)
     with pytest.raises(ConfigError, match="--size"):
         far_crops(data, tmp_path / "o2", size=(16, 64), progress=False)
+    with pytest.raises(ConfigError, match="--around-conf"):
+        far_crops(data, tmp_path / "o4", around=tmp_path / "p.jsonl", around_conf=1.5, progress=False)
     with pytest.raises(ConfigError, match="val"):
         far_crops(data, tmp_path / "o3", split="val", progress=False)
     (tmp_path / "full").mkdir()

@@ -47,8 +47,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                        description="Cut windows of --size px, not resized, around labelled cones of --min-height.."
                                    "--max-height px from one split of a data YAML (restore_aspect applied, clips "
                                    "filtered as the YAML says), with their clipped labels, into a YOLO dataset: "
-                                   "the far strip's model trains on them (models/cone_detector_far.md). --around: windows around "
-                                   "a model's false detections instead (hard negatives).")
+                                   "the far strip's model trains on them (models/cone_detector_far.md). --around: "
+                                   "windows around a model's false detections instead (hard negatives).")
     c.add_argument("data", help="data YAML (Ultralytics form, e.g. synth dataset's data.yaml, or our mixing form)")
     c.add_argument("out", help="output folder, new or empty (images/, labels/, data.yaml)")
     c.add_argument("--split", choices=("train", "val"), default="train", help="which split of the YAML to cut (default train)")
@@ -61,8 +61,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     c.add_argument("--seed", type=int, default=0, help="random seed of the choice and placement (default 0)")
     c.add_argument("--around", metavar="PRED", default=None,
                    help="hard negatives: cut the windows around the false detections of this `detect` prediction "
-                        "file of the same images (boxes of --min-height..--max-height px overlapping no labelled "
-                        "cone) instead of around cones; every label a window shows is kept")
+                        "file of the same images (boxes of --min-height..--max-height px on no cone; a rendered set's "
+                        "gt.jsonl also names the cones its labels leave out) instead of around cones; every label a "
+                        "window shows is kept")
     c.add_argument("--around-conf", type=float, default=0.25,
                    help="with --around: the score a detection needs to count (default 0.25)")
     for q in (f, r, c):

@@ -158,6 +158,8 @@ def far_crops(data_yaml: str | Path, out: str | Path, split: str = "train", size
         raise ConfigError("--min-height", None, f"needs 0 <= min-height < max-height, got {min_height}, {max_height}")
     if per_image < 1:
         raise ConfigError("--per-image", None, f"must be at least 1, got {per_image}")
+    if around is not None and not 0.0 <= around_conf <= 1.0:
+        raise ConfigError("--around-conf", None, f"must be a score in 0..1, got {around_conf}")
     out = Path(out)
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise ConfigError(str(out), None, "output must be a new or empty folder")
