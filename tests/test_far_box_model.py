@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from cone_perception.attitude import BoxModel, ImageAttitudeConfig
-from cone_perception.attitude.box_files import far_reading_for, write_box_model
+from cone_perception.attitude.box_files import attitude_config_for, far_reading_for, write_box_model
 from cone_perception.attitude.boxes import FAR_MODEL_TOP_BIAS_EXTRA_PX, BoxReading
 from cone_perception.detector.farband import FarBand, drawn_by_far, far_band_crop, merge_boxes
 from cone_perception.mapping import ConeMapper
@@ -159,6 +159,9 @@ def test_far_reading_follows_the_box_model_choice(tmp_path, caplog):
     other.write_bytes(b"")
     r, what = far_reading_for("rendered", other, band, False)  # no table of its own: the band's, as before
     assert r is None and "band's rendered table" in what
+    # ... and the fit's words say so (a candidate scored under another file name reads as the band's: session 17)
+    words = attitude_config_for("rendered", band, other, True)[1]
+    assert "far strip: the band's rendered table (m.pt has none of its own)" in words
     with caplog.at_level("WARNING"):
         r, what = far_reading_for("model", other, band, False)  # no box model: the conservative default, warned
     assert r.box_model.source == "default" and "m.pt has no box model" in caplog.text

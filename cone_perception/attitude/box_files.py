@@ -125,6 +125,6 @@ def attitude_config_for(choice: str, model_path: str | Path, far_model_path: str
 
     bm, what = box_model_for(choice, model_path, synthetic)
     far, far_what = far_reading_for(choice, far_model_path, model_path, synthetic)
-    if far is not None:
+    if far_model_path is not None:  # also where its boxes fall back to the band's reading: said, never silent
         what += f"; far strip: {far_what}"
     return ImageAttitudeConfig(box_model=bm, far_reading=far), what

@@ -147,7 +147,7 @@ def _run_offline(args, calib) -> dict:
                                   threads=plan.network_threads or None, bf16=args.bf16)
     imu = _imu_source(args, calib)
     # the fit reads each network's boxes through its own box model (the far strip's of a far model: issue 26f)
-    att_cfg, _ = attitude_config_for(box_model_choice(args), det.source, far_model if far else None, True)
+    att_cfg, att_what = attitude_config_for(box_model_choice(args), det.source, far_model if far else None, True)
     if args.box_behaviour == "real":  # the real frames' boxes on a rendered drive, each network's as its box model says
         far_real = far_reading_for("model", far_model if far else None, det.source, False)[0]
         far_table = far_reading_for("rendered", far_model if far else None, det.source, True)[0]  # its rendered offset
@@ -160,6 +160,8 @@ def _run_offline(args, calib) -> dict:
                         far_every=args.far_every, far_tiles=FarTiles.for_setting(
                             far_model, args.far_tiles, far, args.far_every, "--far-tiles", backend=args.backend, conf=conf,
                             threads=plan.network_threads or None, bf16=args.bf16))
+    if pipeline.attitude_mode in ("image", "fused"):
+        print(f"replay: the image attitude reads the boxes through {att_what}")
     with pipeline:  # joins the strip's worker thread, if one ran
         res = offline_replay(args.bag, pipeline, args.topic, args.out, args.gt_topic,
                              _progress(args.no_progress), imu_topic=args.imu_topic, tracking=tracking)
