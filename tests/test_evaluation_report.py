@@ -197,6 +197,39 @@ def test_eval_gt_jsonl_perfect_predictions(tmp_path, calib, scene, capsys):
     assert "mAP@0.5 1.000" in capsys.readouterr().out
 
 
+def test_max_range_leaves_farther_cones_out_of_the_score(tmp_path, scene, capsys):
+    boxes, cls = scene
+    gt = write_gt_jsonl(tmp_path / "gt.jsonl", {"images/val/000000.jpg": (boxes, cls)})
+    far = [i for i, (_, x, y) in enumerate(CONES) if np.hypot(x, y) > 15.0]
+    assert len(far) == 2  # the 18 m pair
+    keep = [i for i in range(len(CONES)) if i != far[0]]  # the blue 18 m cone missed, the yellow one found
+    pred = write_pred(tmp_path / "pred.jsonl", {"000000.jpg": box_rows(boxes[keep], cls[keep])})
+    assert run_eval("--pred", pred, "--gt", gt, "--calib", "example_mainhoop", "--out", tmp_path / "all") == 0
+    m = json.loads((tmp_path / "all" / "metrics.json").read_text())
+    assert m["inputs"]["gt_boxes"] == 10 and m["detection"]["map50"] < 0.99
+    assert run_eval("--pred", pred, "--gt", gt, "--calib", "example_mainhoop", "--out", tmp_path / "near",
+                    "--max-range", "15") == 0
+    m = json.loads((tmp_path / "near" / "metrics.json").read_text())
+    # the 18 m pair is an ignore region: its miss is no miss, its detection is not false
+    assert m["inputs"]["gt_boxes"] == 8 and m["ground_truth"]["ignored_beyond_max_range"] == 2
+    assert m["detection"]["map50"] == pytest.approx(1.0)
+    op = m["detection"]["operating_point"]["per_class"]["all"]
+    assert (op["tp"], op["fp"], op["fn"]) == (8, 0, 0)
+    assert "beyond --max-range" in (tmp_path / "near" / "report.md").read_text()
+    capsys.readouterr()
+    # YOLO labels carry no cone positions: refused, naming the option
+    root = tmp_path / "yolo"
+    (root / "images").mkdir(parents=True)
+    (root / "labels").mkdir()
+    (root / "images" / "000000.jpg").write_bytes(b"")
+    (root / "labels" / "000000.txt").write_text("0 0.5 0.5 0.1 0.1\n")
+    (root / "data.yaml").write_text("names: [blue, yellow, orange, large_orange, unknown]\n")
+    assert run_eval("--pred", pred, "--gt", root, "--out", tmp_path / "yolo_out", "--max-range", "15") != 0
+    assert "--max-range: the ground truth of 000000.jpg has no cone positions" in capsys.readouterr().err
+    assert run_eval("--pred", pred, "--gt", gt, "--out", tmp_path / "bad", "--max-range", "0") != 0
+    assert "--max-range: needs a range > 0 m, got 0" in capsys.readouterr().err
+
+
 def test_eval_gt_jsonl_localisation_error_is_measured(tmp_path, calib, scene):
     boxes, cls = scene
     gt = write_gt_jsonl(tmp_path / "gt.jsonl", {"f0": (boxes, cls)})

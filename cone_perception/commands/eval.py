@@ -74,6 +74,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="score only cones at least PX tall at the model input, as COCO scores an area range: shorter "
                         "boxes become ignore regions, shorter detections count only where they match a kept cone "
                         "(default: every size counts)")
+    p.add_argument("--max-range", type=float, default=None, metavar="M",
+                   help="score only cones within M m of the rear axle (ground truth with cone positions: a gt.jsonl of "
+                        "`synth`): farther ones become ignore regions, as the drives score within the far strip's "
+                        "design range of 40 m (default: every distance counts)")
     p.add_argument("--worst", type=int, default=6, metavar="N",
                    help="draw the N frames with the most misses + false detections into worst_frames.jpg (default %(default)s; 0 = none)")
     p.add_argument("--attitude", choices=("fixed", "image"), default="fixed",

@@ -18,6 +18,7 @@ the file name, or the stem. Every mismatch is an error naming the file and line.
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -138,6 +139,23 @@ def restrict_to_min_height(images: list[EvalImage], min_height: float, iou: floa
                            pred_classes=im.pred_classes[keep],
                            pred_far=im.pred_far[keep] if im.pred_far is not None else None))
     return out, n_gt, n_pred
+
+
+def restrict_to_range(images: list[EvalImage], max_range_m: float) -> tuple[list[EvalImage], int]:
+    """Score only cones within ``max_range_m`` of the rear axle (their true positions, ``gt_xy_m``): farther ones
+    become ignore regions (no miss, and a detection on one is not false), as the drives score cones within the
+    design range of the far strip (issue 26: 40 m). Returns the new images and how many boxes became ignore
+    regions; ValueError when an image's ground truth has no cone positions (YOLO labels)."""
+    if not (math.isfinite(max_range_m) and max_range_m > 0):
+        raise ValueError(f"needs a range > 0 m, got {max_range_m}")
+    out, n_far = [], 0
+    for im in images:
+        if im.gt_xy_m is None:
+            raise ValueError(f"the ground truth of {im.image} has no cone positions (a gt.jsonl of `synth` has them)")
+        far = np.hypot(im.gt_xy_m[:, 0], im.gt_xy_m[:, 1]) > max_range_m
+        n_far += int((far & ~im.gt_ignore).sum())
+        out.append(replace(im, gt_ignore=im.gt_ignore | far))
+    return out, n_far
 
 
 def load_ground_truth(path: str | os.PathLike, names: list[str] | None = None) -> GroundTruth:

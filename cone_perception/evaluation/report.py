@@ -37,7 +37,9 @@ from ..records import CONE_DTYPE, boxes_from_arrays
 from ..resources import default_model_path, far_model_for
 from ..words import plural
 from .attitude import AttitudeReport
-from .groundtruth import EvalImage, load_ground_truth, pair_with_predictions, restrict_to_band, restrict_to_min_height
+from .groundtruth import (
+    EvalImage, load_ground_truth, pair_with_predictions, restrict_to_band, restrict_to_min_height, restrict_to_range,
+)
 from .localisation import DISTANCE_GROUPS, EXTRA_GROUPS, LocalisationReport, PairDistanceReport, distance_group
 from .metrics import ImageDetections, coco_map, greedy_match, operating_point
 from .plots import plot_by_distance, plot_confusion, plot_localisation, plot_pairs, plot_pr, plot_worst_frames
@@ -313,7 +315,8 @@ def write_report(res: EvalResult, out: Path, pred_source: str, gt_source: str, w
         f"- predictions: `{pred_source}`", f"- ground truth: `{gt_source}`",
         f"- images {inp['images']}, ground-truth cones {inp['gt_boxes']} (+ {inp['gt_ignored_boxes']} ignored: too small, hidden"
         f"{' or outside the band' if 'band_rows' in m.get('ground_truth', {}) else ''}"
-        f"{' or below --min-height' if 'min_height_px' in m.get('ground_truth', {}) else ''}), "
+        f"{' or below --min-height' if 'min_height_px' in m.get('ground_truth', {}) else ''}"
+        f"{' or beyond --max-range' if 'max_range_m' in m.get('ground_truth', {}) else ''}), "
         f"detections {inp['predictions']} ({inp['predictions_at_conf']} with score >= {inp['conf']:g})",
         f"- operating point: score >= {inp['conf']:g}, IoU >= {inp['iou']:g}; mAP by pycocotools over all scores",
         f"- calibration: `{inp['calibration']}`" if inp["calibration"] else "- calibration: none",
@@ -463,10 +466,11 @@ def evaluate_predictions(pred: Path, gt_path: Path, gt_names: str | None = None,
                          conf: float = DEFAULT_CONF, iou: float = 0.5, only_predicted: bool = False, progress: bool = True,
                          verbose: bool = True, band: tuple[int, int] | None = None, min_height: float | None = None,
                          attitude: str = "fixed", box_model: str = "auto", model: str | Path | None = None,
-                         far_model: str | None = None):
+                         far_model: str | None = None, max_range: float | None = None):
     """A prediction file against ground truth -> :class:`~cone_perception.evaluation.report.EvalResult`, as ``eval``
-    computes it (``gt_names`` comma-separated; ``band``, ``min_height``, ``attitude``, ``box_model``, ``model``,
-    ``far_model``: as ``eval --band``, ``--min-height``, ``--attitude``, ``--box-model``, ``--model``, ``--far-model``).
+    computes it (``gt_names`` comma-separated; ``band``, ``min_height``, ``max_range``, ``attitude``, ``box_model``,
+    ``model``, ``far_model``: as ``eval --band``, ``--min-height``, ``--max-range``, ``--attitude``, ``--box-model``,
+    ``--model``, ``--far-model``).
     Used by ``eval`` and ``bench table``."""
     names = [n.strip() for n in gt_names.split(",") if n.strip()] if gt_names else None
     gt = load_ground_truth(gt_path, names)
@@ -481,6 +485,12 @@ def evaluate_predictions(pred: Path, gt_path: Path, gt_names: str | None = None,
         except ValueError as e:
             raise ConfigError("eval", "--min-height", str(e)) from None
         counts = {**counts, "min_height_px": min_height, "ignored_below_min_height": n_gt, "detections_dropped_below_min_height": n_pred}
+    if max_range is not None:
+        try:
+            images, n_far = restrict_to_range(images, max_range)
+        except ValueError as e:
+            raise ConfigError(str(gt_path), "--max-range", str(e)) from None
+        counts = {**counts, "max_range_m": max_range, "ignored_beyond_max_range": n_far}
     calib_path = calib_arg if calib_arg is not None else gt.calib_path
     calib = load_calibration(calib_path) if calib_path is not None else None
     if verbose and calib is not None and calib_arg is None:
