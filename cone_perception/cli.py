@@ -28,7 +28,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "calibrate": ("calibrate", "calibrate a camera to the rear axle (chessboard / points / mount pose) with report and pictures"),
     "train": ("train", "train the cone detector on YOLO txt datasets"),
     "export": ("export", "export a detector checkpoint to TorchScript or ONNX, verified against eager"),
-    "data": ("data", "dataset converters: fsoco-to-yolo, restore-aspect, far-crops"),
+    "data": ("data", "dataset converters: fsoco-to-yolo, restore-aspect, far-crops, verifier-crops"),
     "speed": ("speed", "forward micro-benchmark of detector sizes and backends"),
     "eval": ("eval", "evaluate a prediction file against ground truth -> report.md, metrics.json, plots"),
     "params": ("params", "the nodes' parameters from their schema; --write / --check the tables of docs/nodes.md and the docstrings"),

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from .errors import ConfigError, FrameError
@@ -168,3 +169,28 @@ def camera_info_crop(
     if crop.out_width * crop.out_height > MAX_BAND_PIXELS:
         raise bad("roi", f"band {crop.out_width}x{crop.out_height} is over {MAX_BAND_PIXELS} px")
     return crop
+
+
+#: A box's patch for the far strip's verifier (detector/verifier.py): ``SIDE`` px square at the network's input,
+#: ``CTX`` x the box's height in the image, at least ``MIN_SIDE`` px (a box of 6 px is judged with 12 px around it).
+SIDE = 32
+CTX = 2.0
+MIN_SIDE = 12.0
+
+
+def crop_patch(img: np.ndarray, box, jitter: np.random.Generator | None = None) -> np.ndarray:
+    """The ``SIDE`` x ``SIDE`` BGR patch around ``box`` (u1, v1, u2, v2 in ``img`` px): a square ``CTX`` x the
+    box's height wide (at least ``MIN_SIDE``) centred on the box, the image's edge rows repeated beyond it.
+    ``jitter`` (training): the centre moved and the side scaled a little at random. Bilinear (``warpAffine`` has no
+    area filter), the same in training and on the car."""
+    u1, v1, u2, v2 = (float(x) for x in box)
+    h = max(v2 - v1, 1.0)
+    cx, cy = (u1 + u2) / 2.0, (v1 + v2) / 2.0
+    s = max(CTX * h, MIN_SIDE)
+    if jitter is not None:
+        cx += float(jitter.normal(0.0, 0.08)) * h
+        cy += float(jitter.normal(0.0, 0.08)) * h
+        s *= float(np.exp(jitter.normal(0.0, 0.1)))
+    k = SIDE / s
+    m = np.array([[k, 0.0, SIDE / 2.0 - cx * k], [0.0, k, SIDE / 2.0 - cy * k]], np.float32)
+    return cv2.warpAffine(img, m, (SIDE, SIDE), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)

@@ -243,6 +243,11 @@ _PIPELINE = (
        "box model, box_model); band or empty = the band's own model; else a model file (its box model: "
        "MODEL.box_model.yaml). Its classes must be the band model's (refused at start-up otherwise)",
        values="auto, band, or a model file"),
+    _p("far_verifier", "auto", "a second look at the far strip's doubtful boxes (scored under the verifier's "
+       "verify_below, small): a tiny classifier on a crop around each box drops those where it sees no cone, such as "
+       "worn paint (docs/detector.md, Far band; counted on /diagnostics: far_strip verifier_dropped). auto = the "
+       "shipped models/cone_verifier.pt (none where it is not installed), none or empty = off, else a verifier file",
+       values="auto, none, or a verifier file"),
     _p("far_every", 1, "the far band's cadence: its strip runs on every this-many-th frame only, the frames between "
        "run the band alone (a far cone is seen up to far_every - 1 frames late; the tracker carries it meanwhile; "
        "docs/detector.md, Far band); 1 = every frame", min=1, max=100),

@@ -101,12 +101,15 @@ class Pipeline:
         self.cones_conf = cones_conf
         #: frames with the far strip, and those where the attitude would have moved it out of the image
         #: (clamped to it): the replay summary and the node's /diagnostics report them (``skipped``: frames
-        #: without it by ``far_every``, only where that is above 1)
+        #: without it by ``far_every``, only where that is above 1; ``verifier_dropped``: the strip's boxes its
+        #: verifier dropped, with one)
         self.strip_counts = {"frames": 0, "clamped": 0}
         if far is not None and self.far_every > 1:
             self.strip_counts["skipped"] = 0
             if self.far_tiles is not None:  # frames run as tiles, and those whose tiles did not fit (the whole strip)
                 self.strip_counts.update(tiles=0, tiles_full=0)
+        if far is not None and getattr(far, "verifier", None) is not None:  # the strip's boxes its second look dropped
+            self.strip_counts["verifier_dropped"] = 0
         self.strip_rows: tuple[int, int] | None = None  # the last frame's strip rows (V0, V1)
         self._strip_attitude = np.zeros(2)  # (pitch, roll) the strip follows: the previous frame's attitude
         self._strip_body: np.ndarray | None = None  # the IMU's reading at the previous frame's stamp
@@ -160,12 +163,19 @@ class Pipeline:
             t0 = time.perf_counter()
             boxes = merge_boxes(boxes, far_boxes, getattr(self.far.detector, "iou", DEFAULT_IOU))
             t_merge = (time.perf_counter() - t0) * 1e3
+            if windows is None and getattr(self.far, "verifier", None) is not None:  # the whole strip ran: its second look
+                t0 = time.perf_counter()
+                boxes = self.far.verify(boxes, strip, far_crop)
+                timing["verifier"] = (time.perf_counter() - t0) * 1e3
+                t_merge += timing["verifier"]
             timing.update({k.removesuffix("_ms"): v for k, v in self.detector.timing.items()})
             if "forward_ms" in getattr(far_det, "timing", {}):
                 timing["far_forward"] = far_det.timing["forward_ms"]
             timing["far_band"] = t["second"] + t_merge  # the strip's own time, on whichever thread
             timing["far_wait"] = t["wall"] - t["first"] + t_merge  # what it adds to the frame
             self.strip_counts["frames"] += int(windows is None)
+            if "verifier_dropped" in self.strip_counts:
+                self.strip_counts["verifier_dropped"] = self.far.verifier.counts["dropped"]
             self.strip_counts["clamped"] += int(clamped)
             self.strip_rows = (far_crop.v0, far_crop.v1) if far_crop is not None else None
         else:

@@ -19,6 +19,7 @@ from ..resources import far_model_for, far_model_given
 from ..detector import default_model_path
 from ..detector.fartiles import FarTiles
 from ..detector.farband import FarBand, SplitDetector, band_rows_for, band_split_for, far_rows_for
+from ..detector.verifier import load_verifier
 from ..detector.parallel import ForwardPlan
 from ..errors import ConfigError
 from ..params import PARAMS, check_options
@@ -52,6 +53,7 @@ def _bench_pipeline(args: argparse.Namespace, calib) -> dict:
         det = SplitDetector.load(args.model or default_model_path(), split, backend=args.backend,
                                  threads=plan.network_threads, bf16=args.bf16)
     far = FarBand.for_calibration(far_model_for(args.far_model, det.source), args.far_rows, calib, "--far-rows", "--far-model",
+                                  verifier=load_verifier(args.far_verifier, "--far-verifier"),
                                   backend=args.backend, threads=plan.network_threads, bf16=args.bf16)
     tiles = FarTiles.for_setting(far.detector.source if far else None, args.far_tiles, far, args.far_every,
                                  "--far-tiles", backend=args.backend, threads=plan.network_threads, bf16=args.bf16)

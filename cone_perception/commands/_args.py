@@ -35,6 +35,14 @@ def add_far_model(p: argparse.ArgumentParser, scope: str = "", after: str = "") 
                         f"must be the band model's{after}")
 
 
+def add_far_verifier(p: argparse.ArgumentParser, scope: str = "") -> None:
+    """``--far-verifier auto|none|PATH``: the far strip's second look at its doubtful boxes (detector/verifier.py)."""
+    p.add_argument("--far-verifier", default=None, metavar="auto|none|PATH",
+                   help=f"{scope}a second look at the far strip's doubtful boxes (scored low, small): a tiny "
+                        "classifier on a crop around each drops those where it sees no cone (docs/detector.md, Far "
+                        "band). auto (default) = the shipped models/cone_verifier.pt, none = off, or a verifier file")
+
+
 def add_far_box_reading(p: argparse.ArgumentParser) -> None:
     """``--far-model`` of the tools that read a `detect` prediction file (``map``, ``eval``): the model that drew the
     boxes the file marks as the far strip's, whose box model the image attitude reads them through."""

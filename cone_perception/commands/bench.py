@@ -35,7 +35,7 @@ from ..bench.table import INPUT_SETTINGS
 from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, RUNTIME_THREADS
 from ..geometry.calib import DEFAULT_CAMERA
 from ..params import DEFAULT_CONF, PARAMS
-from ._args import add_far_model, parse_crop
+from ._args import add_far_model, add_far_verifier, parse_crop
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -77,6 +77,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "of full resolution, the upper rows at the band's half; N0,U1 = the near band from row N0, "
                         "the upper band to row U1")
     add_far_model(p, "pipeline: ")
+    add_far_verifier(p, "pipeline: ")
     p.add_argument("--sequential", action="store_true",
                    help="pipeline with a far band: the band's and the strip's forwards one after the other, each network "
                         "on --threads intra-op threads (default: with --threads >= 2 at once, the strip on a worker "

@@ -1,4 +1,4 @@
-"""``cone-perception data``: dataset converters (FSOCO -> YOLO, 16:9 restore, far-strip crops)."""
+"""``cone-perception data``: dataset converters (FSOCO -> YOLO, 16:9 restore, far-strip crops, verifier crops)."""
 
 from __future__ import annotations
 
@@ -66,7 +66,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "window shows is kept")
     c.add_argument("--around-conf", type=float, default=0.25,
                    help="with --around: the score a detection needs to count (default 0.25)")
-    for q in (f, r, c):
+    v = sub.add_parser("verifier-crops", help="crops around the far strip's boxes, cone or not (training data of its verifier)",
+                       description="Cut the training crops of the far strip's verifier (docs/training.md, The far "
+                                   "strip's verifier): around the boxes of a `detect` file of a rendered set in each "
+                                   "frame's strip rows, labelled by its gt.jsonl; random boxes of those rows on no "
+                                   "cone; and the labelled small cones of a real YOLO folder. Then `cone-perception "
+                                   "train --data OUT.npz` trains the verifier.")
+    v.add_argument("out", help="output file (.npz)")
+    v.add_argument("--rendered", nargs=2, action="append", default=[], metavar=("DIR", "PRED"),
+                   help="a `synth dataset` folder and a `detect` file of its frames (the far model at full "
+                        "resolution, --conf 0.1); repeat for more sets")
+    v.add_argument("--real", default=None, metavar="DIR",
+                   help="a real YOLO folder (images/, labels/) whose labelled cones of 4-20 px are kept as cones "
+                        "(never the validation clips)")
+    v.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    for q in (f, r, c, v):
         q.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 

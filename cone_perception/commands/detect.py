@@ -20,7 +20,7 @@ from pathlib import Path
 from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND
 from ..params import DEFAULT_CONF, DEFAULT_IOU
 from ..replay.detect import run_detect
-from ._args import add_far_model, parse_crop, size_arg
+from ._args import add_far_model, add_far_verifier, parse_crop, size_arg
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -49,6 +49,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "with --calib); V0,V1 = these rows (with --crop or --calib); none (or off) = no far band (the default "
                         "without --calib)")
     add_far_model(p)
+    add_far_verifier(p)
     p.add_argument("--conf", type=float, default=DEFAULT_CONF, help="confidence threshold (default %(default)s)")
     p.add_argument("--iou", type=float, default=DEFAULT_IOU, help="NMS IoU threshold (default %(default)s)")
     p.add_argument("--topic", default=None, help="rosbag: camera topic (default: the only image topic)")

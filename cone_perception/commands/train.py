@@ -20,7 +20,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     d = TrainConfig(data="", out="")
     p.add_argument("--data", required=True,
                    help="data YAML: Ultralytics form (path, train, val, test, names as list or dict; what 'synth "
-                        "dataset' writes) or our own mixing form (see docs/training.md)")
+                        "dataset' writes) or our own mixing form (see docs/training.md); or a .npz of `data "
+                        "verifier-crops`: trains the far strip's verifier instead (--epochs, --seed, --threads, "
+                        "--out; writes OUT/verifier.pt)")
     p.add_argument("--model", default=d.model,
                    help=f"model size ({', '.join(MODEL_SIZES)}), an ImageNet-pretrained backbone with a size's neck "
                         f"and head ({', '.join(f'{b}[-SIZE]' for b in PRETRAINED_BACKBONES)}; default neck p), "

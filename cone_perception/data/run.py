@@ -9,10 +9,15 @@ import logging
 from ..words import plural
 from . import convert
 from .farcrops import far_crops
+from .verifiercrops import verifier_crops
 
 
 def run_data(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(message)s")
+    if args.action == "verifier-crops":
+        counts = verifier_crops(args.out, args.rendered, args.real, args.seed, progress=not args.no_progress)
+        print(f"wrote {args.out}: " + "; ".join(f"{k}: {v['cones']} cones, {v['not_cones']} not" for k, v in counts.items()))
+        return 0
     if args.action == "far-crops":
         rep = far_crops(args.data, args.out, args.split, args.size, args.min_height, args.max_height, args.per_image,
                         args.seed, progress=not args.no_progress, around=args.around, around_conf=args.around_conf)

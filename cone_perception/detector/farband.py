@@ -263,6 +263,7 @@ class FarBand:
     detector: object  # a Detector (anything with detect(bgr, crop) -> BOX_DTYPE and a timing dict)
     model_source: str = "far_model"
     plan: StripPlan | None = None  # the calibration's strip, moved with the attitude; None: fixed rows
+    verifier: object | None = None  # a second look at the strip's doubtful boxes (detector/verifier.py), or None
 
     def crop_for(self, pitch_deg: float = 0.0, roll_deg: float = 0.0) -> tuple[CropSpec, bool]:
         """(this frame's strip crop, clamped): the strip moved with the attitude offset (degrees) and kept
@@ -281,19 +282,21 @@ class FarBand:
 
     @classmethod
     def load(cls, model, rows: str | tuple[int, int], image_width: int, image_height: int, band: CropSpec,
-             source: str = "far_rows", model_source: str = "far_model", **detector_kw) -> "FarBand":
+             source: str = "far_rows", model_source: str = "far_model", verifier=None, **detector_kw) -> "FarBand":
         """The far band of ``rows`` with ``model`` (the band's own, or a far model: ``model_source`` names
-        its option in errors) built for its strip (``Detector.load_for_band``)."""
+        its option in errors) built for its strip (``Detector.load_for_band``); ``verifier``: its second look
+        (:func:`~cone_perception.detector.verifier.load_verifier`) or None."""
         crop = far_band_crop(rows, image_width, image_height, band, source)
         det = Detector.load_for_band(model, (crop.out_width, crop.out_height), **detector_kw)
         det.warmup()
-        return cls(crop, det, model_source)
+        return cls(crop, det, model_source, verifier=verifier)
 
     @classmethod
     def for_calibration(cls, model, rows: str | None, calib, source: str = "far_rows",
-                        model_source: str = "far_model", say=None, **detector_kw) -> "FarBand | None":
+                        model_source: str = "far_model", say=None, verifier=None, **detector_kw) -> "FarBand | None":
         """The far band ``rows`` (:func:`far_rows_for`: ``auto`` = the calibration's strip) of ``calib`` with
-        ``model`` built for it, or None when off; ``say(text)`` is told which (e.g. ``print``)."""
+        ``model`` built for it, or None when off; ``say(text)`` is told which (e.g. ``print``); ``verifier``: its
+        second look or None."""
         fr = far_rows_for(rows, calib, source)
         if say is not None:
             say(fr.what)
@@ -301,7 +304,7 @@ class FarBand:
             return None
         det = Detector.load_for_band(model, (fr.crop.out_width, fr.crop.out_height), **detector_kw)
         det.warmup()
-        return cls(fr.crop, det, model_source, fr.plan)
+        return cls(fr.crop, det, model_source, fr.plan, verifier)
 
     def detect(self, strip_bgr: np.ndarray, crop: CropSpec | None = None) -> np.ndarray:
         """Full-resolution strip ``(V1 - V0, W, 3)`` BGR cut at ``crop`` (this frame's rows, :meth:`crop_for`;
@@ -309,13 +312,29 @@ class FarBand:
         crop = crop or self.crop
         return drop_cut_boxes(self.detector.detect(strip_bgr, crop), crop)
 
+    def verify(self, boxes: np.ndarray, strip_bgr: np.ndarray, crop: CropSpec | None = None) -> np.ndarray:
+        """``boxes`` (the band's and the strip's, merged) less the doubtful ones wholly inside the strip's rows
+        (``crop``, default :attr:`crop`) where the verifier, looking at the strip's full-resolution pixels, sees no
+        cone (detector/verifier.py; counted there). The band's boxes are judged too: a strip box the verifier drops
+        would otherwise leave the band's box of the same place in its stead. Without a verifier: ``boxes``."""
+        if self.verifier is None or len(boxes) == 0:
+            return boxes
+        crop = crop or self.crop
+        inside = ((boxes["v1"] >= crop.v0) & (boxes["v2"] <= crop.v1) & (boxes["u1"] >= crop.u0)
+                  & (boxes["u2"] <= crop.u1))
+        if not inside.any():
+            return boxes
+        drop = np.zeros(len(boxes), bool)
+        drop[inside] = self.verifier.drops(strip_bgr, boxes[inside], crop.u0, crop.v0, crop.downscale)
+        return boxes[~drop]
+
     def merged(self, band_boxes: np.ndarray, strip_bgr: np.ndarray,
                crop: CropSpec | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """``(the band's boxes merged with the strip's (:func:`merge_boxes`), which of them the strip drew
+        """``(the band's boxes merged with the strip's (:func:`merge_boxes`) and verified (:meth:`verify`), which of them the strip drew
         (:func:`drawn_by_far`))``."""
         iou = getattr(self.detector, "iou", DEFAULT_IOU)
         far_boxes = self.detect(strip_bgr, crop)
-        merged = merge_boxes(band_boxes, far_boxes, iou)
+        merged = self.verify(merge_boxes(band_boxes, far_boxes, iou), strip_bgr, crop)
         return merged, drawn_by_far(merged, far_boxes)
 
 

@@ -158,6 +158,29 @@ def restrict_to_range(images: list[EvalImage], max_range_m: float) -> tuple[list
     return out, n_far
 
 
+def restrict(images: list[EvalImage], band: tuple[int, int] | None = None, min_height: float | None = None,
+             max_range: float | None = None, iou: float = 0.5, gt_source: str = "eval") -> tuple[list[EvalImage], dict]:
+    """``eval --band``, ``--min-height`` and ``--max-range`` in turn (each None: not applied): the images and what
+    each set aside; ConfigError naming the option for a value it refuses."""
+    counts: dict = {}
+    if band is not None:
+        images, n_out = restrict_to_band(images, band)
+        counts.update(band_rows=list(band), ignored_outside_band=n_out)
+    if min_height is not None:
+        try:
+            images, n_gt, n_pred = restrict_to_min_height(images, min_height, iou)
+        except ValueError as e:
+            raise ConfigError("eval", "--min-height", str(e)) from None
+        counts.update(min_height_px=min_height, ignored_below_min_height=n_gt, detections_dropped_below_min_height=n_pred)
+    if max_range is not None:
+        try:
+            images, n_far = restrict_to_range(images, max_range)
+        except ValueError as e:
+            raise ConfigError(gt_source, "--max-range", str(e)) from None
+        counts.update(max_range_m=max_range, ignored_beyond_max_range=n_far)
+    return images, counts
+
+
 def load_ground_truth(path: str | os.PathLike, names: list[str] | None = None) -> GroundTruth:
     """A YOLO label folder or a ``gt.jsonl``; ``names`` overrides the folder's class names."""
     path = Path(path)

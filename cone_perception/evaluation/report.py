@@ -29,7 +29,6 @@ from ..attitude.box_files import attitude_config_for
 from ..classes import CLASS_NAMES
 from ..data.outfiles import json_safe
 from ..data.predictions import read_predictions
-from ..errors import ConfigError
 from ..geometry.calib import Calibration, load_calibration
 from ..mapping import ConeMapper
 from ..params import DEFAULT_CONF
@@ -37,9 +36,7 @@ from ..records import CONE_DTYPE, boxes_from_arrays
 from ..resources import default_model_path, far_model_for
 from ..words import plural
 from .attitude import AttitudeReport
-from .groundtruth import (
-    EvalImage, load_ground_truth, pair_with_predictions, restrict_to_band, restrict_to_min_height, restrict_to_range,
-)
+from .groundtruth import EvalImage, load_ground_truth, pair_with_predictions, restrict
 from .localisation import DISTANCE_GROUPS, EXTRA_GROUPS, LocalisationReport, PairDistanceReport, distance_group
 from .metrics import ImageDetections, coco_map, greedy_match, operating_point
 from .plots import plot_by_distance, plot_confusion, plot_localisation, plot_pairs, plot_pr, plot_worst_frames
@@ -476,21 +473,8 @@ def evaluate_predictions(pred: Path, gt_path: Path, gt_names: str | None = None,
     gt = load_ground_truth(gt_path, names)
     preds = list(read_predictions(pred))
     images, counts = pair_with_predictions(gt, preds, str(pred), only_predicted)
-    if band is not None:
-        images, n_out = restrict_to_band(images, band)
-        counts = {**counts, "band_rows": list(band), "ignored_outside_band": n_out}
-    if min_height is not None:
-        try:
-            images, n_gt, n_pred = restrict_to_min_height(images, min_height, iou)
-        except ValueError as e:
-            raise ConfigError("eval", "--min-height", str(e)) from None
-        counts = {**counts, "min_height_px": min_height, "ignored_below_min_height": n_gt, "detections_dropped_below_min_height": n_pred}
-    if max_range is not None:
-        try:
-            images, n_far = restrict_to_range(images, max_range)
-        except ValueError as e:
-            raise ConfigError(str(gt_path), "--max-range", str(e)) from None
-        counts = {**counts, "max_range_m": max_range, "ignored_beyond_max_range": n_far}
+    images, cut = restrict(images, band, min_height, max_range, iou, str(gt_path))
+    counts = {**counts, **cut}
     calib_path = calib_arg if calib_arg is not None else gt.calib_path
     calib = load_calibration(calib_path) if calib_path is not None else None
     if verbose and calib is not None and calib_arg is None:

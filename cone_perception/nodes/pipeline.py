@@ -28,6 +28,12 @@ Parameters (generated from cone_perception/params.py by ``cone-perception params
     more small cones; the image attitude reads its boxes through its own box model, box_model); band
     or empty = the band's own model; else a model file (its box model: MODEL.box_model.yaml). Its
     classes must be the band model's (refused at start-up otherwise)
+  far_verifier (string, default auto; auto, none, or a verifier file): a second look at the far
+    strip's doubtful boxes (scored under the verifier's verify_below, small): a tiny classifier on a
+    crop around each box drops those where it sees no cone, such as worn paint (docs/detector.md,
+    Far band; counted on /diagnostics: far_strip verifier_dropped). auto = the shipped
+    models/cone_verifier.pt (none where it is not installed), none or empty = off, else a verifier
+    file
   far_every (int, default 1; 1 .. 100): the far band's cadence: its strip runs on every this-many-th
     frame only, the frames between run the band alone (a far cone is seen up to far_every - 1 frames
     late; the tracker carries it meanwhile; docs/detector.md, Far band); 1 = every frame
@@ -78,7 +84,12 @@ class PipelineNode(PerceptionNode):
             return None
         # warmed like the band's; the Pipeline refuses a far model of other classes before the first frame
         det = self.loader.load((fr.crop.out_width, fr.crop.out_height), model)
-        return FarBand(fr.crop, det, "parameter far_model", fr.plan)
+        from ..detector.verifier import load_verifier
+
+        verifier = load_verifier(declare(self, "far_verifier"), "parameter far_verifier")
+        if verifier is not None:
+            self.get_logger().info(f"far strip: second look at its doubtful boxes by {verifier.source}")
+        return FarBand(fr.crop, det, "parameter far_model", fr.plan, verifier)
 
     def _far_tiles(self, far, every: int, model):
         """The far tiles of ``far_tiles`` (detector/fartiles.py; a detector of the far band's ``model`` built for the

@@ -18,6 +18,7 @@ from ..data.bags import read_ground_truth
 from ..resources import far_model_for
 from ..detector import Detector, default_model_path
 from ..detector.farband import FarBand
+from ..detector.verifier import load_verifier
 from ..errors import ConfigError
 from ..evaluation import LocalisationReport, format_localisation
 from ..evaluation.plots import bag_frames_picture
@@ -86,7 +87,8 @@ def run_demo(args: argparse.Namespace) -> int:
         det = Detector.load(model)
         det.warmup()
         far_model = far_model_for(None, model)
-        far = FarBand.for_calibration(far_model, None, calib, say=lambda t: print(f"  {t}"))  # as the node: the strip
+        far = FarBand.for_calibration(far_model, None, calib, say=lambda t: print(f"  {t}"),  # as the node: the strip
+                                      verifier=load_verifier(None))
         att_cfg, _ = offline_attitude_config(model, far_model if far else None, calib)  # as the nodes' box_model
         res = offline_replay(bag, Pipeline(calib, det, far=far, attitude_config=att_cfg), progress=progress)
         cones, boxes, wall = res.cones, res.boxes, res.wall_s

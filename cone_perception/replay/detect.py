@@ -19,6 +19,7 @@ from ..resources import far_model_for, far_model_given
 from ..detector import Detector, default_model_path, detect_one, resolve_backend
 from ..detector.farband import (BAND_SPLIT_AUTO, BAND_SPLIT_OFF, FAR_ROWS_AUTO, FAR_ROWS_OFF, FarBand, SplitDetector,
                                 band_split_for, far_rows_for)
+from ..detector.verifier import load_verifier
 from ..errors import ConfigError
 from ..geometry.calib import load_calibration
 from ..vis import draw_band, draw_boxes
@@ -86,6 +87,7 @@ def run_detect(args: argparse.Namespace) -> int:
         if (w, h) not in far_by_size:
             far_model = far_model_for(args.far_model, model)
             far = FarBand.load(far_model, args.far_rows, w, h, band_for(w), "--far-rows", "--far-model",
+                               verifier=load_verifier(args.far_verifier, "--far-verifier"),
                                backend=resolve_backend(args.backend, far_model, bf16=args.bf16), conf=args.conf,
                                iou=args.iou, bf16=args.bf16)
             far.check_classes(det)  # a far model of other classes: refused before its first image

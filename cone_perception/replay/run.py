@@ -24,6 +24,7 @@ from ..resources import far_model_for, far_model_given
 from ..detector import Detector, default_model_path
 from ..detector.fartiles import FarTiles
 from ..detector.farband import FarBand, SplitDetector, band_rows_for, band_split_for, far_rows_for
+from ..detector.verifier import load_verifier
 from ..detector.parallel import ForwardPlan
 from ..detector.model_files import attitude_config_for, box_model_or_default, far_reading_for
 from ..errors import ConfigError
@@ -143,7 +144,8 @@ def _run_offline(args, calib) -> dict:
                                  threads=plan.network_threads or None, bf16=args.bf16)
     far_model = far_model_for(args.far_model, det.source)
     far = FarBand.for_calibration(far_model, args.far_rows, calib, "--far-rows", "--far-model",
-                                  say=lambda t: print(f"replay: {t}"), backend=args.backend, conf=conf,
+                                  say=lambda t: print(f"replay: {t}"),
+                                  verifier=load_verifier(args.far_verifier, "--far-verifier"), backend=args.backend, conf=conf,
                                   threads=plan.network_threads or None, bf16=args.bf16)
     imu = _imu_source(args, calib)
     # the fit reads each network's boxes through its own box model (the far strip's of a far model: issue 26f)
@@ -209,7 +211,8 @@ def format_strip_counts(pipeline) -> str:
     return (f"rows {s['rows'][0]}-{s['rows'][1]} at the calibration's attitude ({how}), {s['frames']} frames, "
             f"clamped to the image in {s['clamped']}" + (f", skipped (far_every) in {s['skipped']}" if "skipped" in s else "")
             + (f", of those run as tiles {s['tiles']}, as the whole strip (tiles too wide) {s['tiles_full']}"
-               if "tiles" in s else ""))
+               if "tiles" in s else "")
+            + (f", boxes dropped by its verifier {s['verifier_dropped']}" if "verifier_dropped" in s else ""))
 
 
 def tracker_config(settings: list[str]) -> TrackerConfig:
@@ -268,6 +271,9 @@ def _run_live(args, calib) -> dict:
         params["far_model"] = str(Path(args.far_model).resolve())
     elif args.far_model is not None:
         params["far_model"] = args.far_model
+    if args.far_verifier is not None:  # a file: its absolute path (the node runs elsewhere); auto / none as given
+        v = str(args.far_verifier).strip()
+        params["far_verifier"] = str(Path(v).resolve()) if v.lower() not in ("auto", "none", "off", "") else v
     if args.bf16:
         params["bf16"] = True
     res = live_replay(args.bag, mode=args.live, topic=args.topic, params=params, pace=args.pace,

@@ -18,6 +18,13 @@ from ..train.trainer import TrainConfig, train
 
 def run_train(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    if str(args.data).endswith(".npz"):  # crops of `data verifier-crops`: the far strip's verifier
+        from ..train.verifier import train_verifier
+
+        out = args.out or str(next_run_dir(RUNS_DIR, "verifier"))
+        res = train_verifier(args.data, out, args.epochs, args.seed, args.threads, progress=not args.no_progress)
+        print(f"train: wrote {out}/verifier.pt (held-out tenth, last epoch: {res})")
+        return 0
     aug = AugmentConfig.off() if args.no_augment else replace(AugmentConfig(), mosaic=args.mosaic, copy_paste=args.copy_paste)
 
     rank = world_from_env()[0]
