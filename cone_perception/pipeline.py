@@ -101,14 +101,14 @@ class Pipeline:
         self.cones_conf = cones_conf
         #: frames with the far strip, and those where the attitude would have moved it out of the image
         #: (clamped to it): the replay summary and the node's /diagnostics report them (``skipped``: frames
-        #: without it by ``far_every``, only where that is above 1; ``verifier_dropped``: the strip's boxes its
-        #: verifier dropped, with one)
+        #: without it by ``far_every``, only where that is above 1; ``verifier_dropped``: the boxes in the strip's
+        #: rows its verifier dropped, with one)
         self.strip_counts = {"frames": 0, "clamped": 0}
         if far is not None and self.far_every > 1:
             self.strip_counts["skipped"] = 0
             if self.far_tiles is not None:  # frames run as tiles, and those whose tiles did not fit (the whole strip)
                 self.strip_counts.update(tiles=0, tiles_full=0)
-        if far is not None and getattr(far, "verifier", None) is not None:  # the strip's boxes its second look dropped
+        if far is not None and getattr(far, "verifier", None) is not None:  # boxes its second look dropped
             self.strip_counts["verifier_dropped"] = 0
         self.strip_rows: tuple[int, int] | None = None  # the last frame's strip rows (V0, V1)
         self._strip_attitude = np.zeros(2)  # (pitch, roll) the strip follows: the previous frame's attitude

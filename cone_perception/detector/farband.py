@@ -330,8 +330,8 @@ class FarBand:
 
     def merged(self, band_boxes: np.ndarray, strip_bgr: np.ndarray,
                crop: CropSpec | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """``(the band's boxes merged with the strip's (:func:`merge_boxes`) and verified (:meth:`verify`), which of them the strip drew
-        (:func:`drawn_by_far`))``."""
+        """``(the band's boxes merged with the strip's (:func:`merge_boxes`) and verified (:meth:`verify`), which of
+        them the strip drew (:func:`drawn_by_far`))``."""
         iou = getattr(self.detector, "iou", DEFAULT_IOU)
         far_boxes = self.detect(strip_bgr, crop)
         merged = self.verify(merge_boxes(band_boxes, far_boxes, iou), strip_bgr, crop)
