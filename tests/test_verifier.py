@@ -63,7 +63,7 @@ def test_only_doubtful_small_boxes_are_asked_and_those_without_a_cone_dropped():
         (70, 400, 72, 404, 0.3),     # 4 px: below min_px, kept
         (80, 300, 120, 380, 0.3),    # 80 px: above max_px, kept
     ])
-    out = v.filter(np.zeros((96, 1920, 3), np.uint8), b, 0, 370)
+    out = b[~v.drops(np.zeros((96, 1920, 3), np.uint8), b, 0, 370)]
     assert out["u1"].tolist() == [500, 60, 70, 80]
     assert v.counts == {"checked": 2, "dropped": 1}
     # the boxes are asked about in the strip's own px (row 400 of the image = row 30 of the strip)

@@ -104,16 +104,15 @@ def boxes_in_window(boxes: np.ndarray, cls: np.ndarray, win: tuple[int, int, int
     return b[keep], cls[keep]
 
 
-def false_detections(pred_boxes: np.ndarray, boxes: np.ndarray, conf: float,
-                     unlabelled: np.ndarray | None = None) -> np.ndarray:
-    """(K, 4) x1 y1 x2 y2 of the predictions (:data:`~cone_perception.records.BOX_DTYPE`) at score >= ``conf`` that
-    overlap no labelled box of ``boxes`` (x1 y1 x2 y2) at IoU >= :data:`FALSE_IOU` and whose centre lies in none
-    of ``boxes`` and ``unlabelled`` (cones without a label, x1 y1 x2 y2)."""
-    p = pred_boxes[pred_boxes["score"] >= conf]
-    xyxy = np.c_[p["u1"], p["v1"], p["u2"], p["v2"]].astype(np.float32).reshape(-1, 4)
+def on_no_cone(pred_boxes: np.ndarray, boxes: np.ndarray, unlabelled: np.ndarray | None = None) -> np.ndarray:
+    """(K,) bool: which predictions (:data:`~cone_perception.records.BOX_DTYPE`) overlap no labelled box of ``boxes``
+    (x1 y1 x2 y2) at IoU >= :data:`FALSE_IOU` and have their centre in none of ``boxes`` and ``unlabelled`` (cones
+    without a label, x1 y1 x2 y2)."""
+    p = pred_boxes
     cones = boxes if unlabelled is None else np.r_[boxes.reshape(-1, 4), unlabelled.reshape(-1, 4)]
     if len(p) == 0 or len(cones) == 0:
-        return xyxy
+        return np.ones(len(p), bool)
+    xyxy = np.c_[p["u1"], p["v1"], p["u2"], p["v2"]].astype(np.float32).reshape(-1, 4)
     cu, cv = (xyxy[:, 0] + xyxy[:, 2]) / 2, (xyxy[:, 1] + xyxy[:, 3]) / 2
     inside = ((cones[None, :, 0] <= cu[:, None]) & (cu[:, None] <= cones[None, :, 2])
               & (cones[None, :, 1] <= cv[:, None]) & (cv[:, None] <= cones[None, :, 3])).any(axis=1)
@@ -121,7 +120,15 @@ def false_detections(pred_boxes: np.ndarray, boxes: np.ndarray, conf: float,
     if len(boxes):
         labels = boxes_from_arrays(boxes, np.ones(len(boxes)), np.zeros(len(boxes), np.int64))
         false &= box_iou(p, labels).max(axis=1) < FALSE_IOU
-    return xyxy[false]
+    return false
+
+
+def false_detections(pred_boxes: np.ndarray, boxes: np.ndarray, conf: float,
+                     unlabelled: np.ndarray | None = None) -> np.ndarray:
+    """(K, 4) x1 y1 x2 y2 of the predictions at score >= ``conf`` on no cone (:func:`on_no_cone`)."""
+    p = pred_boxes[pred_boxes["score"] >= conf]
+    xyxy = np.c_[p["u1"], p["v1"], p["u2"], p["v2"]].astype(np.float32).reshape(-1, 4)
+    return xyxy[on_no_cone(p, boxes, unlabelled)]
 
 
 def _predictions_by_name(path: str | Path) -> dict[str, np.ndarray]:
@@ -222,5 +229,5 @@ def far_crops(data_yaml: str | Path, out: str | Path, split: str = "train", size
     return rep
 
 
-__all__ = ["FALSE_IOU", "FarCropReport", "HEIGHT_BINS", "boxes_in_window", "false_detections", "far_crops",
+__all__ = ["FALSE_IOU", "FarCropReport", "HEIGHT_BINS", "boxes_in_window", "false_detections", "far_crops", "on_no_cone",
            "window_around"]

@@ -29,14 +29,13 @@ from ..geometry.strip import plan_strip
 from ..mapping import box_iou
 from ..records import boxes_from_arrays
 from .datasets import IMAGE_SUFFIXES
+from .farcrops import on_no_cone
 from .predictions import read_predictions
 
 #: The strip rows of a frame's camera, this many px more each side, are where its crops are cut.
 ROW_MARGIN = 48
 #: A detection on a cone: IoU at least this with a cone's box, a third of that cone in view.
 CONE_IOU, CONE_VISIBLE = 0.4, 0.3
-#: No cone: IoU under this with every cone's box, its centre in none.
-NO_CONE_IOU = 0.3
 #: Box heights (px) cut around: detections, rendered cones, real labelled cones.
 DET_PX, GT_PX, REAL_PX = (6.0, 60.0), (8.0, 48.0), (4.0, 20.0)
 
@@ -88,16 +87,14 @@ def rendered_crops(root: Path, pred: Path, rng: np.random.Generator, progress: b
             iou = box_iou(b, boxes_from_arrays(gb.astype(np.float32), np.ones(len(gb), np.float32),
                                                np.zeros(len(gb), np.uint8)))
             best, j = iou.max(1), iou.argmax(1)
-            cu, cv = (xyxy[:, 0] + xyxy[:, 2]) / 2, (xyxy[:, 1] + xyxy[:, 3]) / 2
-            inside = ((gb[None, :, 0] <= cu[:, None]) & (cu[:, None] <= gb[None, :, 2])
-                      & (gb[None, :, 1] <= cv[:, None]) & (cv[:, None] <= gb[None, :, 3])).any(1)
         else:
-            best, j, inside = np.zeros(len(xyxy)), np.zeros(len(xyxy), int), np.zeros(len(xyxy), bool)
+            best, j = np.zeros(len(xyxy)), np.zeros(len(xyxy), int)
+        none = on_no_cone(b, gb.astype(np.float32))  # every rendered cone counts, labelled or not
         for i in range(len(xyxy)):
             if best[i] >= CONE_IOU and vis[j[i]] >= CONE_VISIBLE:
                 X.append(crop_patch(img, xyxy[i], rng))
                 y.append(1)
-            elif best[i] < NO_CONE_IOU and not inside[i]:
+            elif none[i]:
                 X.append(crop_patch(img, xyxy[i], rng))
                 y.append(0)
         for _ in range(4):  # random boxes of the strip's rows on no cone

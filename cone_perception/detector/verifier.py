@@ -2,12 +2,14 @@
 
 The far strip's network finds cones 8-20 px tall at full resolution; at that size worn paint (short dashes of a
 yellow line seen from afar) looks like a yellow cone to it, scored 0.25-0.75 (docs/benchmarks.md, "A second look
-at the far strip's boxes"). :class:`BoxVerifier` cuts a square around each strip box scored below its
-``verify_below``, ``CTX`` times the box's height wide, resizes it to ``SIDE`` x ``SIDE`` px and asks a four-layer
+at the far strip's boxes"). :class:`BoxVerifier` cuts a square around each box in the strip's rows (the band's
+and the strip's, :meth:`~cone_perception.detector.farband.FarBand.verify`) scored below its ``verify_below``,
+``CTX`` times the box's height wide, resizes it to ``SIDE`` x ``SIDE`` px and asks a four-layer
 network (:class:`VerifierNet`, about 60 k weights) whether a cone stands there; a box it gives less than ``min_p``
 is dropped (counted). It sees the box's own pixels and context at a fixed scale, where the detector saw the box
 among a whole strip's; it was trained on crops around rendered cones, rendered false detections of the far
-model (paint, the verge) and real cones (``cone-perception train --verifier-crops``, docs/training.md). Its file
+model (paint, the verge) and real cones (``cone-perception data verifier-crops``, then ``train --data CROPS.npz``;
+docs/training.md). Its file
 holds the weights, the crop geometry and both thresholds (models/cone_verifier.md). ROS-free.
 """
 
@@ -85,7 +87,7 @@ def _ort_runner(net, source: str):
 
 
 class BoxVerifier:
-    """A loaded verifier (:func:`load_verifier`): ``probabilities(img, boxes)``, ``drops`` / ``filter``."""
+    """A loaded verifier (:func:`load_verifier`): ``probabilities(img, boxes)`` and ``drops(img, boxes, ...)``."""
 
     def __init__(self, net, verify_below: float, min_p: float, min_px: float, max_px: float, source: str = "",
                  session=None):
@@ -106,11 +108,6 @@ class BoxVerifier:
 
         with torch.inference_mode():
             return torch.sigmoid(self.net(patches_tensor(patches))).numpy().astype(np.float64)
-
-    def filter(self, img: np.ndarray, boxes: np.ndarray, u0: float = 0.0, v0: float = 0.0,
-               downscale: float = 1.0) -> np.ndarray:
-        """``BOX_DTYPE`` boxes less those :meth:`drops` (in their order)."""
-        return boxes[~self.drops(img, boxes, u0, v0, downscale)] if len(boxes) else boxes
 
     def drops(self, img: np.ndarray, boxes: np.ndarray, u0: float = 0.0, v0: float = 0.0,
               downscale: float = 1.0) -> np.ndarray:
@@ -151,7 +148,7 @@ def verifier_path_for(choice) -> Path | None:
     return Path(c)
 
 
-#: The keys a verifier file holds besides the weights (written by ``train --verifier-crops``).
+#: The keys a verifier file holds besides the weights (written by ``train --data CROPS.npz``).
 FILE_KEYS = ("verify_below", "min_p", "min_px", "max_px", "side", "ctx")
 
 
@@ -180,7 +177,7 @@ def load_verifier(choice, source: str = "far_verifier") -> BoxVerifier | None:
         raise ConfigError(source, str(path), f"cannot read it as a verifier file: {type(e).__name__}: {e}") from None
     if not isinstance(d, dict) or d.get("kind") != "cone_verifier" or "state_dict" not in d:
         raise ConfigError(source, str(path), "not a cone verifier file (train one with `cone-perception train "
-                                             "--verifier-crops`)")
+                                             "--data CROPS.npz`)")
     missing = [k for k in FILE_KEYS if k not in d]
     if missing:
         raise ConfigError(source, str(path), f"the verifier file lacks {', '.join(missing)}")

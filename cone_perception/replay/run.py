@@ -24,7 +24,7 @@ from ..resources import far_model_for, far_model_given
 from ..detector import Detector, default_model_path
 from ..detector.fartiles import FarTiles
 from ..detector.farband import FarBand, SplitDetector, band_rows_for, band_split_for, far_rows_for
-from ..detector.verifier import load_verifier
+from ..detector.verifier import load_verifier, verifier_path_for
 from ..detector.parallel import ForwardPlan
 from ..detector.model_files import attitude_config_for, box_model_or_default, far_reading_for
 from ..errors import ConfigError
@@ -271,9 +271,9 @@ def _run_live(args, calib) -> dict:
         params["far_model"] = str(Path(args.far_model).resolve())
     elif args.far_model is not None:
         params["far_model"] = args.far_model
-    if args.far_verifier is not None:  # a file: its absolute path (the node runs elsewhere); auto / none as given
-        v = str(args.far_verifier).strip()
-        params["far_verifier"] = str(Path(v).resolve()) if v.lower() not in ("auto", "none", "off", "") else v
+    if args.far_verifier is not None:  # the file it stands for, absolute (the node runs elsewhere), or none
+        path = verifier_path_for(args.far_verifier)
+        params["far_verifier"] = str(path.resolve()) if path is not None else "none"
     if args.bf16:
         params["bf16"] = True
     res = live_replay(args.bag, mode=args.live, topic=args.topic, params=params, pace=args.pace,
