@@ -163,7 +163,7 @@ class Pipeline:
             t0 = time.perf_counter()
             boxes = merge_boxes(boxes, far_boxes, getattr(self.far.detector, "iou", DEFAULT_IOU))
             t_merge = (time.perf_counter() - t0) * 1e3
-            if windows is None and getattr(self.far, "verifier", None) is not None:  # the whole strip ran: its second look
+            if getattr(self.far, "verifier", None) is not None:  # its second look (tile frames too: the whole strip is cut)
                 t0 = time.perf_counter()
                 boxes = self.far.verify(boxes, strip, far_crop)
                 timing["verifier"] = (time.perf_counter() - t0) * 1e3

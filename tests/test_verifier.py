@@ -98,6 +98,31 @@ def test_the_strip_with_a_verifier_drops_and_counts_in_the_pipeline(ros):
     assert "verifier_dropped" not in plain.strip_counts
 
 
+def test_tile_frames_get_the_second_look_too(ros):
+    """far_every 2 with tiles: the frames between run the tiles around the last frame's far cones; their boxes in the
+    strip's rows are judged as the whole strip's are (the strip is cut on those frames too), and counted."""
+    from cone_perception.detector.fartiles import TILE_MARGIN_PX, FarTiles
+
+    class _Tile:  # the mosaic's network: the cone kept on the strip's frame, where its window puts it
+        timing = _Strip.timing
+
+        def detect(self, bgr, crop):  # full-image rows; the mosaic's columns (the window of u 900 starts at 0)
+            return _boxes([(TILE_MARGIN_PX, 400, TILE_MARGIN_PX + 10, 420, 0.4)])
+
+    frame = np.zeros((1080, 1920, 3), np.uint8).tobytes()
+    ver = _Fixed()
+    pipe = Pipeline(CALIB, _Band(), "fixed", far=FarBand(STRIP, _Strip(), verifier=ver), far_every=2,
+                    far_tiles=FarTiles({256: _Tile(), 512: _Tile(), 1152: _Tile()}))
+    kept = [pipe.process_raw("bgr8", 1920, 1080, 5760, frame, stamp_ns=i).boxes["u1"].tolist() for i in range(2)]
+    assert pipe.strip_counts["tiles"] == 1  # frame 1 ran as tiles
+    assert kept == [[900], [900]]  # the strip's frame: the box at u1 50 dropped; the tile frame: its cone kept
+    assert [a[:, 0].tolist() for a in ver.asked] == [[50, 900], [900]]  # the tile frame's box was asked about too
+    ver.probabilities = lambda img, xyxy: np.zeros(len(xyxy))  # now it sees no cone anywhere
+    assert len(pipe.process_raw("bgr8", 1920, 1080, 5760, frame, stamp_ns=2).boxes) == 0  # a strip frame
+    assert len(pipe.process_raw("bgr8", 1920, 1080, 5760, frame, stamp_ns=3).boxes) == 0  # tiles (frame 1's cone)
+    assert pipe.strip_counts["verifier_dropped"] == 4 and pipe.strip_counts["tiles"] == 2
+
+
 def test_the_shipped_verifier_keeps_rendered_cones_and_drops_bare_road():
     from cone_perception.synth.config import SynthConfig
     from cone_perception.synth.scene import random_pose
