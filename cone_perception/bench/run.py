@@ -34,6 +34,11 @@ def forward_plan(threads: int, strip: bool, sequential: bool = False) -> Forward
     return ForwardPlan(False, threads) if sequential else ForwardPlan.of(threads, strip)
 
 
+def _network_kw(args: argparse.Namespace) -> dict:
+    """The networks' precision and device options of ``bench pipeline`` (``--bf16``, ``--device``, ``--fp16``)."""
+    return dict(bf16=args.bf16, device=args.device, fp16=args.fp16)
+
+
 def _bench_pipeline(args: argparse.Namespace, calib) -> dict:
     if args.input:
         calib = replace(calib, crop=crop_for_setting(calib.crop, args.input, calib.image_width, calib.image_height))
@@ -48,15 +53,15 @@ def _bench_pipeline(args: argparse.Namespace, calib) -> dict:
     plan = forward_plan(args.threads, far_rows.crop is not None, args.sequential)
     split = band_split_for(args.band_split, calib, "--band-split")
     if split.upper is None:
-        det = load_for_crop(args.model, args.backend, calib.crop, plan.network_threads, bf16=args.bf16)
+        det = load_for_crop(args.model, args.backend, calib.crop, plan.network_threads, **_network_kw(args))
     else:
         det = SplitDetector.load(args.model or default_model_path(), split, backend=args.backend,
-                                 threads=plan.network_threads, bf16=args.bf16)
+                                 threads=plan.network_threads, **_network_kw(args))
     far = FarBand.for_calibration(far_model_for(args.far_model, det.source), args.far_rows, calib, "--far-rows", "--far-model",
                                   verifier=load_verifier(args.far_verifier, "--far-verifier"),
-                                  backend=args.backend, threads=plan.network_threads, bf16=args.bf16)
+                                  backend=args.backend, threads=plan.network_threads, **_network_kw(args))
     tiles = FarTiles.for_setting(far.detector.source if far else None, args.far_tiles, far, args.far_every,
-                                 "--far-tiles", backend=args.backend, threads=plan.network_threads, bf16=args.bf16)
+                                 "--far-tiles", backend=args.backend, threads=plan.network_threads, **_network_kw(args))
     result = bench_pipeline(calib, det, rendered_frames(calib, max(1, args.scenes)), args.frames, args.warmup, far,
                             plan.concurrent, args.far_every, tiles)
     result["far_rows"] = f"{far.crop.v0},{far.crop.v1}" if far is not None else "none"
@@ -76,6 +81,7 @@ def _repeat_pipeline(args: argparse.Namespace) -> int:
            "--frames", str(args.frames), "--warmup", str(args.warmup), "--calib", str(args.calib),
            "--threads", str(args.threads), "--backend", args.backend, "--scenes", str(args.scenes)]
     cmd += (["--model", str(args.model)] if args.model else []) + (["--bf16"] if args.bf16 else [])
+    cmd += ["--device", args.device] + (["--fp16"] if args.fp16 else [])
     cmd += ["--input", args.input] if args.input else []
     cmd += (["--far-rows", args.far_rows] if args.far_rows is not None else []) + (["--far-model", args.far_model] if args.far_model else [])
     cmd += ["--sequential"] if args.sequential else []
@@ -121,7 +127,7 @@ def run_bench(args: argparse.Namespace) -> int:
             return _print_json(result)
         print(f"bench pipeline ({result['setting']}): {result['input']} -> {result['output']}, model input "
               f"{result['model_input'][0]}x{result['model_input'][1]}; model {result['model']} "
-              f"({result['backend']}, {plural(result['threads'], 'thread')}), {args.frames} frames, "
+              f"({result['backend']} on {result['runs_on']}, {plural(result['threads'], 'thread')}), {args.frames} frames, "
               f"{result['boxes_per_frame']:.1f} boxes/frame; {result['far_band']}")
         print(format_table(result["stages"]))
         if (result["far_every"] or 1) > 1:  # bimodal: frames with the strip and without

@@ -56,6 +56,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="pipeline, table: inference backend (default %(default)s: ONNX Runtime on the CPU where "
                         "installed, else torch; fixed-size ones are built for each band's input size)")
     p.add_argument("--bf16", action="store_true", help="pipeline, table: backend torch with bfloat16 autocast on the CPU")
+    p.add_argument("--device", default=PARAMS["device"].default, metavar="cpu|cuda|cuda:N",
+                   help="pipeline: where the networks run (the nodes' device parameter; with --backend onnx ONNX "
+                        "Runtime's TensorRT or CUDA provider, docs/jetson.md; default %(default)s)")
+    p.add_argument("--fp16", action="store_true",
+                   help="pipeline, with --device cuda: half precision (torch fp16, or TensorRT's fp16 engine with "
+                        "--backend onnx)")
     p.add_argument("--far-rows", default=None, metavar="auto|none|V0,V1",
                    help="pipeline: the far band, image rows also run at full resolution (docs/detector.md 'Far band'): "
                         "auto (default) = the calibration's far strip; V0,V1 = these rows; none (or off) = the band alone")

@@ -81,12 +81,17 @@ class TorchRunner:
 
 
 class OrtRunner:
-    """An ONNX Runtime session: (1, 3, H, W) float32 RGB 0..1 -> (4 + nc, N) float32 numpy (fp16 inputs cast)."""
+    """An ONNX Runtime session: (1, 3, H, W) float32 RGB 0..1 -> (4 + nc, N) float32 numpy (fp16 inputs cast).
+    ``fp16``: an fp16 graph, or TensorRT building its engine in fp16 (:func:`ort_session` with ``fp16``);
+    ``provider``: the execution provider that runs it first (``TensorrtExecutionProvider``, ``CUDAExecutionProvider``
+    or ``CPUExecutionProvider``)."""
 
     def __init__(self, session):
         self.session = session
         self.input_name = session.get_inputs()[0].name
-        self.fp16 = session.get_inputs()[0].type == "tensor(float16)"
+        self.provider = session.get_providers()[0]
+        trt = session.get_provider_options().get(TRT_PROVIDER, {}) if self.provider == TRT_PROVIDER else {}
+        self.fp16 = session.get_inputs()[0].type == "tensor(float16)" or str(trt.get("trt_fp16_enable")) in ("1", "True")
 
     def __call__(self, blob: np.ndarray) -> np.ndarray:
         x = blob.astype(np.float16) if self.fp16 else blob
@@ -102,14 +107,58 @@ def ort_spinning(threads: int | None) -> bool:
     return threads == 1
 
 
-def ort_session(model_bytes_or_path, device: str, threads: int | None, source: str):
-    """An ONNX Runtime session (CUDA first when asked for and available), its intra-op pool not spinning
-    (:func:`ort_spinning`); a :class:`ConfigError` naming ``source`` when onnxruntime is missing or cannot
-    load the model."""
+TRT_PROVIDER, CUDA_PROVIDER, CPU_PROVIDER = "TensorrtExecutionProvider", "CUDAExecutionProvider", "CPUExecutionProvider"
+
+
+def trt_cache_dir() -> Path:
+    """Where ONNX Runtime's TensorRT provider keeps the engines it builds (``$XDG_CACHE_HOME``, else ``~/.cache``,
+    then ``cone_perception/tensorrt``): the first start with a model and input size builds one (minutes on a
+    Jetson), later starts load it. An engine holds for one GPU, TensorRT version and input size; ONNX Runtime
+    keys its files by the model and builds anew where they do not match."""
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "cone_perception" / "tensorrt"
+
+
+def ort_providers(device: str, fp16: bool, available: list[str], source: str) -> list:
+    """ONNX Runtime's providers for ``device``: the CPU's alone for ``cpu``; for ``cuda`` / ``cuda:N`` TensorRT
+    first where this ONNX Runtime has it (its engine in fp16 with ``fp16``, cached in :func:`trt_cache_dir`), then
+    CUDA, each on device N, the CPU last (for what they cannot run). A :class:`ConfigError` naming ``device`` when
+    it asks for a GPU this ONNX Runtime has no provider for (the PyPI ``onnxruntime`` is CPU-only), and naming
+    ``fp16`` when fp16 is asked without TensorRT (the CUDA provider runs the graph in fp32)."""
+    if not device.startswith("cuda"):
+        return [CPU_PROVIDER]
+    index = device.partition(":")[2] or "0"
+    if not index.isdigit():
+        raise ConfigError(source, "device", f"must be cpu, cuda or cuda:N, got {device!r}")
+    gpu = [p for p in (TRT_PROVIDER, CUDA_PROVIDER) if p in available]
+    if not gpu:
+        raise ConfigError(source, "device", f"{device!r} with backend 'onnx' needs ONNX Runtime with a GPU provider "
+                                            f"(onnxruntime-gpu, or NVIDIA's build for the Jetson); this one has "
+                                            f"{', '.join(available) or 'none'}")
+    if fp16 and TRT_PROVIDER not in gpu:
+        raise ConfigError(source, "fp16", "with backend 'onnx', fp16 is TensorRT's (its execution provider builds the "
+                                          "engine in fp16); this ONNX Runtime has no TensorrtExecutionProvider, so "
+                                          "leave fp16 off (CUDA runs fp32) or use backend 'torch'")
+    out: list = []
+    if TRT_PROVIDER in gpu:
+        cache = trt_cache_dir()
+        cache.mkdir(parents=True, exist_ok=True)
+        out.append((TRT_PROVIDER, {"device_id": index, "trt_fp16_enable": "True" if fp16 else "False",
+                                   "trt_engine_cache_enable": "True", "trt_engine_cache_path": str(cache)}))
+    if CUDA_PROVIDER in gpu:
+        out.append((CUDA_PROVIDER, {"device_id": index}))
+    return out + [CPU_PROVIDER]
+
+
+def ort_session(model_bytes_or_path, device: str, threads: int | None, source: str, fp16: bool = False):
+    """An ONNX Runtime session on ``device`` (:func:`ort_providers`: on a GPU TensorRT first, in fp16 with
+    ``fp16``), its intra-op pool not spinning (:func:`ort_spinning`); a :class:`ConfigError` naming ``source``
+    when onnxruntime is missing, has no provider for ``device``, or cannot load the model."""
     try:
         import onnxruntime as ort
     except ImportError as e:  # optional dependency
         raise ConfigError(source, "backend", "backend 'onnx' needs the onnxruntime package (pip install onnxruntime)") from e
+    providers = ort_providers(device, fp16, list(ort.get_available_providers()), source)
     so = ort.SessionOptions()
     if threads:
         so.intra_op_num_threads = int(threads)
@@ -117,9 +166,6 @@ def ort_session(model_bytes_or_path, device: str, threads: int | None, source: s
     so.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
     if not ort_spinning(threads):
         so.add_session_config_entry("session.intra_op.allow_spinning", "0")
-    providers = ["CPUExecutionProvider"]
-    if device.startswith("cuda") and "CUDAExecutionProvider" in ort.get_available_providers():
-        providers.insert(0, "CUDAExecutionProvider")
     try:
         return ort.InferenceSession(model_bytes_or_path, sess_options=so, providers=providers)
     except Exception as e:  # noqa: BLE001 - onnxruntime raises its own exception types

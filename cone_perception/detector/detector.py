@@ -86,6 +86,15 @@ class Detector:
         run = self._run
         return "bf16" if getattr(run, "bf16", False) else ("fp16" if getattr(run, "fp16", False) else "fp32")
 
+    @property
+    def runs_on(self) -> str:
+        """Where the network runs: ONNX Runtime's first execution provider (``TensorRT``, ``CUDA``, ``CPU``) or the
+        torch device (``cpu``, ``cuda:0``)."""
+        provider = getattr(self._run, "provider", None)
+        if provider is not None:
+            return str(provider).removesuffix("ExecutionProvider").replace("Tensorrt", "TensorRT")
+        return str(getattr(self._run, "device", "cpu"))
+
     # -- loading -----------------------------------------------------------------------------
     @classmethod
     def load_for_band(cls, path: str | Path, band_wh: tuple[int, int], **kw) -> "Detector":
@@ -125,8 +134,8 @@ class Detector:
         if backend not in BACKEND_CHOICES:
             raise ConfigError(src, "backend", f"unknown backend {backend!r}; choose one of {', '.join(BACKEND_CHOICES)}")
         backend = resolve_backend(backend, path, device, bf16=bf16, fp16=fp16)
-        if device.startswith("cuda") and not torch.cuda.is_available():
-            raise ConfigError(src, "device", f"device {device!r} requested but CUDA is not available")
+        if device.startswith("cuda") and backend != "onnx" and not torch.cuda.is_available():  # onnx: ort_providers
+            raise ConfigError(src, "device", f"device {device!r} requested but CUDA is not available to torch")
         if fp16 and not device.startswith("cuda"):
             raise ConfigError(src, "fp16", "fp16 needs a CUDA device (CPU half precision is slower than fp32)")
         if threads:
@@ -139,7 +148,7 @@ class Detector:
         if bf16 and suffix in (".torchscript", ".ts", ".onnx"):
             raise ConfigError(src, "bf16", "bf16 runs a checkpoint (.pt) with backend 'torch', not an exported model")
         if suffix == ".onnx":
-            det = cls._load_onnx(path, backend, device, imgsz, threads, kw)
+            det = cls._load_onnx(path, backend, device, imgsz, threads, kw, fp16)
         elif suffix in (".torchscript", ".ts"):
             det = cls._load_torchscript(path, backend, device, fp16, imgsz, kw)
         else:
@@ -149,12 +158,12 @@ class Detector:
 
     @classmethod
     def _load_onnx(cls, path: Path, backend: str, device: str, imgsz: tuple[int, int] | None, threads: int | None,
-                   kw: dict) -> "Detector":
+                   kw: dict, fp16: bool = False) -> "Detector":
         """An ONNX file on ONNX Runtime; names and size from the sidecar, the embedded metadata or the graph."""
         src = str(path)
         if backend != "onnx":
             raise ConfigError(src, "backend", f"an ONNX file runs with backend 'onnx', not {backend!r}")
-        sess = ort_session(src, device, threads, src)
+        sess = ort_session(src, device, threads, src, fp16)
         embedded = dict(sess.get_modelmeta().custom_metadata_map)
         names, side_imgsz, names_src = external_names(path, embedded)
         size = imgsz or side_imgsz or onnx_input_size(sess, src)
@@ -211,7 +220,7 @@ class Detector:
         size = (int(imgsz[0]), int(imgsz[1])) if imgsz else ck.imgsz
         model = ck.build_model()
         if backend == "onnx":
-            sess = ort_session(onnx_bytes(model, size), device, threads, ck.path)
+            sess = ort_session(onnx_bytes(model, size), device, threads, ck.path, fp16)
             return cls(OrtRunner(sess), class_map, size, True, "onnx", ck.path, checkpoint=ck, **kw)
         model = model.fuse().to(device)
         if fp16:

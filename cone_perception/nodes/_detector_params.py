@@ -59,7 +59,7 @@ class DetectorLoader:
             det = Detector.load(model, **self.kw)
             det.warmup()
         self.node.get_logger().info(
-            f"model {det.source} ({det.backend} {det.precision}, {self.kw['threads'] or 'library default'} thread(s), "
+            f"model {det.source} ({det.backend} on {det.runs_on}, {det.precision}, {self.kw['threads'] or 'library default'} thread(s), "
             f"input {det.imgsz[0]}x{det.imgsz[1]}) loaded and warm")
         return det
 

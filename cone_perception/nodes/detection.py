@@ -15,8 +15,10 @@ Parameters (generated from cone_perception/params.py by ``cone-perception params
   backend (string, default auto; auto | torch | torchscript | onnx): inference backend; auto = ONNX
     Runtime for a checkpoint on the CPU where installed, else eager torch; an exported file runs
     with its own
-  device (string, default cpu; cpu, cuda, cuda:N): where the network runs (torch device)
-  fp16 (bool, default false): half precision on the GPU (CUDA only)
+  device (string, default cpu; cpu, cuda, cuda:N): where the network runs: torch's device, or with
+    backend onnx ONNX Runtime's TensorRT (first) or CUDA provider on that GPU (docs/jetson.md)
+  fp16 (bool, default false): half precision on the GPU (CUDA only): torch in fp16, or with backend
+    onnx TensorRT's engine built in fp16
   bf16 (bool, default false): bfloat16 autocast on the CPU (backend torch); pays only on CPUs with
     native bf16
   threads (int, default 1; 0 .. 256): the network's CPU threads; 0 = the library's default (all
