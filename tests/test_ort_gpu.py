@@ -17,6 +17,8 @@ from cone_perception.detector.backends import (CPU_PROVIDER, CUDA_PROVIDER, TRT_
                                                ort_session, trt_cache_dir)
 from cone_perception.errors import ConfigError
 
+from synthetic_cones import assert_same_cones, make_image
+
 
 def test_cpu_asks_for_the_cpu_alone():
     assert ort_providers("cpu", False, [TRT_PROVIDER, CUDA_PROVIDER, CPU_PROVIDER], "m") == [CPU_PROVIDER]
@@ -99,10 +101,19 @@ def test_the_session_runs_tensorrt_fp16_first_and_the_runner_says_so(tmp_path, m
     assert cpu.session.get_providers() == [CPU_PROVIDER] and not cpu.fp16
 
 
-def test_the_detector_says_where_it_runs_and_the_cpu_only_runtime_refuses_a_gpu():
+def test_the_detector_says_where_it_runs_and_a_cpu_only_runtime_refuses_a_gpu():
+    import onnxruntime
+
     det = Detector.load(default_model_path(), backend="onnx")
     assert (det.runs_on, det.precision) == ("CPU", "fp32")
     assert Detector.load(default_model_path(), backend="torch").runs_on == "cpu"
+    available = onnxruntime.get_available_providers()
+    if TRT_PROVIDER in available or CUDA_PROVIDER in available:  # a GPU build of ONNX Runtime: it runs there
+        gpu = Detector.load(default_model_path(), backend="onnx", device="cuda", fp16=TRT_PROVIDER in available)
+        assert gpu.runs_on == ("TensorRT" if TRT_PROVIDER in available else "CUDA")
+        img, _ = make_image(np.random.default_rng(3), 960, 288, 6)
+        assert_same_cones(det, gpu, img, box_px=2.0, score_tol=0.05)  # fp16 moves boxes and scores a little
+        return
     with pytest.raises(ConfigError) as e:  # not torch's "CUDA is not available": ONNX Runtime's providers decide
         Detector.load(default_model_path(), backend="onnx", device="cuda", fp16=True)
     assert e.value.field == "device" and "GPU provider" in str(e.value)
