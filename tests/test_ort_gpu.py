@@ -78,6 +78,7 @@ class _FakeOrt(types.ModuleType):
             return [types.SimpleNamespace(name="images", type="tensor(float)")]
 
         def run(self, outputs, feeds):
+            assert feeds["images"].dtype == np.float32  # the graph's input type, whatever TensorRT computes in
             return [np.zeros((1, 9, 10), np.float32)]
 
     def __init__(self):

@@ -91,10 +91,11 @@ class OrtRunner:
         self.input_name = session.get_inputs()[0].name
         self.provider = session.get_providers()[0]
         trt = session.get_provider_options().get(TRT_PROVIDER, {}) if self.provider == TRT_PROVIDER else {}
-        self.fp16 = session.get_inputs()[0].type == "tensor(float16)" or str(trt.get("trt_fp16_enable")) in ("1", "True")
+        self.half_input = session.get_inputs()[0].type == "tensor(float16)"  # the graph takes fp16: cast to it
+        self.fp16 = self.half_input or str(trt.get("trt_fp16_enable")) in ("1", "True")
 
     def __call__(self, blob: np.ndarray) -> np.ndarray:
-        x = blob.astype(np.float16) if self.fp16 else blob
+        x = blob.astype(np.float16) if self.half_input else blob
         return np.asarray(self.session.run(None, {self.input_name: x})[0][0], dtype=np.float32)
 
 
