@@ -108,7 +108,7 @@ class Pipeline:
             self.strip_counts["skipped"] = 0
             if self.far_tiles is not None:  # frames run as tiles, and those whose tiles did not fit (the whole strip)
                 self.strip_counts.update(tiles=0, tiles_full=0)
-        if far is not None and getattr(far, "verifier", None) is not None:  # boxes its second look dropped
+        if far is not None and far.verifier is not None:  # boxes its second look dropped
             self.strip_counts["verifier_dropped"] = 0
         self.strip_rows: tuple[int, int] | None = None  # the last frame's strip rows (V0, V1)
         self._strip_attitude = np.zeros(2)  # (pitch, roll) the strip follows: the previous frame's attitude
@@ -163,7 +163,7 @@ class Pipeline:
             t0 = time.perf_counter()
             boxes = merge_boxes(boxes, far_boxes, getattr(self.far.detector, "iou", DEFAULT_IOU))
             t_merge = (time.perf_counter() - t0) * 1e3
-            if getattr(self.far, "verifier", None) is not None:  # its second look (tile frames too: the whole strip is cut)
+            if self.far.verifier is not None:  # its second look (tile frames too: the whole strip is cut)
                 t0 = time.perf_counter()
                 boxes = self.far.verify(boxes, strip, far_crop)
                 timing["verifier"] = (time.perf_counter() - t0) * 1e3

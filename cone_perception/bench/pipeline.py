@@ -78,7 +78,7 @@ def _time_pipeline(pipe: Pipeline, calib, det, frames: list[bytes], n_frames: in
         "model_input": [in_w, in_h],
         "model": det.source,
         "backend": det.backend,
-        "runs_on": getattr(det, "runs_on", "cpu"),
+        "runs_on": det.runs_on,
         "fps": 1000.0 / s["end_to_end"]["median_ms"],
         "fps_mean": 1000.0 / s["end_to_end"]["mean_ms"],
         "boxes_per_frame": n_boxes / n_frames,
