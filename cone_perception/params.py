@@ -245,11 +245,18 @@ _PIPELINE = (
        "box model, box_model); band or empty = the band's own model; else a model file (its box model: "
        "MODEL.box_model.yaml). Its classes must be the band model's (refused at start-up otherwise)",
        values="auto, band, or a model file"),
-    _p("far_verifier", "auto", "a second look at the far strip's doubtful boxes (scored under the verifier's "
+    _p("far_box_model", "band", "which measured box model the image attitude reads the far strip's boxes through on a "
+       "real camera (box_model model; docs/attitude.md, Box model): band = the band model's, at each box's size in its "
+       "input px (the default: the far model's own was measured on 640x360 video and has no measurement at the sizes "
+       "where 15-25 m cones fall on a sharp camera); own = the far model's own box model (MODEL.box_model.yaml), its "
+       "sizes without measurements read through the band's (counted on /diagnostics: boxes_read_by_band_model)",
+       choices=("band", "own")),
+    _p("far_verifier", "none", "a second look at the far strip's doubtful boxes (scored under the verifier's "
        "verify_below, small): a tiny classifier on a crop around each box drops those where it sees no cone, such as "
-       "worn paint (docs/detector.md, Far band; counted on /diagnostics: far_strip verifier_dropped). auto = the "
-       "shipped models/cone_verifier.pt (none where it is not installed), none or empty = off, else a verifier file",
-       values="auto, none, or a verifier file"),
+       "worn paint (docs/detector.md, Far band; counted on /diagnostics: far_strip verifier_dropped). Opt-in: trained "
+       "on 640x360 video and rendered negatives, it dropped real far cones on a sharp camera. none or empty = off (the "
+       "default), auto = the shipped models/cone_verifier.pt (none where it is not installed), else a verifier file",
+       values="none, auto, or a verifier file"),
     _p("far_every", 1, "the far band's cadence: its strip runs on every this-many-th frame only, the frames between "
        "run the band alone (a far cone is seen up to far_every - 1 frames late; the tracker carries it meanwhile; "
        "docs/detector.md, Far band); 1 = every frame", min=1, max=100),

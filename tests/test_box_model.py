@@ -9,6 +9,7 @@ import logging
 
 import numpy as np
 import pytest
+import yaml
 
 from cone_perception.attitude import DEFAULT_BOX_MODEL, BoxModel, ImageAttitudeConfig
 from cone_perception.detector.model_files import box_model_or_default, box_model_path, read_box_model, write_box_model
@@ -84,6 +85,26 @@ def test_sidecar_round_trip_default_and_bad_file(tmp_path, caplog):
     assert "no box model" in caplog.text and "--box-model-out" in caplog.text
     box_model_path(model).write_text("box_model:\n  buckets_px: [8, 12]\n  height_ratio: [0.9]\n")
     with pytest.raises(ConfigError, match="height_ratio"):
+        read_box_model(model)
+
+
+@pytest.mark.parametrize("field, value, why", [
+    ("buckets_px", [8.0, 8.0, 24.0, 48.0], "strictly increasing"),
+    ("buckets_px", [0.0, 12.0, 24.0, 48.0], "positive"),
+    ("counts", [3, 30, 20], "list of 4"),
+    ("counts", [3, -1, 20, 2], "whole numbers >= 0"),
+    ("counts", [3, 1.5, 20, 2], "whole numbers >= 0"),
+    ("counts", [0, 0, 0, 0], "no bucket was measured"),
+])
+def test_a_box_model_whose_buckets_or_counts_do_not_fit_is_refused_naming_the_field(tmp_path, field, value, why):
+    """Issue 41: a box model file whose buckets or counts do not fit is refused at load, naming the file and field."""
+    model = tmp_path / "m.pt"
+    bm = BoxModel(counts=(3, 30, 20, 2), sigma_rel=0.07, input_scale=0.5, source="measured")
+    write_box_model(box_model_path(model), bm)
+    doc = yaml.safe_load(box_model_path(model).read_text())
+    doc["box_model"][field] = value
+    box_model_path(model).write_text(yaml.safe_dump(doc))
+    with pytest.raises(ConfigError, match=f"m.pt.box_model.yaml.*box_model.{field}.*{why}"):
         read_box_model(model)
 
 
@@ -186,23 +207,24 @@ def _two_models(tmp_path, far_top: float):
 
 
 def test_map_boxes_reads_the_far_strips_boxes_through_the_far_model(tmp_path, capsys):
-    """A prediction file's `far` key (the boxes the far strip drew, as `detect` writes it) makes `map --boxes` read
-    those boxes through the far model's box model, as the node does: boxes of a far network whose tops stand 6 % low,
-    marked, give the pitch that exact boxes give through the band's model; unmarked (read as the band model's), a
-    pitch pulled off."""
+    """A prediction file's `far` key (the boxes the far strip drew, as `detect` writes it) makes `map --boxes
+    --far-box-model own` read those boxes through the far model's box model, as the node does with far_box_model own:
+    boxes of a far network whose tops stand 6 % low, marked, give the pitch that exact boxes give through the band's
+    model; unmarked (read as the band model's), a pitch pulled off; marked but with the default far_box_model band,
+    read through the band model's too, as pulled off (issue 41: the far model's own box model is opt-in)."""
     from cone_perception.cli import main
 
     band, far = _two_models(tmp_path, 0.06)
     cal_path = save_calibration(_calib(), tmp_path / "cal.yaml")
     exact = _cone_boxes(_tilted_camera(0.6, 0.0), CONES_XY, CONES_CLS)
 
-    def pitch_of(boxes, marked):
+    def pitch_of(boxes, marked, reading="own"):
         rows = [[*map(float, b), 0.9, int(c)] for b, c in zip(boxes, CONES_CLS)]
         doc = {"width": 1920, "height": 1080, "boxes": rows, **({"far": list(range(len(rows)))} if marked else {})}
         pred = tmp_path / "p.jsonl"
         pred.write_text("\n".join(json.dumps({**doc, "image": f"f{k}"}) for k in range(4)) + "\n")
         assert main(["map", "--calib", str(cal_path), "--boxes", str(pred), "--attitude", "image",
-                     "--model", str(band), "--far-model", str(far)]) == 0
+                     "--model", str(band), "--far-model", str(far), "--far-box-model", reading]) == 0
         err = capsys.readouterr().err
         assert f"{4 * len(rows) if marked else 0} boxes of the far strip kept" in err
         return float([ln for ln in err.splitlines() if ln.startswith("f3")][0].split("pitch ")[1].split()[0])
@@ -212,6 +234,7 @@ def test_map_boxes_reads_the_far_strips_boxes_through_the_far_model(tmp_path, ca
     far_boxes = _shrunk(exact, 0.06, 0.0)
     assert pitch_of(far_boxes, True) == pytest.approx(reference, abs=0.02)
     assert abs(pitch_of(far_boxes, False) - reference) > 0.2
+    assert abs(pitch_of(far_boxes, True, "band") - reference) > 0.2  # not through the far model's box model
 
 
 def test_map_boxes_drops_what_the_node_drops(tmp_path, capsys):
@@ -255,7 +278,8 @@ def test_eval_reads_each_networks_boxes_through_its_box_model(tmp_path, capsys):
         (tmp_path / "pred.jsonl").write_text(json.dumps(doc) + "\n")
         assert main(["eval", "--pred", str(tmp_path / "pred.jsonl"), "--gt", str(tmp_path / "gt.jsonl"), "--calib",
                      str(cal_path), "--out", str(tmp_path / name), "--attitude", "image", "--box-model", "model",
-                     "--model", str(band), "--far-model", str(far), "--worst", "0", "--no-progress"]) == 0
+                     "--model", str(band), "--far-model", str(far), "--far-box-model", "own", "--worst", "0",
+                     "--no-progress"]) == 0
         assert "image attitude: box model measured (band.pt.box_model.yaml" in capsys.readouterr().out
         loc = json.loads((tmp_path / name / "metrics.json").read_text())["localisation"]
         err[name] = loc["groups"]["far 7-15 m"]["median_err_m"]

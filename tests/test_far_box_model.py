@@ -60,7 +60,8 @@ def test_rendered_readings_apply_each_network_its_own_table():
     """With rendered tables (no measured box model) the strip's tops move by the far table, the band's by the band's."""
     est = ConeMapper(_calib()).image_attitude(ImageAttitudeConfig(far_reading=BoxReading(None, ((10.0, -0.5), (50.0, -0.5)))))
     boxes = np.array([[100.0, 500.0, 112.0, 520.0], [300.0, 500.0, 312.0, 520.0]])
-    _, extra, rel, scatter = est._read(boxes, np.array([False, True]))
+    _, extra, rel, scatter, read = est._read(boxes, np.array([False, True]))
+    assert read.all()
     band = est.cfg.top_bias_extra_px
     assert extra[0] == pytest.approx(np.interp(20.0, [h for h, _ in band], [v for _, v in band])) and extra[0] > 0
     assert extra[1] == pytest.approx(-0.5)
@@ -74,7 +75,8 @@ def test_each_box_carries_its_network_box_model_spread():
     wide = BoxModel(counts=(1, 1, 1, 1), sigma_rel=0.085, input_scale=1.0, source="measured")
     est = ConeMapper(_calib()).image_attitude(ImageAttitudeConfig(box_model=EXACT_BM, far_reading=BoxReading(wide)))
     boxes = np.array([[100.0, 500.0, 112.0, 520.0], [300.0, 500.0, 312.0, 520.0]])
-    _, extra, rel, scatter = est._read(boxes, np.array([False, True]))
+    _, extra, rel, scatter, read = est._read(boxes, np.array([False, True]))
+    assert read.all()
     np.testing.assert_allclose(scatter, [0.03, 0.085])
     np.testing.assert_allclose(rel, [max(est.cfg.sigma_rel, 0.03), 0.085])
     np.testing.assert_array_equal(extra, 0.0)  # measured box models: no rendered table
@@ -153,7 +155,9 @@ def test_far_reading_follows_the_box_model_choice(tmp_path, caplog):
     far = default_far_model_path()
     r, what = far_reading_for("auto", far, band, True)  # a synthetic camera: the far model's rendered table
     assert r.box_model is None and r.table == FAR_MODEL_TOP_BIAS_EXTRA_PX and "rendered" in what
-    r, what = far_reading_for("model", far, band, True)  # its measured box model (models/cone_detector_far.pt.box_model.yaml)
+    r, what = far_reading_for("model", far, band, True)  # measured: the band model's box model reads them by default
+    assert r is None and "far_box_model: band" in what
+    r, what = far_reading_for("model", far, band, True, "own")  # opt-in: its own (models/cone_detector_far.pt.box_model.yaml)
     assert r.box_model is not None and r.box_model.source == "measured" and r.box_model.input_scale == 1.0
     other = tmp_path / "m.pt"
     other.write_bytes(b"")
@@ -163,12 +167,51 @@ def test_far_reading_follows_the_box_model_choice(tmp_path, caplog):
     words = attitude_config_for("rendered", band, other, True)[1]
     assert "far strip: the band's rendered table (m.pt has none of its own)" in words
     with caplog.at_level("WARNING"):
-        r, what = far_reading_for("model", other, band, False)  # no box model: the conservative default, warned
+        r, what = far_reading_for("model", other, band, False, "own")  # no box model: the conservative default, warned
     assert r.box_model.source == "default" and "m.pt has no box model" in caplog.text
     write_box_model(tmp_path / "m.pt.box_model.yaml", FAR_BM)
-    assert far_reading_for("auto", other, band, False)[0].box_model == FAR_BM
+    assert far_reading_for("auto", other, band, False, "own")[0].box_model == FAR_BM
+    assert far_reading_for("auto", other, band, False)[0] is None  # the default: the band's box model
     with pytest.raises(ValueError, match="unknown box model choice"):
         far_reading_for("nope", far, band, False)
+    with pytest.raises(ValueError, match="unknown far box model"):
+        far_reading_for("model", far, band, False, "mine")
+
+
+#: a far model measured only on small boxes (8-24 px at its input), as the shipped one on 640x360 video
+SMALL_ONLY_BM = BoxModel(height_ratio=(0.92,) * 4, top_low=(0.06,) * 4, bottom_high=(0.02,) * 4, counts=(50, 40, 0, 0),
+                         sigma_rel=0.03, input_scale=1.0, source="measured")
+
+
+def test_a_bucket_without_measurements_is_unknown_not_exact():
+    """Issue 41: a box whose height falls in a bucket with no measured cones is not read through that bucket's values
+    (nor the nearest measured one's, held): it goes through the band's box model where that one has measured its size,
+    else it is left out of the fit; both are counted."""
+    np.testing.assert_array_equal(SMALL_ONLY_BM.measured(np.array([4.0, 10.0, 20.0, 23.9, 24.0, 30.0, 60.0])),
+                                  [True, True, True, True, False, False, False])
+    np.testing.assert_array_equal(SMALL_ONLY_BM.measured(np.array([20.0, 60.0]), input_scale=0.5), [True, False])
+    assert BoxModel().measured(np.array([5.0, 500.0])).all()  # the default stand-in: every size alike, by design
+    boxes = np.array([[100.0, 500.0, 110.0, 520.0],    # 20 px, the strip's: measured by its own model
+                      [300.0, 500.0, 315.0, 530.0],    # 30 px, the strip's: unmeasured there -> the band's
+                      [500.0, 500.0, 530.0, 560.0]])   # 60 px, the band's own
+    far = np.array([True, True, False])
+    est = ConeMapper(_calib()).image_attitude(ImageAttitudeConfig(box_model=_shrunk_bm(0.0), far_reading=BoxReading(SMALL_ONLY_BM)))
+    out, _, _, _, read = est._read(boxes, far)
+    assert read.all()
+    np.testing.assert_allclose(out[0], SMALL_ONLY_BM.correct(boxes[:1])[0])  # its own model
+    np.testing.assert_allclose(out[1], boxes[1])  # the band's (exact) model, not the far one's held 12-24 px values
+    assert est.counts.read_by_band == 1 and est.counts.unmeasured == 0
+    # the band's model has measured only small boxes too: the 30 px strip box and the band's 60 px box are left out
+    est = ConeMapper(_calib()).image_attitude(ImageAttitudeConfig(box_model=_shrunk_bm(0.0, (5, 5, 0, 0), 1.0),
+                                                                  far_reading=BoxReading(SMALL_ONLY_BM)))
+    _, _, _, _, read = est._read(boxes, far)
+    np.testing.assert_array_equal(read, [True, False, False])
+    assert est.counts.unmeasured == 2 and est.counts.read_by_band == 0
+    assert est.counts.as_dict()["boxes_unmeasured_size"] == 2
+
+
+def _shrunk_bm(top_low: float, counts=(1, 1, 1, 1), input_scale: float = 0.5) -> BoxModel:
+    return BoxModel(top_low=(top_low,) * 4, counts=counts, sigma_rel=0.03, input_scale=input_scale, source="measured")
 
 
 def test_real_behaviour_takes_the_far_model_rendered_offset_out_first():
@@ -264,7 +307,7 @@ def test_far_box_model_measured_at_another_scale_is_read_at_the_strip_scale(tmp_
     far = tmp_path / "far.pt"
     far.write_bytes(b"")
     write_box_model(tmp_path / "far.pt.box_model.yaml", bm)
-    r, what = far_reading_for("model", far, default_model_path(), False)
+    r, what = far_reading_for("model", far, default_model_path(), False, "own")
     assert r.box_model.input_scale == 1.0 and "measured at input scale 0.5, read at the strip's 1" in what
     box = np.array([[100.0, 300.0, 114.0, 320.0]])  # 20 px tall in the strip = 20 px at the far model's input
     np.testing.assert_allclose(r.box_model.at(np.array([20.0]))[1], 0.02)
@@ -274,8 +317,8 @@ def test_far_box_model_measured_at_another_scale_is_read_at_the_strip_scale(tmp_
 
 
 def test_shipped_far_box_model_covers_the_strip_cone_sizes():
-    """On the car the strip's cones are 8-21 px at the far model's input (full resolution): the shipped far box
+    """With far_box_model own, on the car the strip's cones are 8-21 px at the far model's input (full resolution): the shipped far box
     model has measured cones in its 8-12 and 12-24 px buckets (measured where one model-input px is one px of the
     real clips' own detail, not on the clips upscaled 3x, where no cone is under 18 px)."""
-    r, _ = far_reading_for("model", default_far_model_path(), default_model_path(), False)
+    r, _ = far_reading_for("model", default_far_model_path(), default_model_path(), False, "own")
     assert r.box_model.source == "measured" and r.box_model.counts[0] >= 30 and r.box_model.counts[1] >= 30

@@ -216,10 +216,8 @@ def test_replay_far_strip_by_default_offline_and_its_bad_values(tmp_path, capsys
         js = json.loads(out.read_text())
         summary[name], strip[name] = js["localisation"]["groups"], js["far_strip"]
     assert strip["band"] is None
-    # the shipped verifier takes its second look at the doubtful boxes in the strip's rows by default (counted)
-    dropped = strip["strip"].pop("verifier_dropped")
+    # no second look by default (issue 41: the verifier is opt-in), so nothing counted of it
     assert strip["strip"] == {"rows": [370, 466], "moves": True, "frames": 10, "clamped": 0}
-    assert isinstance(dropped, int) and 0 <= dropped < 30
     far_recall = {k: v["very far >15 m"]["recall"] for k, v in summary.items()}
     assert far_recall["strip"] > far_recall["band"], far_recall
     for group in ("near 0-4 m", "mid 4-7 m", "far 7-15 m"):

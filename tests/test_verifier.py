@@ -157,6 +157,8 @@ def test_bad_verifier_files_are_refused_naming_the_option_and_the_file(tmp_path)
     import torch
 
     assert vf.load_verifier("none") is None and vf.load_verifier("") is None
+    assert vf.verifier_path_for(None) is None  # issue 41: off unless asked for (auto = the shipped one)
+    assert vf.verifier_path_for("auto") == vf.default_verifier_path()
     with pytest.raises(ConfigError, match=r"--far-verifier: .*nope\.pt: no such verifier file"):
         vf.load_verifier(str(tmp_path / "nope.pt"), "--far-verifier")
     junk = tmp_path / "junk.pt"

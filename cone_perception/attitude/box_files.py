@@ -86,17 +86,29 @@ def box_model_for(choice: str, model_path: str | Path, synthetic: bool) -> tuple
     return bm, f"measured ({box_model_path(model_path).name}, spread {bm.sigma_rel:g})"
 
 
+#: Which measured box model reads the far strip's boxes on a real camera (the nodes' ``far_box_model``, ``--far-box-model``):
+#: ``band`` (the default) = the band model's, at each box's size in the band model's input px; ``own`` = the far model's
+#: own (``MODEL.box_model.yaml``), its sizes without measurements through the band's. The far model's own was measured
+#: on 640x360 video, where a far cone is 8-24 px; on a sharper camera its boxes at 15-25 m are 24-48 px, where it has
+#: no measurement, and on held-out sharp frames it doubled the image attitude's range error (issue 41): opt-in.
+FAR_BOX_MODEL_CHOICES = ("band", "own")
+
+
 def far_reading_for(choice: str, far_model_path: str | Path | None, band_model_path: str | Path,
-                    synthetic: bool) -> tuple[BoxReading | None, str]:
+                    synthetic: bool, far_box_model: str = "band") -> tuple[BoxReading | None, str]:
     """How the image attitude reads the far strip's boxes (:attr:`~cone_perception.attitude.ImageAttitudeConfig.far_reading`)
     for a :data:`BOX_MODEL_CHOICES` ``choice``: ``(reading, in words)``; the reading is None (its boxes read as the
     band's) where there is no strip (``far_model_path`` None) or the strip runs the band's own model. Else, as
     :func:`box_model_for` decides for the band: the far model's rendered table (:data:`~cone_perception.attitude.boxes.RENDERED_TABLES`;
     a model without one: the band's table, as before) or its measured box model (a model without one: the
     conservative default, warned), looked up at the strip's input scale (:data:`~cone_perception.attitude.boxes.STRIP_INPUT_SCALE`,
-    full resolution) whatever scale it was measured at. ValueError for an unknown choice."""
+    full resolution) whatever scale it was measured at. A measured box model is the far model's own only with
+    ``far_box_model`` ``own`` (:data:`FAR_BOX_MODEL_CHOICES`); by default the band's reads the strip's boxes.
+    ValueError for an unknown choice."""
     if choice not in BOX_MODEL_CHOICES:
         raise ValueError(f"unknown box model choice {choice!r}; known: {', '.join(BOX_MODEL_CHOICES)}")
+    if far_box_model not in FAR_BOX_MODEL_CHOICES:
+        raise ValueError(f"unknown far box model {far_box_model!r}; known: {', '.join(FAR_BOX_MODEL_CHOICES)}")
     if far_model_path is None:
         return None, "no far strip"
     far = Path(far_model_path)
@@ -108,6 +120,8 @@ def far_reading_for(choice: str, far_model_path: str | Path | None, band_model_p
             return None, f"the band's rendered table ({far.name} has none of its own)"
         what = f"rendered table of {far.with_suffix('.pt').name}"
         return BoxReading(None, table, what), what
+    if far_box_model == "band":
+        return None, "the band model's box model (far_box_model: band; its own: far_box_model own)"
     bm, what = box_model_for("model", far, False)
     if bm.input_scale != STRIP_INPUT_SCALE:  # its buckets are model input px: read at the strip's scale
         if bm.source == "measured":
@@ -116,15 +130,16 @@ def far_reading_for(choice: str, far_model_path: str | Path | None, band_model_p
     return BoxReading(bm, (), what), what
 
 
-def attitude_config_for(choice: str, model_path: str | Path, far_model_path: str | Path | None, synthetic: bool):
+def attitude_config_for(choice: str, model_path: str | Path, far_model_path: str | Path | None, synthetic: bool,
+                        far_box_model: str = "band"):
     """``(ImageAttitudeConfig, in words)``: the image fit reading the band model's (``model_path``) boxes by
     :func:`box_model_for` and the far strip's model's (``far_model_path``; None: no strip, or the band's model
-    in it) by :func:`far_reading_for`, for one :data:`BOX_MODEL_CHOICES` ``choice`` (the nodes' ``box_model``,
-    ``replay --box-model``). ValueError for an unknown choice."""
+    in it) by :func:`far_reading_for` (``far_box_model``: :data:`FAR_BOX_MODEL_CHOICES`), for one
+    :data:`BOX_MODEL_CHOICES` ``choice`` (the nodes' ``box_model``, ``replay --box-model``). ValueError for an unknown choice."""
     from .image import ImageAttitudeConfig
 
     bm, what = box_model_for(choice, model_path, synthetic)
-    far, far_what = far_reading_for(choice, far_model_path, model_path, synthetic)
+    far, far_what = far_reading_for(choice, far_model_path, model_path, synthetic, far_box_model)
     if far_model_path is not None:  # also where its boxes fall back to the band's reading: said, never silent
         what += f"; far strip: {far_what}"
     return ImageAttitudeConfig(box_model=bm, far_reading=far), what

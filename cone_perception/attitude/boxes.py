@@ -51,6 +51,20 @@ class BoxModel:
     note: str = ""
     by_class: dict | None = None  # class name -> {"height_ratio", "top_low", "bottom_high", "count"} (report only)
 
+    def measured(self, height_px: np.ndarray, input_scale: float | None = None) -> np.ndarray:
+        """(N,) bool: boxes (N,) full-image px high whose height at the model input (``input_scale``, default the
+        model's) falls in a bucket with measured cones (``counts`` > 0; below the first edge: the first bucket). A
+        box in a bucket without measurements is unknown, not exact (issue 41): :func:`read_boxes` reads it through
+        another measured model or leaves it out of the fit. A model with no measured bucket at all (the default
+        stand-in) measures every size the same, by design: all True."""
+        s = self.input_scale if input_scale is None else float(input_scale)
+        h = np.asarray(height_px, dtype=np.float64).ravel() * s
+        have = np.asarray(self.counts) > 0
+        if not have.any():
+            return np.ones(h.shape, dtype=bool)
+        bucket = np.clip(np.searchsorted(np.asarray(self.buckets_px, dtype=np.float64), h, side="right") - 1, 0, None)
+        return have[bucket]
+
     def _table(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Bucket centres (px at the model input) and values of the buckets with cones (all when none has)."""
         edges = np.asarray(self.buckets_px, dtype=np.float64)
@@ -123,8 +137,10 @@ class BoxModel:
         if not isinstance(d, dict):
             raise ValueError(f"{where}: must be a mapping")
         buckets = d.get("buckets_px")
-        if not isinstance(buckets, list) or not buckets or sorted(buckets) != buckets:
-            raise ValueError(f"{where}.buckets_px: must be a non-empty increasing list of px")
+        if (not isinstance(buckets, list) or not buckets
+                or not all(isinstance(x, (int, float)) and np.isfinite(x) and x > 0 for x in buckets)
+                or any(b <= a for a, b in zip(buckets, buckets[1:]))):
+            raise ValueError(f"{where}.buckets_px: must be a non-empty, strictly increasing list of positive px")
         n = len(buckets)
         vals = {}
         for k in ("height_ratio", "top_low", "bottom_high", "counts"):
@@ -132,6 +148,10 @@ class BoxModel:
             if not isinstance(v, list) or len(v) != n or not all(isinstance(x, (int, float)) and np.isfinite(x) for x in v):
                 raise ValueError(f"{where}.{k}: must be a list of {n} finite numbers (one per bucket)")
             vals[k] = tuple(v)
+        if not all(float(c) == int(c) and c >= 0 for c in vals["counts"]):
+            raise ValueError(f"{where}.counts: must be whole numbers >= 0 (cones measured in each bucket)")
+        if str(d.get("source", "measured")) == "measured" and not any(vals["counts"]):
+            raise ValueError(f"{where}.counts: all 0 in a measured box model: no bucket was measured")
         if not all(0.3 <= r <= 3.0 for r in vals["height_ratio"]):
             raise ValueError(f"{where}.height_ratio: values must lie within 0.3..3")
         for k in ("sigma_rel", "input_scale"):
@@ -181,19 +201,43 @@ def range_cuts(n: int, far: np.ndarray | None, max_range_m: float, far_max_range
 
 
 def read_boxes(boxes: np.ndarray, far: np.ndarray | None, band: BoxReading, far_reading: BoxReading | None,
-               sigma_rel: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+               sigma_rel: float, counts=None
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(N, 4) boxes (full-image px) each through the reading of the network that drew it (``far``: (N,) bool, the far
     strip's, read through ``far_reading``; None, or no ``far_reading``: all through ``band``): ``(boxes corrected by
     a measured box model, (N,) px their tops stand above the cones' by a rendered table, (N,) relative per-cone
     sigma (at least the fit's ``sigma_rel``), (N,) relative scatter of the box height from frame to frame: the box
-    model's spread, 0 with a table)``."""
-    out, extra, rel = boxes.copy(), np.zeros(len(boxes)), np.full(len(boxes), float(sigma_rel))
-    scatter = np.zeros(len(boxes))
-    parts = [(band, np.ones(len(boxes), bool))]
+    model's spread, 0 with a table, (N,) bool: read at all)``.
+
+    A box whose measured box model has no measurement at its size (:meth:`BoxModel.measured`) is unknown, not exact:
+    a far-strip box goes through the band's box model where that one has measured its size (at the box's size in the
+    band model's input px), else it is left out of the fit (``False`` in the last array); both counted in ``counts``
+    (its ``read_by_band`` and ``unmeasured``: :class:`~cone_perception.attitude.image.AttitudeCounts`), where given."""
+    n = len(boxes)
+    out, extra, rel = boxes.copy(), np.zeros(n), np.full(n, float(sigma_rel))
+    scatter, used = np.zeros(n), np.ones(n, dtype=bool)
+    heights = boxes[:, 3] - boxes[:, 1]
+    band_m = np.ones(n, dtype=bool)
+    parts = []
     if far is not None and far_reading is not None:
         far = np.asarray(far, dtype=bool).ravel()
-        parts = [(band, ~far), (far_reading, far)]
+        band_m = ~far
+        if far_reading.box_model is not None and far.any():
+            own = far & far_reading.box_model.measured(heights)
+            by_band = far & ~own
+            if band.box_model is not None:  # the unknown sizes through the band's measured model, where it knows them
+                by_band &= band.box_model.measured(heights)
+            if counts is not None:
+                counts.read_by_band += int(by_band.sum())
+            band_m |= by_band
+            used &= ~far | own | by_band
+            parts.append((far_reading, own))
+        else:
+            parts.append((far_reading, far))
+    parts.insert(0, (band, band_m))
     for rd, m in parts:
+        if rd.box_model is not None:
+            m = m & rd.box_model.measured(heights)
         if not m.any():
             continue
         if rd.box_model is not None:
@@ -201,8 +245,12 @@ def read_boxes(boxes: np.ndarray, far: np.ndarray | None, band: BoxReading, far_
             rel[m] = max(sigma_rel, rd.box_model.sigma_rel)
             scatter[m] = rd.box_model.sigma_rel
         else:
-            extra[m] = box_top_extra_px(boxes[m, 3] - boxes[m, 1], rd.table)
-    return out, extra, rel, scatter
+            extra[m] = box_top_extra_px(heights[m], rd.table)
+    if band.box_model is not None:  # the band's own boxes where its model has no measurement
+        used &= ~band_m | band.box_model.measured(heights)
+    if counts is not None:
+        counts.unmeasured += int((~used).sum())
+    return out, extra, rel, scatter, used
 
 
 #: Model input px per full-image px of the far strip: it runs at full resolution (``detector/farband.py``), so the

@@ -109,10 +109,15 @@ class AttitudeCounts:
     #: from an earlier frame (the rest start their average)
     size_cones: int = 0
     size_followed: int = 0
+    #: boxes whose own box model has no measurement at their size (:meth:`~cone_perception.attitude.boxes.BoxModel.measured`):
+    #: far-strip boxes read through the band model's box model instead, and boxes no measured model knows (left out)
+    read_by_band: int = 0
+    unmeasured: int = 0
 
     def as_dict(self) -> dict[str, int]:
         return {"fitted": self.fitted, "too_few_cones": self.too_few, "rejected_beyond_limit": self.rejected,
-                "used_calibration": self.calibration, "size_cones": self.size_cones, "size_followed": self.size_followed}
+                "used_calibration": self.calibration, "size_cones": self.size_cones, "size_followed": self.size_followed,
+                "boxes_read_by_band_model": self.read_by_band, "boxes_unmeasured_size": self.unmeasured}
 
 
 class ImageAttitude:
@@ -222,7 +227,7 @@ class ImageAttitude:
         """Each box through its network's reading (:func:`~cone_perception.attitude.boxes.read_boxes`)."""
         c = self.cfg
         band = BoxReading(c.box_model, c.top_bias_extra_px if c.box_model is None else ())
-        return read_boxes(boxes, far, band, c.far_reading, c.sigma_rel)
+        return read_boxes(boxes, far, band, c.far_reading, c.sigma_rel, self.counts)
 
     def _prepare(self, boxes: np.ndarray, class_ids: np.ndarray, top_extra: np.ndarray | None = None):
         """``top_extra``: (N,) px each box top stands above its cone's (:meth:`_read`); None: the band's reading."""
@@ -310,7 +315,7 @@ class ImageAttitude:
         averaged height. ``far``: (N,) bool, the boxes of the far strip's network (read through
         :attr:`ImageAttitudeConfig.far_reading`; None: none)."""
         c = self.cfg
-        boxes, top_extra, rel, scatter = self._read(np.asarray(boxes, dtype=np.float64).reshape(-1, 4), far)
+        boxes, top_extra, rel, scatter, read = self._read(np.asarray(boxes, dtype=np.float64).reshape(-1, 4), far)
         class_ids = np.asarray(class_ids, dtype=np.intp).ravel()
         self.last_scale = np.inf
         # the rendered table (no box model): boxes within tenths of a pixel, no scatter to average over frames
@@ -318,7 +323,7 @@ class ImageAttitude:
         averaging = sizes is not None and (measured or c.size_rendered)
         theta = np.zeros(2) if start_deg is None else np.clip(np.asarray(start_deg, dtype=np.float64), -2.0, 2.0)
         # averaging: cones cut at their range by the feet, not the scattered heights (those that came out tall would start tall)
-        sel = self._select(boxes, class_ids, by_size=not averaging, far=far)
+        sel = self._select(boxes, class_ids, by_size=not averaging, far=far) & read  # unmeasured sizes: out
         if averaging and int(sel.sum()) >= c.min_cones:
             rays, _, _ = self._prepare(boxes[sel], class_ids[sel])
             away = self.ground_feet(theta, rays)[0] - self.p0[:2]

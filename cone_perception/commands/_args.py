@@ -40,13 +40,23 @@ def add_far_verifier(p: argparse.ArgumentParser, scope: str = "") -> None:
     p.add_argument("--far-verifier", default=None, metavar="auto|none|PATH",
                    help=f"{scope}a second look at the far strip's doubtful boxes (scored low, small): a tiny "
                         "classifier on a crop around each drops those where it sees no cone (docs/detector.md, Far "
-                        "band). auto (default) = the shipped models/cone_verifier.pt, none = off, or a verifier file")
+                        "band). none (default) = off, auto = the shipped models/cone_verifier.pt (opt-in: it dropped "
+                        "real far cones on a sharp camera), or a verifier file")
+
+
+def add_far_box_model(p: argparse.ArgumentParser) -> None:
+    """``--far-box-model band|own``: which measured box model reads the far strip's boxes (the nodes' ``far_box_model``)."""
+    p.add_argument("--far-box-model", choices=("band", "own"), default="band",
+                   help="the image attitude on a real camera: which measured box model reads the far strip's boxes: band "
+                        "(default) = the band model's, at each box's size in its input px; own = the far model's own "
+                        "(measured on 640x360 video), its sizes without measurements through the band's")
 
 
 def add_far_box_reading(p: argparse.ArgumentParser) -> None:
     """``--far-model`` of the tools that read a `detect` prediction file (``map``, ``eval``): the model that drew the
-    boxes the file marks as the far strip's, whose box model the image attitude reads them through."""
+    boxes the file marks as the far strip's, and ``--far-box-model`` (:func:`add_far_box_model`)."""
     p.add_argument("--far-model", default=None, metavar="auto|band|PATH",
                    help="--attitude image: the model that drew the boxes a prediction file marks as the far strip's (its "
-                        "`far` key, written by `detect` with a far strip); the fit reads them through its box model. "
-                        "auto (default) = the shipped far-strip model, band = the --model")
+                        "`far` key, written by `detect` with a far strip); the fit reads them through the box model "
+                        "--far-box-model names. auto (default) = the shipped far-strip model, band = the --model")
+    add_far_box_model(p)

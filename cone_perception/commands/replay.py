@@ -27,7 +27,7 @@ from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, RUNTIME_THREADS
 from ..geometry.calib import DEFAULT_CAMERA
 from ..params import DEFAULT_CONF, PARAMS
 from ..replay.run import run_replay
-from ._args import add_far_model, add_far_verifier
+from ._args import add_far_box_model, add_far_model, add_far_verifier
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -87,6 +87,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "Live: the pipeline node's band_rows (fused only)")
     add_far_model(p, after="; live: the node's far_model")
     add_far_verifier(p)
+    add_far_box_model(p)
     p.add_argument("--min-height-ratio", type=float, default=PARAMS["min_height_ratio"].default, metavar="R",
                    help="offline: a box lower than R x the height a cone of its class has where its foot maps is a mark "
                         "on the ground, not a cone: dropped and counted (summary: boxes dropped); 0 = off (default "

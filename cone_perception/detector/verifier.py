@@ -137,9 +137,9 @@ def default_verifier_path() -> Path:
 
 
 def verifier_path_for(choice) -> Path | None:
-    """The verifier file of ``far_verifier`` / ``--far-verifier`` ``choice`` (None: ``auto``): ``auto`` -> the
+    """The verifier file of ``far_verifier`` / ``--far-verifier`` ``choice`` (None: the default, off): ``auto`` -> the
     shipped one where installed (else None), ``none`` / ``off`` / empty -> None, else ``Path(choice)``."""
-    c = VERIFIER_AUTO if choice is None else str(choice).strip()
+    c = "" if choice is None else str(choice).strip()
     if c.lower() == VERIFIER_AUTO:
         p = default_verifier_path()
         return p if p.is_file() else None

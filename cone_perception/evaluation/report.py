@@ -463,11 +463,11 @@ def evaluate_predictions(pred: Path, gt_path: Path, gt_names: str | None = None,
                          conf: float = DEFAULT_CONF, iou: float = 0.5, only_predicted: bool = False, progress: bool = True,
                          verbose: bool = True, band: tuple[int, int] | None = None, min_height: float | None = None,
                          attitude: str = "fixed", box_model: str = "auto", model: str | Path | None = None,
-                         far_model: str | None = None, max_range: float | None = None):
+                         far_model: str | None = None, max_range: float | None = None, far_box_model: str = "band"):
     """A prediction file against ground truth -> :class:`~cone_perception.evaluation.report.EvalResult`, as ``eval``
     computes it (``gt_names`` comma-separated; ``band``, ``min_height``, ``max_range``, ``attitude``, ``box_model``,
-    ``model``, ``far_model``: as ``eval --band``, ``--min-height``, ``--max-range``, ``--attitude``, ``--box-model``,
-    ``--model``, ``--far-model``).
+    ``model``, ``far_model``, ``far_box_model``: as ``eval --band``, ``--min-height``, ``--max-range``, ``--attitude``,
+    ``--box-model``, ``--model``, ``--far-model``, ``--far-box-model``).
     Used by ``eval`` and ``bench table``."""
     names = [n.strip() for n in gt_names.split(",") if n.strip()] if gt_names else None
     gt = load_ground_truth(gt_path, names)
@@ -485,7 +485,7 @@ def evaluate_predictions(pred: Path, gt_path: Path, gt_names: str | None = None,
     if attitude == "image" and calib is not None:  # the boxes read as the node reads them (docs/attitude.md, Box model)
         band_model = model or default_model_path()
         att_cfg, what = attitude_config_for(box_model, band_model, far_model_for(far_model, band_model),
-                                            calib.camera == "synth")
+                                            calib.camera == "synth", far_box_model)
         if verbose:
             print(f"image attitude: box model {what}")
     res = evaluate(images, calib, conf, iou, gt.has_positions, progress=progress, attitude=attitude,

@@ -28,7 +28,7 @@ def run_eval(args: argparse.Namespace) -> int:
     res = evaluate_predictions(args.pred, args.gt, args.gt_names, args.calib, args.conf, args.iou, args.only_predicted,
                                progress=not args.no_progress, band=args.band, min_height=args.min_height, max_range=args.max_range,
                                attitude=args.attitude, box_model=args.box_model, model=args.model,
-                               far_model=args.far_model)
+                               far_model=args.far_model, far_box_model=args.far_box_model)
 
     low = lowest_score_note(res.images)
     if low:

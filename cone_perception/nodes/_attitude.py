@@ -42,14 +42,16 @@ def declare_attitude(node) -> tuple[str, ImuAttitude | None]:
     return mode, imu
 
 
-def declare_box_model(node, calib, model_path, far_model_path=None) -> tuple[ImageAttitudeConfig, str]:
+def declare_box_model(node, calib, model_path, far_model_path=None, far_box_model: str = "band"
+                      ) -> tuple[ImageAttitudeConfig, str]:
     """Declare ``box_model``; the image fit's config reading the boxes of the model file ``model_path``
     (None: the shipped default) that way, and those of the far strip's model ``far_model_path`` (None: no strip,
-    or the band's model in it) through that model's own, and the box model in words (``attitude:box_model`` on
+    or the band's model in it) as ``far_box_model`` (the pipeline node's parameter) says, and the box model in words (``attitude:box_model`` on
     ``/diagnostics``)."""
     choice = str(declare(node, "box_model"))
     try:
-        return attitude_config_for(choice, model_path or default_model_path(), far_model_path, calib.camera == "synth")
+        return attitude_config_for(choice, model_path or default_model_path(), far_model_path, calib.camera == "synth",
+                                   far_box_model)
     except ValueError as e:
         raise ConfigError("parameter", "box_model", str(e)) from None
 

@@ -28,12 +28,20 @@ Parameters (generated from cone_perception/params.py by ``cone-perception params
     more small cones; the image attitude reads its boxes through its own box model, box_model); band
     or empty = the band's own model; else a model file (its box model: MODEL.box_model.yaml). Its
     classes must be the band model's (refused at start-up otherwise)
-  far_verifier (string, default auto; auto, none, or a verifier file): a second look at the far
+  far_box_model (string, default band; band | own): which measured box model the image attitude
+    reads the far strip's boxes through on a real camera (box_model model; docs/attitude.md, Box
+    model): band = the band model's, at each box's size in its input px (the default: the far
+    model's own was measured on 640x360 video and has no measurement at the sizes where 15-25 m
+    cones fall on a sharp camera); own = the far model's own box model (MODEL.box_model.yaml), its
+    sizes without measurements read through the band's (counted on /diagnostics:
+    boxes_read_by_band_model)
+  far_verifier (string, default none; none, auto, or a verifier file): a second look at the far
     strip's doubtful boxes (scored under the verifier's verify_below, small): a tiny classifier on a
     crop around each box drops those where it sees no cone, such as worn paint (docs/detector.md,
-    Far band; counted on /diagnostics: far_strip verifier_dropped). auto = the shipped
-    models/cone_verifier.pt (none where it is not installed), none or empty = off, else a verifier
-    file
+    Far band; counted on /diagnostics: far_strip verifier_dropped). Opt-in: trained on 640x360 video
+    and rendered negatives, it dropped real far cones on a sharp camera. none or empty = off (the
+    default), auto = the shipped models/cone_verifier.pt (none where it is not installed), else a
+    verifier file
   far_every (int, default 1; 1 .. 100): the far band's cadence: its strip runs on every this-many-th
     frame only, the frames between run the band alone (a far cone is seen up to far_every - 1 frames
     late; the tracker carries it meanwhile; docs/detector.md, Far band); 1 = every frame
@@ -133,7 +141,8 @@ class PipelineNode(PerceptionNode):
         far_model = far_model_for(declare(self, "far_model"), None)  # None: the band's model
         # the box model of each network: the band's, and the far strip's own model's for its boxes
         att_config, box_model = declare_box_model(self, calib, self.loader.model,
-                                                  far_model if far_rows.crop is not None else None)
+                                                  far_model if far_rows.crop is not None else None,
+                                                  str(declare(self, "far_box_model")))
         far, every = self._far_band(far_rows, far_model), int(declare(self, "far_every"))
         self.pipeline = Pipeline(calib, detector, mode, imu, far,
                                  attitude_config=att_config, concurrent=plan.concurrent,

@@ -39,7 +39,8 @@ def run_map(args: argparse.Namespace) -> int:
     config = None
     if args.attitude == "image" or args.attitude is None and calib.has_attitude_model:
         model = args.model or default_model_path()
-        config, _ = attitude_config_for(args.box_model, model, far_model_for(args.far_model, model), False)
+        config, _ = attitude_config_for(args.box_model, model, far_model_for(args.far_model, model), False,
+                                        args.far_box_model)
     mode, est = attitude_estimator(mapper, args.attitude, None, config)
     if args.boxes.suffix == ".jsonl":
         return _run_sequence(args, calib, mapper, mode, est)

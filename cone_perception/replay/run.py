@@ -149,9 +149,10 @@ def _run_offline(args, calib) -> dict:
                                   threads=plan.network_threads or None, bf16=args.bf16)
     imu = _imu_source(args, calib)
     # the fit reads each network's boxes through its own box model (the far strip's of a far model: issue 26f)
-    att_cfg, att_what = attitude_config_for(box_model_choice(args), det.source, far_model if far else None, True)
+    att_cfg, att_what = attitude_config_for(box_model_choice(args), det.source, far_model if far else None, True,
+                                            args.far_box_model)
     if args.box_behaviour == "real":  # the real frames' boxes on a rendered drive, each network's as its box model says
-        far_real = far_reading_for("model", far_model if far else None, det.source, False)[0]
+        far_real = far_reading_for("model", far_model if far else None, det.source, False, "own")[0]
         far_table = far_reading_for("rendered", far_model if far else None, det.source, True)[0]  # its rendered offset
         det, far = real_box_behaviour(det, far, box_model_or_default(det.source), args.box_jitter,
                                       far_real.box_model if far_real is not None else None,
@@ -274,6 +275,8 @@ def _run_live(args, calib) -> dict:
     if args.far_verifier is not None:  # the file it stands for, absolute (the node runs elsewhere), or none
         path = verifier_path_for(args.far_verifier)
         params["far_verifier"] = str(path.resolve()) if path is not None else "none"
+    if args.far_box_model != "band":  # the pipeline node's far_box_model, where not its default
+        params["far_box_model"] = args.far_box_model
     if args.bf16:
         params["bf16"] = True
     res = live_replay(args.bag, mode=args.live, topic=args.topic, params=params, pace=args.pace,
