@@ -3,7 +3,7 @@
   cone-perception fuzz [--n 10000] [--seed 0] [--targets driver_adapter_raw,...] [--json FILE]
 
 Each target node is built in-process with the shipped calibration and model and gets ``--n``
-messages from a seeded generator (``cone_perception/nodes/fuzz.py``): random and structured
+messages from a seeded generator (``cone_perception/rostools/fuzz.py``): random and structured
 malformed Image, CompressedImage (header bombs included), CameraInfo and PointCloud2, stamps
 jumping, a few valid frames. Prints per node the crashes (an exception out of a callback), the
 messages counted (every one must be: ok or dropped with its cause), the time (worst message and
@@ -40,7 +40,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..nodes.fuzz import TARGETS, bomb_timings, fuzz_target  # rclpy and the nodes: only when fuzzing
+    from ..rostools.fuzz import TARGETS, bomb_timings, fuzz_target  # rclpy and the nodes: only when fuzzing
 
     targets = list(TARGETS) if args.targets == "all" else [t.strip() for t in args.targets.split(",") if t.strip()]
     unknown = [t for t in targets if t not in TARGETS]

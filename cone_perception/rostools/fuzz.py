@@ -12,7 +12,7 @@ counted on its topic (ok + dropped, + the one image the detection node keeps for
 
 from __future__ import annotations
 
-from ._common import PerceptionNode  # noqa: I001 (sets DDS env first)
+from ..nodes._common import PerceptionNode  # noqa: I001 (sets DDS env first)
 
 import time
 from dataclasses import dataclass, field
@@ -29,13 +29,13 @@ from ..data import hostile
 from ..errors import FrameError
 from ..geometry.calib import DEFAULT_CAMERA, load_calibration
 from ..imageheader import declared_size
+from ..nodes import _msgs
+from ..nodes.detection import DetectionNode
+from ..nodes.driver_adapter import DriverAdapterNode
+from ..nodes.mapping import MappingNode
+from ..nodes.pipeline import PipelineNode
 from ..records import BOX_DTYPE, boxes_from_arrays
 from ..timing import rss_mb
-from . import _msgs
-from .detection import DetectionNode
-from .driver_adapter import DriverAdapterNode
-from .mapping import MappingNode
-from .pipeline import PipelineNode
 
 U32 = 2**32 - 1
 TARGETS = ("driver_adapter_raw", "driver_adapter_compressed", "detection", "mapping", "pipeline_raw",
