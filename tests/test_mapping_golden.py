@@ -26,7 +26,9 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import pytest
 
+from cone_perception import records
 from cone_perception.detector.farband import FarBand, far_rows_for
 from cone_perception.geometry.calib import load_calibration
 from cone_perception.pipeline import Pipeline
@@ -153,9 +155,14 @@ def write_golden(out: Path, folder: Path) -> None:
     np.savez_compressed(out, **arrays)
 
 
-def test_the_mapping_stage_gives_the_golden_cones_bytes(tmp_path) -> None:
+@pytest.fixture(scope="module")
+def drive(tmp_path_factory) -> Path:
+    return render(tmp_path_factory.mktemp("golden"))
+
+
+def test_the_mapping_stage_gives_the_golden_cones_bytes(drive) -> None:
     g = np.load(GOLDEN)
-    bag = render(tmp_path)
+    bag = drive
     band, far = _unpack(g["band_boxes"], g["band_n"], BOX_DTYPE), _unpack(g["far_boxes"], g["far_n"], BOX_DTYPE)
     stamps = g["stamps"].tolist()
     assert len(stamps) == int(SECONDS * FPS) and len(band) == len(stamps) == len(far)
@@ -176,6 +183,19 @@ def test_the_mapping_stage_gives_the_golden_cones_bytes(tmp_path) -> None:
             seen["far_cones"] += len(wc) if with_far else 0
     # the golden is no empty drive: cones in every set-up, weak cones where split
     assert seen["cones"] > 50 and seen["weak"] > 0 and seen["far_cones"] > 0, seen
+
+
+def test_a_frame_becomes_columns_once(drive, monkeypatch) -> None:
+    """Every step of the mapping stage (one box per cone, the weak split, the attitude fit, the foot points, the
+    widths, the flat boxes, the mapping of the weak boxes) reads the frame's one column view: the records are turned
+    into arrays once a frame."""
+    g = np.load(GOLDEN)
+    calls = []
+    to_arrays = records.boxes_to_arrays
+    monkeypatch.setattr(records, "boxes_to_arrays", lambda r: calls.append(len(r)) or to_arrays(r))
+    band, far = _unpack(g["band_boxes"], g["band_n"], BOX_DTYPE), _unpack(g["far_boxes"], g["far_n"], BOX_DTYPE)
+    cones, weak = replay(drive, "width_weak", Playback(band), Playback(far))
+    assert len(calls) == len(cones) == len(band) and sum(len(w) for w in weak.values()) > 0
 
 
 if __name__ == "__main__":
