@@ -1,7 +1,8 @@
 """Mapping stage: detected boxes (full-image px) -> cones in ``rear_axle`` metres.
 
-One call per frame: :meth:`ConeMapper.map_boxes` takes :data:`BOX_DTYPE`
-records, validates them, picks each class's foot point, maps it through the
+One call per frame: :meth:`ConeMapper.map_boxes` takes a frame's boxes as
+:class:`~cone_perception.records.BoxColumns` (made once from the :data:`BOX_DTYPE`
+records; records are taken too, and made columns at the entry), validates them, picks each class's foot point, maps it through the
 calibration's ``H_F_B``, moves it by the class's foot offset away from the
 camera along the viewing ray (from the base edge the camera sees to the cone's
 centre) and returns :data:`CONE_DTYPE` records with covariance.
@@ -46,7 +47,7 @@ from .classes import CONE_SIZE_M, NUM_CLASSES
 from .errors import FrameError
 from .geometry import GroundMapper, apply_homography, foot_point_weights, foot_points
 from .geometry.calib import Calibration
-from .records import BOX_DTYPE, CONE_DTYPE, boxes_to_arrays
+from .records import CONE_DTYPE, BoxColumns
 
 #: causes of :attr:`ConeMapper.dropped`: a second box of a cone (:func:`one_box_per_cone`, counted by its
 #: callers); the foot above the horizon or beyond ``max_range_m``; a box lower
@@ -58,11 +59,15 @@ DROP_CAUSES = ("second_box", "off_ground", "flat", "one_ray")
 FLAT_MAX_SCORE = 0.5
 
 
-def validate_boxes(records: np.ndarray) -> None:
+#: a frame's boxes: their :class:`~cone_perception.records.BoxColumns`, or :data:`BOX_DTYPE` records (made columns
+#: at the entry of the step that takes them)
+Boxes = BoxColumns | np.ndarray
+
+
+def validate_boxes(boxes: Boxes) -> None:
     """Raise :class:`FrameError` for NaN/inf, ``u2 < u1``, ``v2 < v1`` or an unknown class id."""
-    if records.dtype != BOX_DTYPE:
-        records = records.astype(BOX_DTYPE)
-    b, s, c = boxes_to_arrays(records)
+    cols = BoxColumns.of(boxes)
+    b, s, c = cols.xyxy, cols.score, cols.class_id
     if not (np.all(np.isfinite(b)) and np.all(np.isfinite(s))):
         i = int(np.flatnonzero(~(np.isfinite(b).all(axis=1) & np.isfinite(s)))[0])
         raise FrameError("bad_box", f"box {i} has a non-finite value: {b[i].tolist()} score {s[i]}")
@@ -88,10 +93,15 @@ SMALL_SAME_IOU = 0.3
 SMALL_WEAKER = 0.6
 
 
-def box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(N, M) IoU of :data:`BOX_DTYPE` records ``a`` and ``b`` (pixel-edge boxes)."""
-    au1, av1, au2, av2 = (np.asarray(a[k], np.float64) for k in ("u1", "v1", "u2", "v2"))
-    bu1, bv1, bu2, bv2 = (np.asarray(b[k], np.float64) for k in ("u1", "v1", "u2", "v2"))
+def box_iou(a: Boxes, b: Boxes) -> np.ndarray:
+    """(N, M) IoU of the boxes ``a`` and ``b`` (:data:`BOX_DTYPE` records or their columns; pixel edges)."""
+    return xyxy_iou(BoxColumns.of(a).xyxy, BoxColumns.of(b).xyxy)
+
+
+def xyxy_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(N, M) IoU of (N, 4) and (M, 4) ``u1 v1 u2 v2`` boxes (pixel edges), in float64."""
+    au1, av1, au2, av2 = np.asarray(a, np.float64).reshape(-1, 4).T
+    bu1, bv1, bu2, bv2 = np.asarray(b, np.float64).reshape(-1, 4).T
     iw = np.clip(np.minimum(au2[:, None], bu2[None]) - np.maximum(au1[:, None], bu1[None]), 0.0, None)
     ih = np.clip(np.minimum(av2[:, None], bv2[None]) - np.maximum(av1[:, None], bv1[None]), 0.0, None)
     inter = iw * ih
@@ -99,10 +109,11 @@ def box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.divide(inter, union, out=np.zeros_like(inter), where=union > 0)
 
 
-def one_box_per_cone(records: np.ndarray, iou: float = CROSS_CLASS_IOU, small_px: float = SMALL_BOX_PX,
-                     small_iou: float = SMALL_SAME_IOU, small_weaker: float = SMALL_WEAKER) -> np.ndarray:
-    """:data:`BOX_DTYPE` records minus the boxes that are a second box of a cone a better-scored box already has
-    (greedy, best score first; order kept):
+def one_box_per_cone(boxes: Boxes, iou: float = CROSS_CLASS_IOU, small_px: float = SMALL_BOX_PX,
+                     small_iou: float = SMALL_SAME_IOU, small_weaker: float = SMALL_WEAKER) -> Boxes:
+    """``boxes`` minus those that are a second box of a cone a better-scored box already has (greedy, best score
+    first; order kept), of the kind given (:class:`~cone_perception.records.BoxColumns` or :data:`BOX_DTYPE`
+    records):
 
     * a box of ANOTHER class overlapping it at IoU >= ``iou``: the detector's NMS is per class, so a far cone it
       is unsure of can come out as a blue and a yellow box on one spot (two cones on ``/cones``, one false);
@@ -110,27 +121,29 @@ def one_box_per_cone(records: np.ndarray, iou: float = CROSS_CLASS_IOU, small_px
       under ``small_weaker`` x its score (``small_weaker`` 0: off).
 
     Everything else is left to the detector's NMS."""
-    n = len(records)
+    n = len(boxes)
     if n < 2:
-        return records
-    score = np.asarray(records["score"], np.float64)
-    cls = records["class_id"]
+        return boxes
+    cols = BoxColumns.of(boxes)
+    score = np.asarray(cols.score, np.float64)
+    cls = cols.class_id
     same = cls[:, None] == cls[None, :]
-    ov = box_iou(records, records)
+    xyxy = np.asarray(cols.xyxy, np.float64)
+    ov = xyxy_iou(xyxy, xyxy)
     over = (ov >= iou) & ~same
     if small_weaker > 0:
-        h = np.asarray(records["v2"], np.float64) - np.asarray(records["v1"], np.float64)
+        h = xyxy[:, 3] - xyxy[:, 1]
         small = (h[:, None] < small_px) & (h[None, :] < small_px)
         weaker = np.minimum(score[:, None], score[None, :]) < small_weaker * np.maximum(score[:, None], score[None, :])
         over |= (ov >= small_iou) & same & small & weaker
     np.fill_diagonal(over, False)
     if not over.any():
-        return records
+        return boxes
     keep = np.ones(n, dtype=bool)
     for i in np.argsort(-score, kind="stable"):
         if keep[i]:  # a kept box removes the lower-scored (ties: the later) boxes it pairs with
             keep[over[i] & (score <= score[i])] = False
-    return records[keep]
+    return cols.take(keep) if isinstance(boxes, BoxColumns) else boxes[keep]
 
 
 #: :func:`one_cone_per_ray`'s ways to make one cone of a pair: ``drop`` (the better-scored cone as it was),
@@ -269,10 +282,10 @@ class ConeMapper:
         return GroundMapper(self.attitude_model.H_F_B(attitude.pitch_deg, attitude.roll_deg), g.max_range_m,
                             tuple(g.sigma), g.K, g.dist)
 
-    def foot_points(self, records: np.ndarray) -> np.ndarray:
-        """(N, 2) foot pixels (pixel-centre coordinates) of :data:`BOX_DTYPE` records, by each box's class rule."""
-        b, _, c = boxes_to_arrays(records)
-        return foot_points(b, c, self._u_weights) - 0.5
+    def foot_points(self, boxes: Boxes) -> np.ndarray:
+        """(N, 2) foot pixels (pixel-centre coordinates) of the boxes, by each box's class rule."""
+        cols = BoxColumns.of(boxes)
+        return foot_points(cols.xyxy, cols.class_id, self._u_weights) - 0.5
 
     def foot_offsets(self, xy_m: np.ndarray, class_ids: np.ndarray, offsets_m: np.ndarray | None = None) -> np.ndarray:
         """(N, 2) mapped foot points -> cone centres: moved by the class's foot offset (or ``offsets_m``,
@@ -284,14 +297,15 @@ class ConeMapper:
         n = np.linalg.norm(d, axis=1, keepdims=True)
         return xy_m + d / np.maximum(n, 1e-9) * off[:, None]
 
-    def width_offsets(self, records: np.ndarray, foot_uv: np.ndarray, ground: GroundMapper | None = None) -> np.ndarray:
+    def width_offsets(self, boxes: Boxes, foot_uv: np.ndarray, ground: GroundMapper | None = None) -> np.ndarray:
         """(N,) m foot offsets from the boxes' widths (module doc): half the ground distance between the
         box's left and right edges at its foot row, clipped to the class's plate ``s/2 .. s/sqrt(2)``;
         the class's fixed offset where the size is unknown or an edge does not map.
         ``foot_uv``: (N, 2) foot pixels (pixel-centre coordinates, :meth:`foot_points`)."""
         ground = ground or self.ground
-        b, _, c = boxes_to_arrays(records)
-        cls = np.asarray(c, dtype=np.intp)
+        cols = BoxColumns.of(boxes)
+        b = cols.xyxy
+        cls = np.asarray(cols.class_id, dtype=np.intp)
         left, _ = ground.map_pixels(np.c_[b[:, 0] - 0.5, foot_uv[:, 1]])
         right, _ = ground.map_pixels(np.c_[b[:, 2] - 0.5, foot_uv[:, 1]])
         half = 0.5 * np.hypot(right[:, 0] - left[:, 0], right[:, 1] - left[:, 1])
@@ -300,17 +314,18 @@ class ConeMapper:
             off = np.clip(half, lo, lo * np.sqrt(2.0))
         return np.where(np.isfinite(off), off, self._offset_m[cls])
 
-    def height_ratios(self, records: np.ndarray, xy_m: np.ndarray) -> np.ndarray:
+    def height_ratios(self, boxes: Boxes, xy_m: np.ndarray) -> np.ndarray:
         """(N,) each box's height (undistorted px, at its centre column) over the height a cone of its class has
         with its centre at ``xy_m`` (N, 2) (the box mapped, :meth:`map_boxes`): the cone model of the image
         attitude fit at zero attitude (an attitude error of a tenth of a degree changes it by under 1 % at 40 m).
         NaN where it is not known: no mount pose in the calibration, a class of unknown size, behind the camera."""
-        n = len(records)
+        n = len(boxes)
         if self.attitude_model is None or n == 0:
             return np.full(n, np.nan)
         if self._sizes is None:
             self._sizes = self.image_attitude()
-        b, _, c = boxes_to_arrays(records)
+        cols = BoxColumns.of(boxes)
+        b, c = cols.xyxy, cols.class_id
         uc = 0.5 * (b[:, 0] + b[:, 2]) - 0.5
         und = self.ground.undistort(np.r_[np.c_[uc, b[:, 1] - 0.5], np.c_[uc, b[:, 3] - 0.5]])
         h = und[n:, 1] - und[:n, 1]
@@ -338,8 +353,9 @@ class ConeMapper:
         """(N, 2) ground points (m) -> (N, 2) full-image px where the camera sees them."""
         return self.ground.ground_to_pixels(xy_m)
 
-    def map_boxes(self, records: np.ndarray, attitude: Attitude | None = None) -> np.ndarray:
-        """Validated :data:`BOX_DTYPE` records -> :data:`CONE_DTYPE` records.
+    def map_boxes(self, boxes: Boxes, attitude: Attitude | None = None) -> np.ndarray:
+        """A frame's boxes (:class:`~cone_perception.records.BoxColumns`, or :data:`BOX_DTYPE` records made columns
+        here), validated -> :data:`CONE_DTYPE` records.
 
         Boxes whose foot point is above the horizon or beyond ``max_range_m``
         are dropped (they are never published), and with ``min_height_ratio`` boxes too low for a cone
@@ -349,36 +365,36 @@ class ConeMapper:
         ``attitude``: the body's attitude offset for this frame (needs a mount pose); its
         uncertainty is added to each cone's covariance.
         """
-        out, _ = self._map(records, attitude, self.dropped)
+        out, _ = self._map(BoxColumns.of(boxes), attitude, self.dropped)
         return self.one_per_ray(out)[0]
 
-    def box_ranges(self, records: np.ndarray, attitude: Attitude | None = None) -> np.ndarray:
+    def box_ranges(self, boxes: Boxes, attitude: Attitude | None = None) -> np.ndarray:
         """(N,) float64: the distance (m) from the ``rear_axle`` origin of the cone each box maps to by itself (as
         :meth:`map_boxes` maps it, before :meth:`one_per_ray`), NaN where it maps to none (above the horizon,
         beyond the range, flat). Nothing is counted in :attr:`dropped`: the debug image's distances, drawn beside
         the frame's own mapping. Raises :class:`FrameError` as :meth:`map_boxes` does."""
-        out, valid = self._map(records, attitude, dict.fromkeys(DROP_CAUSES, 0))
-        ranges = np.full(len(records), np.nan)
+        out, valid = self._map(BoxColumns.of(boxes), attitude, dict.fromkeys(DROP_CAUSES, 0))
+        ranges = np.full(len(boxes), np.nan)
         ranges[valid] = np.hypot(out["x"].astype(np.float64), out["y"].astype(np.float64))
         return ranges
 
-    def _map(self, records: np.ndarray, attitude: Attitude | None, dropped: dict) -> tuple[np.ndarray, np.ndarray]:
+    def _map(self, cols: BoxColumns, attitude: Attitude | None, dropped: dict) -> tuple[np.ndarray, np.ndarray]:
         """(the cones of the boxes kept, in order; (N,) bool: which boxes they are), the drops counted in
         ``dropped``."""
-        validate_boxes(records)
-        if records.shape[0] == 0:
+        validate_boxes(cols)
+        if len(cols) == 0:
             return np.zeros(0, dtype=CONE_DTYPE), np.zeros(0, dtype=bool)
         ground = self._ground_for(attitude)
-        uv = self.foot_points(records)
+        uv = self.foot_points(cols)
         xy, valid = ground.map_pixels(uv)
         dropped["off_ground"] += int((~valid).sum())
-        off = self.width_offsets(records, uv, ground)[valid] if self._from_width else None
-        xy[valid] = self.foot_offsets(xy[valid], records["class_id"][valid], off)
+        off = self.width_offsets(cols, uv, ground)[valid] if self._from_width else None
+        xy[valid] = self.foot_offsets(xy[valid], cols.class_id[valid], off)
         if self.min_height_ratio > 0 and valid.any():
             idx = np.flatnonzero(valid)
-            weak = np.asarray(records["score"][idx], np.float64) < FLAT_MAX_SCORE
+            weak = np.asarray(cols.score[idx], np.float64) < FLAT_MAX_SCORE
             with np.errstate(invalid="ignore"):
-                flat = (self.height_ratios(records[idx], xy[idx]) < self.min_height_ratio) & weak  # NaN: not known, kept
+                flat = (self.height_ratios(cols.take(idx), xy[idx]) < self.min_height_ratio) & weak  # NaN: not known, kept
             valid[idx[flat]] = False
             dropped["flat"] += int(flat.sum())
         cov = ground.covariance(uv[valid])
@@ -388,8 +404,8 @@ class ConeMapper:
         out = np.zeros(int(valid.sum()), dtype=CONE_DTYPE)
         out["x"] = xy[valid, 0]
         out["y"] = xy[valid, 1]
-        out["class_id"] = records["class_id"][valid]
-        out["score"] = records["score"][valid]
+        out["class_id"] = cols.class_id[valid]
+        out["score"] = cols.score[valid]
         out["cov_xx"] = cov[:, 0, 0]
         out["cov_xy"] = cov[:, 0, 1]
         out["cov_yy"] = cov[:, 1, 1]

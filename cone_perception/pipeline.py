@@ -18,7 +18,7 @@ from .detector.farband import FarBand, drawn_by_far, drop_cut_boxes, merge_boxes
 from .detector.parallel import PairRunner
 from .geometry.calib import Calibration
 from .mapping import ConeMapper, one_box_per_cone
-from .records import BOX_DTYPE
+from .records import BOX_DTYPE, BoxColumns
 from .params import DEFAULT_IOU, DEFAULT_MIN_HEIGHT_RATIO, DEFAULT_ONE_RAY_RANGE_M
 
 STAGES = ("adapter", "preprocess", "forward", "postprocess", "far_forward", "far_band", "far_wait", "attitude", "mapping")
@@ -181,27 +181,30 @@ class Pipeline:
         else:
             boxes = self.detector.detect(band, self.calib.crop)
             timing.update({k.removesuffix("_ms"): v for k, v in self.detector.timing.items()})
-        n_boxes = len(boxes)
-        boxes = one_box_per_cone(boxes)  # a second box of one cone (two classes, or twice small) goes
-        self.mapper.dropped["second_box"] += n_boxes - len(boxes)
+        # the mapping stage: the frame's boxes as columns, made once; every step below takes them
+        cols = BoxColumns.of(boxes)
+        kept = one_box_per_cone(cols)  # a second box of one cone (two classes, or twice small) goes
+        self.mapper.dropped["second_box"] += len(cols) - len(kept)
+        cols = kept
         if self.far_tiles is not None:  # where the next frame's tiles look: this frame's cones whole in its strip's rows
-            self._far_seen.append(drop_cut_boxes(boxes, replace(self.far.crop, v0=self._frame_rows[0], v1=self._frame_rows[1])))
+            self._far_seen.append(drop_cut_boxes(cols.records, replace(self.far.crop, v0=self._frame_rows[0],
+                                                                       v1=self._frame_rows[1])))
         weak = None
         if self.cones_conf is not None:
-            strong = boxes["score"] >= self.cones_conf
-            boxes, weak = boxes[strong], boxes[~strong]
+            strong = cols.score >= self.cones_conf
+            cols, weak = cols.take(strong), cols.take(~strong)
         att = FIXED
         if self.attitude is not None:
             t0 = time.perf_counter()
-            far = drawn_by_far(boxes, far_boxes) if far_boxes is not None else None  # of the boxes kept, the strip's
-            att = attitude_for_boxes(self.attitude, boxes, stamp_ns, far)
+            far = drawn_by_far(cols.records, far_boxes) if far_boxes is not None else None  # of the boxes kept, the strip's
+            att = attitude_for_boxes(self.attitude, cols, stamp_ns, far)
             timing["attitude"] = (time.perf_counter() - t0) * 1e3
         t0 = time.perf_counter()
         self._strip_attitude = np.array([att.pitch_deg, att.roll_deg])
-        cones = self.mapper.map_boxes(boxes, att)
+        cones = self.mapper.map_boxes(cols, att)
         weak_cones = self.mapper.map_boxes(weak, att) if weak is not None else None
         timing["mapping"] = (time.perf_counter() - t0) * 1e3
-        return FrameResult(boxes, cones, timing, att, band, weak_cones)
+        return FrameResult(cols.records, cones, timing, att, band, weak_cones)
 
     @property
     def concurrent(self) -> bool:

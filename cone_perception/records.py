@@ -13,11 +13,15 @@ and one point per box / cone. In Python they are numpy structured arrays:
 The converters are duck-typed over the message classes, so the same code builds
 rclpy messages in the nodes and rosbags messages in the offline tools; this
 module imports neither.
+
+On the mapping path a frame's boxes are read as columns (:class:`BoxColumns`): made once from the
+records, handed to every step (one box per cone, the attitude fit, the mapping), subsets taken from it.
 """
 
 from __future__ import annotations
 
 import struct
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -85,6 +89,36 @@ def boxes_to_arrays(records: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nda
     """:data:`BOX_DTYPE` records -> ((N, 4) float32 boxes, (N,) scores, (N,) int class ids)."""
     b = np.stack([records["u1"], records["v1"], records["u2"], records["v2"]], axis=1).astype(np.float32)
     return b.reshape(-1, 4), records["score"].astype(np.float32), records["class_id"].astype(np.int64)
+
+
+@dataclass(frozen=True, eq=False)
+class BoxColumns:
+    """One frame's :data:`BOX_DTYPE` boxes as columns, made once (:meth:`of`) and read by every step of the mapping
+    stage. ``records`` (N,) BOX_DTYPE: the boxes themselves (what is published on ``cone_boxes``); ``xyxy`` (N, 4)
+    float32 ``u1 v1 u2 v2`` (full-image px, pixel edges); ``score`` (N,) float32; ``class_id`` (N,) int64. The
+    columns hold the records' values as they are (float32), so a step computes what it computed from the records."""
+
+    records: np.ndarray
+    xyxy: np.ndarray
+    score: np.ndarray
+    class_id: np.ndarray
+
+    @classmethod
+    def of(cls, boxes: "np.ndarray | BoxColumns") -> "BoxColumns":
+        """The columns of ``boxes`` (BOX_DTYPE records, or records of another dtype with those fields, cast first);
+        ``boxes`` itself where it already is a :class:`BoxColumns`."""
+        if isinstance(boxes, BoxColumns):
+            return boxes
+        records = boxes if boxes.dtype == BOX_DTYPE else boxes.astype(BOX_DTYPE)
+        xyxy, score, class_id = boxes_to_arrays(records)
+        return cls(records, xyxy, score, class_id)
+
+    def __len__(self) -> int:
+        return len(self.records)
+
+    def take(self, which: np.ndarray) -> "BoxColumns":
+        """The boxes ``which`` selects ((N,) bool mask or indices), columns and records alike, in order."""
+        return BoxColumns(self.records[which], self.xyxy[which], self.score[which], self.class_id[which])
 
 
 def point_fields(dtype: np.dtype) -> list[tuple[str, int, int, int]]:

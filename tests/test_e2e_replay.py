@@ -19,7 +19,7 @@ from cone_perception.detector import RUNTIME_THREADS, Detector, default_model_pa
 from cone_perception.evaluation import LocalisationReport
 from cone_perception.geometry.calib import load_calibration
 from cone_perception.mapping import expected_truth
-from cone_perception.nodes.live_replay import live_replay, write_result_bag
+from cone_perception.rostools.live_replay import live_replay, write_result_bag
 from cone_perception.pipeline import Pipeline
 from cone_perception.replay import offline_replay
 from cone_perception.resources import calib_dir
@@ -140,7 +140,7 @@ def test_live_replay_names_a_node_that_died(drive, tmp_path, capsys, monkeypatch
         k["progress"] = killing_progress
         return real(*a, **k)
 
-    monkeypatch.setattr("cone_perception.nodes.live_replay.live_replay", live_with_a_kill)
+    monkeypatch.setattr("cone_perception.rostools.live_replay.live_replay", live_with_a_kill)
     rc = main(replay_cmd_args(drive))
     err = capsys.readouterr().err
     assert rc == 1 and "node pipeline died during the replay (exit code -9)" in err

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from cone_perception.nodes.fuzz import TARGETS, fuzz_target
+from cone_perception.rostools.fuzz import TARGETS, fuzz_target
 
 N = 150
 

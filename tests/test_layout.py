@@ -4,8 +4,9 @@
   even when no module cycle closes it).
 - Layers (:data:`LAYERS`): a module imports only from its own layer or a lower one. The lowest two are the
   vocabulary and the runtime (what runs on the car); the tools (data formats, evaluation, calibrate,
-  synth, train, replay, bench, the fuzz and live-replay players, commands) sit above them, so the runtime
-  imports nothing of the tools; what both need sits in the runtime or in ``data/``.
+  synth, train, replay, bench, the ROS tools of ``rostools/`` (live replay, soak, fuzzer), commands) sit above
+  them, so the runtime (``nodes/`` included) imports nothing of the tools; what both need sits in the runtime or in
+  ``data/``.
 - Importing the runtime's mapping, attitude, tracking or ``data/`` loads no torch.
 - Only ``cli.py`` and the commands import from ``commands/``; no command imports a sibling command (shared
   argparse helpers live in ``commands/_args.py``); tests reach the core, not the commands (CLI tests go
@@ -101,8 +102,7 @@ LAYERS: list[tuple[str, set[str]]] = [
                  "params", "pipeline", "vis", "ros_env", "nodes"}),
     ("data", {"data"}),
     ("evaluation, calibration, synthesis", {"evaluation", "calibrate", "synth"}),
-    ("training, replay, benchmarks, ROS players", {"train", "replay", "bench", "nodes.live_replay", "nodes.fuzz",
-                                                   "nodes.soak"}),
+    ("training, replay, benchmarks, ROS tools", {"train", "replay", "bench", "rostools"}),
     ("commands", {"commands"}),
     ("cli", {"cli"}),
 ]
@@ -110,7 +110,8 @@ RUNTIME_LAYERS = 2  # the first two: what runs on the car
 
 
 def _unit(module: str) -> str:
-    """The layer unit of a module: ``nodes.fuzz`` where a unit names it, else its top-level name."""
+    """The layer unit of a module: a dotted name (``folder.module``) where a unit names it, else its top-level
+    name."""
     parts = module.split(".")[1:]
     for k in range(len(parts), 0, -1):
         name = ".".join(parts[:k])
@@ -143,6 +144,15 @@ def test_the_runtime_imports_no_tool() -> None:
     bad = sorted(f"{m} -> {t}" for m, ts in GRAPH.items() if _layer(m) < RUNTIME_LAYERS
                  for t in ts if _layer(t) >= RUNTIME_LAYERS)
     assert bad == [], "the runtime imports a tool; move what both need into the runtime or data/"
+
+
+def test_the_nodes_sit_below_the_tools() -> None:
+    """``nodes/`` holds the nodes and what they share; the ROS tools that drive them (``rostools/``) import them,
+    never the other way, and the nodes import none of the tools."""
+    tools = {"data", "evaluation", "calibrate", "synth", "train", "replay", "bench", "rostools", "commands", "cli"}
+    bad = sorted(f"{m} -> {t}" for m, ts in GRAPH.items() if _folder(m) == "nodes" for t in ts if _folder(t) in tools)
+    assert bad == []
+    assert "nodes" in FOLDER_GRAPH["rostools"] and "rostools" not in FOLDER_GRAPH["nodes"]
 
 
 def test_no_upward_import() -> None:
@@ -201,6 +211,15 @@ def test_no_module_over_500_lines() -> None:
     long = {str(f.relative_to(ROOT)): n for f in PKG.rglob("*.py")
             if (n := len(f.read_text(encoding="utf-8").splitlines())) > MAX_MODULE_LINES}
     assert long == {}
+
+
+#: The commands parse arguments and make one call each; their logic lives in the package (issue 42: 1,367 lines before).
+MAX_COMMANDS_LINES = 1200
+
+
+def test_the_commands_are_argument_parsing() -> None:
+    n = sum(len(f.read_text(encoding="utf-8").splitlines()) for f in (PKG / "commands").glob("*.py"))
+    assert n < MAX_COMMANDS_LINES, f"commands/ has {n} lines: move logic into the module it belongs to"
 
 
 def test_few_modules_at_the_top() -> None:

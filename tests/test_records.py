@@ -10,7 +10,9 @@ from sensor_msgs.msg import PointCloud2, PointField
 from std_msgs.msg import Header
 
 from cone_perception.errors import FrameError
-from cone_perception.records import BOX_DTYPE, CONE_DTYPE, boxes_from_arrays, from_pointcloud2, point_fields, to_pointcloud2
+from cone_perception.records import (
+    BOX_DTYPE, CONE_DTYPE, BoxColumns, boxes_from_arrays, from_pointcloud2, point_fields, to_pointcloud2,
+)
 
 TS = get_typestore(Stores.ROS2_JAZZY)
 RB_CLOUD = TS.types["sensor_msgs/msg/PointCloud2"]
@@ -95,3 +97,23 @@ def test_bad_clouds_raise_frame_errors() -> None:
 def test_empty_cloud() -> None:
     msg = to_pointcloud2(np.zeros(0, CONE_DTYPE), Header(), PointCloud2, PointField)
     assert msg.width == 0 and from_pointcloud2(msg, CONE_DTYPE).shape == (0,)
+
+
+def test_box_columns_hold_the_records_values_and_subsets_keep_them_together() -> None:
+    recs = boxes_from_arrays(np.array([[10.25, 20.5, 30.125, 60.0], [1.0, 2.0, 3.0, 4.0], [5.5, 6.5, 9.5, 12.0]]),
+                             np.array([0.9, 0.3, 0.6]), np.array([1, 0, 4]))
+    cols = BoxColumns.of(recs)
+    assert len(cols) == 3 and cols.records is recs
+    assert cols.xyxy.dtype == np.float32 and cols.xyxy.shape == (3, 4) and cols.score.dtype == np.float32
+    np.testing.assert_array_equal(cols.xyxy[:, 2], recs["u2"])
+    np.testing.assert_array_equal(cols.xyxy[0], [10.25, 20.5, 30.125, 60.0])
+    assert cols.class_id.tolist() == [1, 0, 4]
+    assert BoxColumns.of(cols) is cols  # made once: a view is taken as it is
+    sub = cols.take(cols.score >= 0.5)
+    assert sub.records.tolist() == recs[[0, 2]].tolist() and sub.class_id.tolist() == [1, 4]
+    np.testing.assert_array_equal(sub.xyxy, cols.xyxy[[0, 2]])
+    empty = BoxColumns.of(recs[:0])
+    assert empty.xyxy.shape == (0, 4) and len(empty) == 0
+    packed = np.zeros(2, dtype=[(n, BOX_DTYPE.fields[n][0]) for n in BOX_DTYPE.names])  # the fields without padding
+    packed["u2"] = 7.0
+    assert BoxColumns.of(packed).records.dtype == BOX_DTYPE and BoxColumns.of(packed).xyxy[:, 2].tolist() == [7.0, 7.0]

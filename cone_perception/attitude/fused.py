@@ -11,6 +11,7 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..geometry.linalg import inv2
+from ..records import BoxColumns
 from .image import AttitudeCounts, ImageAttitude
 from .imu import ImuAttitude
 from .model import ATTITUDE_MODES, FIXED, Attitude, default_attitude_mode
@@ -42,16 +43,19 @@ def attitude_estimator(mapper, mode: str | None, imu: "ImuAttitude | None" = Non
     return mode, FusedAttitude(mapper.image_attitude(config), imu, use_image=(mode == "fused"))
 
 
-def attitude_for_boxes(estimator, records: np.ndarray, stamp_ns: int | None = None, far: np.ndarray | None = None) -> Attitude:
-    """The attitude to map one frame's ``BOX_DTYPE`` records with (:data:`FIXED` without an estimator);
-    ``stamp_ns``: the frame's capture stamp (for the IMU); ``far``: (N,) bool, the records the far strip's
-    network drew (read through its own box model, :attr:`~cone_perception.attitude.ImageAttitudeConfig.far_reading`)."""
+def attitude_for_boxes(estimator, boxes: BoxColumns | np.ndarray, stamp_ns: int | None = None,
+                       far: np.ndarray | None = None) -> Attitude:
+    """The attitude to map one frame's boxes with (:class:`~cone_perception.records.BoxColumns`, or ``BOX_DTYPE``
+    records made columns here; :data:`FIXED` without an estimator); ``stamp_ns``: the frame's capture stamp (for the
+    IMU); ``far``: (N,) bool, the boxes the far strip's network drew (read through its own box model,
+    :attr:`~cone_perception.attitude.ImageAttitudeConfig.far_reading`)."""
     if estimator is None:
         return FIXED
-    b = np.column_stack([records["u1"], records["v1"], records["u2"], records["v2"]]).astype(np.float64)
+    cols = BoxColumns.of(boxes)
+    b = cols.xyxy.astype(np.float64)
     if isinstance(estimator, FusedAttitude):
-        return estimator.update(b, records["class_id"].astype(np.intp), stamp_ns, far)
-    return estimator.update(b, records["class_id"].astype(np.intp), far)
+        return estimator.update(b, cols.class_id.astype(np.intp), stamp_ns, far)
+    return estimator.update(b, cols.class_id.astype(np.intp), far)
 
 
 @dataclass(frozen=True)

@@ -8,6 +8,7 @@ import argparse
 import dataclasses
 import datetime
 import json
+import shlex
 import sys
 from pathlib import Path
 
@@ -38,9 +39,27 @@ BOARD_SIZE = "COLSxROWS (e.g. 9x6)"
 _OWNED_EXTRA = ("mount", "mount_estimate", "calibration")
 
 
-def run_calibrate(args: argparse.Namespace, command_line: str) -> int:
-    """Calibrate as ``args`` (the parsed options of ``cone-perception calibrate``) say; ``command_line``: the
-    command that reproduces them, written into the YAML's header. Returns the exit code."""
+def command_line(args: argparse.Namespace, defaults: dict) -> str:
+    """The ``cone-perception calibrate`` command that reproduces ``args``: the options that differ from their
+    ``defaults`` (option dest -> default value)."""
+    parts = ["cone-perception", "calibrate"]
+    for key, value in vars(args).items():
+        if key not in defaults or value == defaults[key]:
+            continue
+        opt = "--" + key.replace("_", "-")
+        if value is True:
+            parts.append(opt)
+        elif isinstance(value, list):
+            parts += [opt] + [str(v) for v in value]
+        else:
+            parts += [opt, f"{value:g}" if isinstance(value, float) else str(value)]
+    return " ".join(shlex.quote(x) for x in parts)
+
+
+def run_calibrate(args: argparse.Namespace, defaults: dict) -> int:
+    """Calibrate as ``args`` (the parsed options of ``cone-perception calibrate``) say; ``defaults``: the options'
+    defaults (dest -> value), for the command that reproduces ``args`` (:func:`command_line`), written into the
+    YAML's header. Returns the exit code."""
     camera, out = _names(args)
     stem = out.with_suffix("")
     refuse_existing([out, *(Path(f"{stem}{s}") for s in (".report.txt", ".report.json", ".points.png", ".birdseye.png"))],
@@ -95,7 +114,7 @@ def run_calibrate(args: argparse.Namespace, command_line: str) -> int:
 
     calib = _build_calibration(camera, res, existing, extra, out)
     calib.mount_pose = _mount_pose(args, rep, calib)
-    save_calibration(calib, out, header=f"written by: {command_line}")
+    save_calibration(calib, out, header=f"written by: {command_line(args, defaults)}")
 
     text = format_report(rep, title)
     stem = out.with_suffix("")

@@ -1,13 +1,5 @@
-"""``cone-perception demo``: the main job on a built-in sample (what ``make demo`` runs).
-
-1. renders a seeded synthetic drive (default 10 s at 20 Hz, 1920x1080 YUYV) into a rosbag with
-   the true cone positions on ``/cones_gt`` (cached in OUT/ for the same seed and length);
-2. plays it through the live ROS 2 pipeline (node processes, shared-memory DDS) with the shipped
-   default model and calibration, the image attitude reading the boxes through the rendered tables
-   (``box_model: rendered``: the frames are rendered, the calibration is a real camera's);
-3. prints frames, Hz, latency, cones per frame, detection recall and localisation error per
-   distance group, and writes OUT/birdseye.png (cones vs truth), OUT/frames.png (annotated
-   frames), OUT/summary.json and OUT/summary.md.
+"""``cone-perception demo``: the main job on a built-in sample (what ``make demo`` runs): a seeded synthetic drive
+through the live ROS 2 pipeline, its summary and pictures (docs/replay.md, "make demo / cone-perception demo").
 """
 
 from __future__ import annotations

@@ -1,15 +1,6 @@
 """``cone-perception detect``: run the detector over an image, a folder, a video or a rosbag -> JSON lines.
 
-  cone-perception detect SOURCE --out FILE.jsonl [--model M] [--imgsz WxH] [--crop V0,V1[,U0,U1]]
-                                 [--downscale N] [--calib C] [--far-rows auto|none|V0,V1] [--far-model M]
-                                 [--band-split none|auto|N0,U1] [--backend B] [--save-vis DIR] [--every N]
-
-One line per image (see ``cone_perception/data/predictions.py``), boxes in the image's own pixels.
-A video's frames are named ``<video stem>_<frame index, 6 digits>`` (index from 0 in the file);
-a bag's by their stamp in ns. No image read at all is an error (exit 2).
-Without ``--crop`` each image is letterboxed to the model input (``--imgsz``, default the
-model's); with ``--crop`` the band is cut (and downscaled by ``--downscale``) as the car does; with ``--calib`` the
-calibration's band and far strip (at its calibrated rows: ``detect`` has no attitude) run, as on the car.
+Usage, sources, frame names and the line format: docs/detector.md, "cone-perception detect".
 """
 
 from __future__ import annotations

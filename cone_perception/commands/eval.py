@@ -1,14 +1,7 @@
 """``cone-perception eval``: a prediction file against ground truth -> report.md, metrics.json, PNGs.
 
-  cone-perception eval --pred FILE.jsonl --gt DIR_OR_GT.jsonl [--calib FILE] --out DIR
-                       [--conf 0.25] [--iou 0.5] [--gt-names A,B,..] [--band V0,V1] [--min-height PX] [--worst N] [--only-predicted]
-  cone-perception eval --tracked REPLAY_OUT_BAG --gt DRIVE_gt.jsonl --out DIR
-
-Ground truth: a YOLO label folder (images/, labels/, data.yaml) or a synthetic gt.jsonl (with cone
-positions: localisation and the thesis's pair metric too). See ``cone_perception/evaluation/report.py``.
-``--tracked``: the tracking table of ``replay --track --gt-topic`` from a replay's output bag
-(``/cones`` and ``/cones/tracked``) against the synthetic drive's gt.jsonl
-(``cone_perception/evaluation/tracking.py``).
+Ground truth, options and the report: docs/evaluation.md (:mod:`cone_perception.evaluation.report`); ``--tracked``
+(a ``replay --track`` bag against its drive): docs/tracking.md (:mod:`cone_perception.evaluation.tracking`).
 """
 
 from __future__ import annotations

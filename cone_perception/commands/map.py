@@ -1,25 +1,7 @@
 """``cone-perception map``: check a calibration by mapping pixels or boxes to rear_axle metres.
 
-  cone-perception map --calib calib/example_mainhoop.yaml --pixel 960,800 --pixel 100,500
-      -> one CSV line ``u,v,x,y`` per pixel, no header (``nan,nan`` above the horizon / beyond range)
-  cone-perception map --calib CAL --boxes boxes.csv
-      -> one line ``x,y,class_id,score,cov_xx,cov_xy,cov_yy`` per kept cone (columns of boxes.csv:
-         ``u1,v1,u2,v2,score,class_id``, full-image px, optional header line)
-  cone-perception map --calib CAL --boxes boxes.csv --attitude image
-      -> the same, the boxes taken as ONE frame whose camera attitude is fitted from them first
-         (default with a mount pose in the calibration; the attitude used goes to stderr), read through
-         the box model of the detector that drew them (--model, default the shipped model;
-         --box-model rendered for boxes of a synthetic drive)
-  cone-perception map --calib CAL --boxes preds.jsonl [--model MODEL.pt] [--conf 0.25]
-      -> the frames of a prediction file of `detect` (JSON lines), mapped IN ORDER with one attitude
-         filter as the node runs it: one line ``image,x,y,class_id,score,cov_xx,cov_xy,cov_yy`` per
-         kept cone; the attitude per frame and the fit's outcome counts go to stderr. The boxes the
-         file marks as the far strip's (`detect` with a far strip: ``--calib``) are read through the
-         far model's box model (--far-model), as the node reads them
-
-Boxes go through what the pipeline node does after its detector: a second box of one cone is dropped
-(``one_box_per_cone``), and so is a flat box (--min-height-ratio) and a second cone on one viewing ray
-(--one-ray-range); the counts go to stderr.
+Outputs, the boxes' way (as the pipeline node after its detector) and the attitude: docs/calibration.md,
+"cone-perception map".
 """
 
 from __future__ import annotations

@@ -1,20 +1,7 @@
 """``cone-perception replay``: run the full pipeline over a rosbag, offline (no ROS) or live.
 
-  cone-perception replay BAG [--calib CAL] [--model M] [--out OUT] [--gt-topic /cones_gt]
-  cone-perception replay BAG --track [--drop-detections P] [--odom-topic odom] [--gt-topic /cones_gt] [...]
-  cone-perception replay BAG --track [--tracker FIELD=VALUE ...] [--track-conf S] [--max-range M] [...]
-  cone-perception replay BAG --live fused|separate [--track] [...]
-
-Offline: every frame of the bag's camera topic (YUYV, bgr8/rgb8 or JPEG/PNG) goes through the
-same code as the fused node; ``/cone_boxes`` and ``/cones`` are written to OUT (rosbag2, MCAP)
-with the original stamps. Live: the frames are published (raw CDR) into node processes - the
-three separate nodes or the fused ``pipeline`` node - and what they publish is recorded.
-Prints frames, throughput, per-stage latency percentiles, dropped frames by cause, and with
-``--gt-topic`` the localisation table (recall and position error per distance group) and the range
-bands to 40 m (recall and false cones; issue 26).
-``--track`` adds the cone tracker (``/cones/tracked``); on a synthetic bag with ``--gt-topic`` it prints
-recall, false cones, error, id switches, IDF1 and ego-motion error within 15 m, tracked against raw
-(live: no ego-motion error, the nodes do not publish their estimate).
+Offline, live, what is printed, ``--gt-topic``, ``--track``: docs/replay.md, "cone-perception replay"; the tracker's
+figures: docs/tracking.md.
 """
 
 from __future__ import annotations

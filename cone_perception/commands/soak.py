@@ -1,16 +1,7 @@
 """``cone-perception soak``: a drive published at a given rate for a given time into a live node; every
 frame accounted for, memory and latency over time.
 
-  cone-perception soak [--rate 30] [--seconds 600] [--bag BAG] [--json FILE] [--plot FILE.png]
-
-Starts the fused ``pipeline`` node as a process (localhost DDS, a ROS domain of its own), publishes
-a synthetic drive (rendered once, ``--drive-seconds`` at 20 Hz, YUYV 1920x1080; or ``--bag``'s camera
-frames) looped and re-stamped at ``--rate`` for ``--seconds``, and reports from the node's own
-``/diagnostics`` counts: sent, processed, dropped by cause, replaced in the queue, missing (lost
-upstream), queued and **uncounted** (sent minus all of those), then per window the rates, the node's
-RSS and the latency publish -> ``/cones`` (p50, p99). Exit 1 when a target is missed: uncounted 0,
-RSS of the last minute within 5 % of the first, latency p99 of the last minute no higher than the
-first, the node alive. Figures: docs/robustness.md.
+What it counts, its targets (exit 1 when one is missed) and figures: docs/robustness.md, "cone-perception soak".
 """
 
 from __future__ import annotations

@@ -32,9 +32,8 @@ def _common(p: argparse.ArgumentParser) -> None:
                         "cornering roll, bumps, grade changes of the road ahead (up to 2 %%); on top of the jitter")
     g.add_argument("--nose-prob", type=float, default=0.5, help="chance a scene shows the car nose at the bottom (default 0.5)")
     g.add_argument("--no-photometric", action="store_true", help="no exposure / white balance / noise / blur / JPEG randomisation")
-    g.add_argument(
-        "--tracks", default="autocross,skidpad,acceleration", help="comma-separated track kinds to draw from (default all three)"
-    )
+    g.add_argument("--tracks", default="autocross,skidpad,acceleration",
+                   help="comma-separated track kinds to draw from (default all three)")
     g.add_argument("--missing", type=float, default=0.0, help="fraction of cones removed from each track (default 0)")
     g.add_argument("--stray", type=int, default=0, help="stray cones placed off the track per track (default 0)")
     g.add_argument("--knocked", type=float, default=0.0, help="fraction of cones knocked over, lying on their side (default 0)")
@@ -54,12 +53,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--frames-per-track", type=int, default=20, help="frames per random track and look (default 20)")
     p.add_argument("--val-frac", type=float, default=0.1, help="fraction of tracks in the val split (default 0.1; at least one track when there are two or more; "
                         "frames of one track only: no val split, data.yaml without val:)")
-    p.add_argument(
-        "--vary-mount",
-        action="store_true",
-        help="new random viewpoint per track (hfov 70-120, pitch -4..+16 deg around --pitch, height +-0.3 m) for detector training; "
-        "calib.yaml then holds the nominal mount only, each gt.jsonl line its own camera",
-    )
+    p.add_argument("--vary-mount", action="store_true",
+                   help="new random viewpoint per track (hfov 70-120, pitch -4..+16 deg around --pitch, height +-0.3 m) for "
+                        "detector training; calib.yaml then holds the nominal mount only, each gt.jsonl line its own camera")
     _common(p)
     p = sub.add_parser("bag", help="rosbag2 (MCAP): camera images + /cones_gt, calibration YAML beside it")
     p.add_argument("--seconds", type=float, required=True, help="length of the recording in s")
@@ -77,9 +73,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--force", action="store_true", help="overwrite an existing --out")
     p.add_argument("--n", type=int, default=8, help="number of frames (default 8)")
     _common(p)
-    p = sub.add_parser(
-        "mapcheck", help="map exact boxes through the exact calibration: error left by the foot-point rule and jitter"
-    )
+    p = sub.add_parser("mapcheck", help="map exact boxes through the exact calibration: error left by the foot-point rule "
+                                        "and jitter")
     p.add_argument("--frames", type=int, default=30, help="frames to render (default 30)")
     _common(p)
     p = sub.add_parser("bench", help="measure render speed (frames/s) at the given size")

@@ -1,10 +1,5 @@
-"""``cone-perception train``: train the cone detector on YOLO txt datasets.
-
-``--data`` takes an Ultralytics data.yaml (``path``, ``train``, ``val``, ``test``, ``names``),
-the one ``synth dataset`` / ``data fsoco-to-yolo`` / ``data restore-aspect`` write, or this
-package's own mixing form (see :mod:`cone_perception.data.datasets`). Without ``--out`` a run goes
-to ``runs/train/<name>`` numbered (``exp``, ``exp2``, ...), never into an existing run.
-"""
+"""``cone-perception train``: train the cone detector on YOLO txt datasets (the data YAMLs, where a run goes:
+docs/training.md, "cone-perception train")."""
 
 from __future__ import annotations
 

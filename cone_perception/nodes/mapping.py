@@ -41,6 +41,7 @@ from sensor_msgs.msg import PointCloud2
 from ..attitude import attitude_estimator, attitude_for_boxes
 from ..geometry.calib import load_calibration
 from ..mapping import ConeMapper, one_box_per_cone, validate_boxes
+from ..records import BoxColumns
 from . import _msgs
 from ._attitude import declare_attitude, declare_box_model, report_attitude
 from ._params import RuntimeParameters, declare
@@ -66,7 +67,7 @@ class MappingNode(PerceptionNode):
                                f"attitude {self.attitude_mode}" + (f", box model {box_model}" if self.attitude else ""))
 
     def on_boxes(self, msg: PointCloud2) -> None:
-        boxes = _msgs.boxes_from_msg(msg)
+        boxes = BoxColumns.of(_msgs.boxes_from_msg(msg))  # the message's boxes as columns, once
         validate_boxes(boxes)  # a bad message is dropped before it can move the attitude filter
         n_boxes = len(boxes)
         boxes = one_box_per_cone(boxes)  # as the fused pipeline does: a second box of one cone goes

@@ -1,6 +1,6 @@
 """Replay of a rosbag's camera topic through the pipeline: offline, without ROS (:mod:`.offline`), with the
 tracker and its scoring (:mod:`.tracking`); live through node processes in
-:mod:`cone_perception.nodes.live_replay`. Reading the bag's topics is :mod:`cone_perception.data.bags`.
+:mod:`cone_perception.rostools.live_replay`. Reading the bag's topics is :mod:`cone_perception.data.bags`.
 """
 
 from __future__ import annotations

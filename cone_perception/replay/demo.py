@@ -97,7 +97,7 @@ def run_demo(args: argparse.Namespace) -> int:
         how = "offline"
     else:
         print(f"[2/3] live ROS 2 replay: {args.mode} node(s), shared-memory DDS, lockstep")
-        from ..nodes.live_replay import live_replay  # rclpy, and it sets the DDS environment
+        from ..rostools.live_replay import live_replay  # rclpy, and it sets the DDS environment
 
         res = live_replay(bag, mode=args.mode, params=node_params(args.calib, model), progress=progress)
         cones, boxes, wall = res.cones, res.boxes, res.wall_s

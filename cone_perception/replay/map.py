@@ -17,7 +17,7 @@ from ..errors import ConfigError, FrameError
 from ..geometry.calib import load_calibration
 from ..mapping import ConeMapper, one_box_per_cone, validate_boxes
 from ..params import check_options
-from ..records import BOX_DTYPE, read_boxes_csv
+from ..records import BOX_DTYPE, BoxColumns, read_boxes_csv
 from ..resources import far_model_for
 
 
@@ -44,7 +44,7 @@ def run_map(args: argparse.Namespace) -> int:
     mode, est = attitude_estimator(mapper, args.attitude, None, config)
     if args.boxes.suffix == ".jsonl":
         return _run_sequence(args, calib, mapper, mode, est)
-    boxes = read_boxes_csv(args.boxes)
+    boxes = BoxColumns.of(read_boxes_csv(args.boxes))
     try:
         validate_boxes(boxes)
     except FrameError as e:
@@ -54,8 +54,7 @@ def run_map(args: argparse.Namespace) -> int:
     boxes = kept
     att = None
     if est is not None:
-        b = np.column_stack([boxes["u1"], boxes["v1"], boxes["u2"], boxes["v2"]]).astype(np.float64)
-        att = est.single_frame(b, boxes["class_id"].astype(np.intp))
+        att = est.single_frame(boxes.xyxy.astype(np.float64), boxes.class_id.astype(np.intp))
         print(f"attitude ({mode}, {att.source}, {att.n_cones} cones): pitch {att.pitch_deg:+.3f} +- "
               f"{att.sigma_pitch_deg:.3f} deg, roll {att.roll_deg:+.3f} +- {att.sigma_roll_deg:.3f} deg", file=sys.stderr)
     cones = mapper.map_boxes(boxes, att)
@@ -86,9 +85,9 @@ def _run_sequence(args: argparse.Namespace, calib, mapper: ConeMapper, mode: str
         b["u2"] *= sx
         b["v1"] *= sy
         b["v2"] *= sy
-        kept = one_box_per_cone(b)
+        kept = one_box_per_cone(BoxColumns.of(b))  # the frame's boxes as columns, once
         mapper.dropped["second_box"] += len(b) - len(kept)
-        far = drawn_by_far(kept, b[pred.far[keep]]) if pred.far is not None else None  # the strip's, of those kept
+        far = drawn_by_far(kept.records, b[pred.far[keep]]) if pred.far is not None else None  # the strip's, of those kept
         n_far += int(far.sum()) if far is not None else 0
         b = kept
         att = attitude_for_boxes(est, b, None, far)

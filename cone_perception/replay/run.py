@@ -1,5 +1,5 @@
 """The one entry of ``cone-perception replay``: a bag offline (no ROS, :mod:`.offline`) or through live node
-processes (:mod:`cone_perception.nodes.live_replay`), with the tracker when asked (:mod:`.tracking`); prints
+processes (:mod:`cone_perception.rostools.live_replay`), with the tracker when asked (:mod:`.tracking`); prints
 frames, throughput, stage latencies, drops and, with ground truth, the localisation, attitude and tracking
 tables.
 """
@@ -253,7 +253,7 @@ def _tracking(args, calib):
 
 
 def _run_live(args, calib) -> dict:
-    from ..nodes.live_replay import live_replay, write_result_bag  # rclpy, and it sets the DDS environment
+    from ..rostools.live_replay import live_replay, write_result_bag  # rclpy, and it sets the DDS environment
 
     params = {"calibration": str(resolve_calibration_path(args.calib)), "backend": args.backend, "conf": args.conf}
     if args.model:

@@ -1,5 +1,5 @@
 """The ``cone-perception soak`` run: a synthetic drive played at a rate into a live node for a while
-(the player: :mod:`cone_perception.nodes.soak`), its figures per window against the targets
+(the player: :mod:`cone_perception.rostools.soak`), its figures per window against the targets
 (:mod:`cone_perception.bench.soak`).
 """
 
@@ -41,7 +41,7 @@ def run_soak(args: argparse.Namespace) -> int:
             raise ConfigError("--param", None, f"expected NAME:=VALUE, got {p!r}")
     os.environ["ROS_DOMAIN_ID"] = str(args.domain_id if args.domain_id is not None else default_domain_id(os.getpid()))
 
-    from ..nodes import soak as player  # rclpy and the localhost DDS environment: on use only
+    from ..rostools import soak as player  # rclpy and the localhost DDS environment: on use only
 
     tmp = Path(tempfile.mkdtemp(prefix="cone_perception_soak_"))
     try:

@@ -13,7 +13,7 @@ from .. import ros_env
 
 ros_env.use_localhost()  # the soak keeps all traffic on this computer, node processes too
 
-from ._common import QOS_DATA  # noqa: E402,I001 (sets DDS env first)
+from ..nodes._common import QOS_DATA  # noqa: E402,I001 (sets DDS env first)
 
 import os  # noqa: E402
 import subprocess  # noqa: E402

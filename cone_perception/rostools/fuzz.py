@@ -7,15 +7,19 @@ bit-flipped and truncated JPEGs, bad ``camera_info`` (zero sizes, roi outside, h
 PointCloud2 with wrong fields, steps and lengths, stamps jumping back and forth, and a few valid
 messages among them. A message that raises out of the callback is a crash; every message must be
 counted on its topic (ok + dropped, + the one image the detection node keeps for its first
-``camera_info``). Used by ``cone-perception fuzz`` and the bounded fuzz tests.
+``camera_info``). Used by ``cone-perception fuzz`` (:func:`run_fuzz`) and the bounded fuzz tests.
 """
 
 from __future__ import annotations
 
-from ._common import PerceptionNode  # noqa: I001 (sets DDS env first)
+from ..nodes._common import PerceptionNode  # noqa: I001 (sets DDS env first)
 
+import argparse
+import json
+import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
 from typing import Callable, Iterator
 
 import cv2
@@ -23,19 +27,21 @@ import numpy as np
 import rclpy
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2, PointField
+from tqdm import tqdm
 
 from ..adapter import DriverAdapter, bgr_to_yuyv
 from ..data import hostile
-from ..errors import FrameError
-from ..geometry.calib import DEFAULT_CAMERA, load_calibration
+from ..data.outfiles import print_written, refuse_existing
+from ..errors import ConfigError, FrameError
+from ..geometry.calib import DEFAULT_CAMERA, load_calibration, resolve_calibration_path
 from ..imageheader import declared_size
+from ..nodes import _msgs
+from ..nodes.detection import DetectionNode
+from ..nodes.driver_adapter import DriverAdapterNode
+from ..nodes.mapping import MappingNode
+from ..nodes.pipeline import PipelineNode
 from ..records import BOX_DTYPE, boxes_from_arrays
 from ..timing import rss_mb
-from . import _msgs
-from .detection import DetectionNode
-from .driver_adapter import DriverAdapterNode
-from .mapping import MappingNode
-from .pipeline import PipelineNode
 
 U32 = 2**32 - 1
 TARGETS = ("driver_adapter_raw", "driver_adapter_compressed", "detection", "mapping", "pipeline_raw",
@@ -360,3 +366,43 @@ def bomb_timings(calib_name: str = DEFAULT_CAMERA, repeat: int = 20) -> dict[str
 def hostile_size(data: bytes) -> tuple[int, int]:
     return declared_size(data)[1:]
 
+
+def run_fuzz(args: argparse.Namespace) -> int:
+    """``cone-perception fuzz`` (its options ``args``): every target fuzzed, its line and crashes printed, then the
+    header bombs timed; exit 1 on any crash or uncounted message."""
+    targets = list(TARGETS) if args.targets == "all" else [t.strip() for t in args.targets.split(",") if t.strip()]
+    unknown = [t for t in targets if t not in TARGETS]
+    if unknown:
+        raise ConfigError("--targets", None, f"unknown {', '.join(unknown)}; known: {', '.join(TARGETS)}")
+    if args.n <= 0:
+        raise ConfigError("--n", None, f"must be > 0, got {args.n}")
+    if args.json:
+        refuse_existing([args.json], args.force, "fuzz")
+    params = {}
+    if args.calib:
+        params["calibration"] = str(resolve_calibration_path(args.calib))
+    if args.model:
+        params["model"] = str(Path(args.model).resolve())
+    reports, bad = [], 0
+    for t in targets:
+        prog = (lambda it, total, t=t: tqdm(it, total=total, desc=t, unit="msg", file=sys.stderr,
+                                             disable=args.no_progress))
+        rep = fuzz_target(t, args.n, args.seed, params, prog)
+        reports.append(rep)
+        print(rep.line())
+        for ex in rep.crash_examples:
+            print(f"  crash: {ex}")
+        bad += rep.crashes + (0 if rep.all_counted else 1)
+    bombs = bomb_timings(args.calib or "example_mainhoop")
+    print("header bombs through the adapter (worst of 20):")
+    for name, b in bombs.items():
+        print(f"  {name}: {b['bytes']} bytes declaring {b['declared']} px: {b['max_ms']:.3f} ms, "
+              f"RSS {b['rss_growth_mb']:+.1f} MB")
+    total = sum(r.messages for r in reports)
+    print(f"fuzz: {total} messages, {sum(r.crashes for r in reports)} crashes, "
+          f"{sum(r.counted for r in reports)} counted" + ("" if not bad else "  FAILED"))
+    if args.json:
+        doc = {"n": args.n, "seed": args.seed, "targets": [asdict(r) for r in reports], "bombs": bombs}
+        args.json.write_text(json.dumps(doc, indent=1))
+        print_written([args.json], "fuzz")
+    return 1 if bad else 0

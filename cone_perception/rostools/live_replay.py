@@ -17,7 +17,7 @@ from .. import ros_env
 
 ros_env.use_localhost()  # replay --live and demo keep all traffic on this computer, node processes too
 
-from ._common import QOS_DATA  # noqa: E402,I001 (sets DDS env first)
+from ..nodes._common import QOS_DATA  # noqa: E402,I001 (sets DDS env first)
 
 import os
 import shutil
@@ -38,7 +38,7 @@ from sensor_msgs.msg import CompressedImage, Image, PointCloud2
 from ..data import bagio
 from ..data.bags import BOXES_TOPIC, CONES_TOPIC, TRACKED_TOPIC, find_image_topic
 from ..errors import ConfigError
-from . import _msgs
+from ..nodes import _msgs
 
 MODES = {"separate": ("driver_adapter", "detection", "mapping"), "fused": ("pipeline",)}
 PACES = ("lockstep", "rate")
