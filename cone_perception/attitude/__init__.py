@@ -9,12 +9,12 @@ from __future__ import annotations
 
 from .boxes import BOX_MODEL_BUCKETS_PX, DEFAULT_BOX_MODEL, BoxModel, box_top_extra_px
 from .fused import FusedAttitude, GroundGate, attitude_estimator, attitude_for_boxes
-from .image import AttitudeCounts, ImageAttitude, ImageAttitudeConfig
+from .image import ImageAttitude, ImageAttitudeConfig
 from .imu import (
     IMU_MAX_AGE_NS, IMU_REST_MAX_ACCEL_SD, IMU_REST_MAX_ANGLE_SD_DEG, IMU_REST_MAX_RATE_SD_DPS, IMU_REST_MIN_SAMPLES,
     QUAT_NORM_TOL, ImuAttitude, ImuCounts, ImuRest, imu_rest, rpy_from_quaternion,
 )
-from .model import ATTITUDE_MODES, FIXED, MAX_ABS_DEG, Attitude, AttitudeModel, attitude_vector, default_attitude_mode
+from .model import ATTITUDE_MODES, FIXED, MAX_ABS_DEG, Attitude, AttitudeCounts, AttitudeModel, attitude_vector, default_attitude_mode
 
 __all__ = ["ATTITUDE_MODES", "Attitude", "AttitudeCounts", "AttitudeModel", "BOX_MODEL_BUCKETS_PX", "BoxModel",
     "DEFAULT_BOX_MODEL", "FIXED", "FusedAttitude", "GroundGate",

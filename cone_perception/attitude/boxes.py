@@ -212,7 +212,7 @@ def read_boxes(boxes: np.ndarray, far: np.ndarray | None, band: BoxReading, far_
     A box whose measured box model has no measurement at its size (:meth:`BoxModel.measured`) is unknown, not exact:
     a far-strip box goes through the band's box model where that one has measured its size (at the box's size in the
     band model's input px), else it is left out of the fit (``False`` in the last array); both counted in ``counts``
-    (its ``read_by_band`` and ``unmeasured``: :class:`~cone_perception.attitude.image.AttitudeCounts`), where given."""
+    (its ``read_by_band`` and ``unmeasured``: :class:`~cone_perception.attitude.model.AttitudeCounts`), where given."""
     n = len(boxes)
     out, extra, rel = boxes.copy(), np.zeros(n), np.full(n, float(sigma_rel))
     scatter, used = np.zeros(n), np.ones(n, dtype=bool)

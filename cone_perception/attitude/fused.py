@@ -12,7 +12,8 @@ import numpy as np
 from ..errors import ConfigError
 from ..geometry.linalg import inv2
 from ..records import BoxColumns
-from .image import AttitudeCounts, ImageAttitude
+from .image import ImageAttitude
+from .model import AttitudeCounts
 from .imu import ImuAttitude
 from .model import ATTITUDE_MODES, FIXED, Attitude, default_attitude_mode
 

@@ -26,7 +26,7 @@ from ..geometry.camera import MountPose
 from ..geometry.homography import undistort_pixels
 from ..geometry.linalg import inv2
 from .boxes import BoxModel, BoxReading, box_top_extra_px, range_cuts, read_boxes
-from .model import MAX_ABS_DEG, Attitude, attitude_rotation
+from .model import MAX_ABS_DEG, Attitude, AttitudeCounts, attitude_rotation
 from .sizes import SizeTrackConfig, SizeTracks
 
 
@@ -94,30 +94,6 @@ class ImageAttitudeConfig:
     size_frames: bool = True
     size_rendered: bool = False  # average the rendered table's boxes too (measured worse: docs/benchmarks.md)
     size_tracks: SizeTrackConfig = SizeTrackConfig()
-
-
-@dataclass
-class AttitudeCounts:
-    """Frames by outcome of the image fit."""
-
-    fitted: int = 0
-    too_few: int = 0
-    rejected: int = 0
-    #: frames mapped with the calibration's H because the image attitude did not beat it (any outcome above)
-    calibration: int = 0
-    #: cones whose box heights went into an average over frames (``size_frames``), and of them those followed
-    #: from an earlier frame (the rest start their average)
-    size_cones: int = 0
-    size_followed: int = 0
-    #: boxes whose own box model has no measurement at their size (:meth:`~cone_perception.attitude.boxes.BoxModel.measured`):
-    #: far-strip boxes read through the band model's box model instead, and boxes no measured model knows (left out)
-    read_by_band: int = 0
-    unmeasured: int = 0
-
-    def as_dict(self) -> dict[str, int]:
-        return {"fitted": self.fitted, "too_few_cones": self.too_few, "rejected_beyond_limit": self.rejected,
-                "used_calibration": self.calibration, "size_cones": self.size_cones, "size_followed": self.size_followed,
-                "boxes_read_by_band_model": self.read_by_band, "boxes_unmeasured_size": self.unmeasured}
 
 
 class ImageAttitude:

@@ -94,3 +94,27 @@ def default_attitude_mode(has_mount_pose: bool, has_imu: bool = False) -> str:
     if has_imu:
         return "imu"
     return "image" if has_mount_pose else "fixed"
+
+
+@dataclass
+class AttitudeCounts:
+    """Frames by outcome of the image fit (:class:`~cone_perception.attitude.image.ImageAttitude`), and boxes it read."""
+
+    fitted: int = 0
+    too_few: int = 0
+    rejected: int = 0
+    #: frames mapped with the calibration's H because the image attitude did not beat it (any outcome above)
+    calibration: int = 0
+    #: cones whose box heights went into an average over frames (``size_frames``), and of them those followed
+    #: from an earlier frame (the rest start their average)
+    size_cones: int = 0
+    size_followed: int = 0
+    #: boxes whose own box model has no measurement at their size (:meth:`~cone_perception.attitude.boxes.BoxModel.measured`):
+    #: far-strip boxes read through the band model's box model instead, and boxes no measured model knows (left out)
+    read_by_band: int = 0
+    unmeasured: int = 0
+
+    def as_dict(self) -> dict[str, int]:
+        return {"fitted": self.fitted, "too_few_cones": self.too_few, "rejected_beyond_limit": self.rejected,
+                "used_calibration": self.calibration, "size_cones": self.size_cones, "size_followed": self.size_followed,
+                "boxes_read_by_band_model": self.read_by_band, "boxes_unmeasured_size": self.unmeasured}
