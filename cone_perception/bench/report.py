@@ -10,7 +10,8 @@ clips), ``rendered`` (held-out rendered drives), ``attitude``, ``tracking``, ``r
 The table of each topic goes between the markers ``<!-- bench report TOPIC -->`` and
 ``<!-- /bench report TOPIC -->`` of the document, under a line stamping the date, the commit, the machine
 (CPU model, vector flags, cores, the load average before and after) and the mode (``--quick``: fewer frames,
-shorter drives). A topic not asked for is left as it stands.
+shorter drives). A topic not asked for is left as it stands. A new table (the rendered validation suite's, whose
+markers ``validation`` wait in the document) is a function ``(Runner) -> Section`` added to :data:`TOPICS`.
 """
 
 from __future__ import annotations
