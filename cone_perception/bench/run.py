@@ -14,6 +14,7 @@ from tqdm import tqdm
 
 from ..bench.frames import rendered_frames
 from ..bench.pipeline import bench_adapter, bench_pipeline, bench_tracker, load_for_crop
+from ..bench.report import REAL_VAL, TOPICS, run_report
 from ..bench.table import crop_for_setting, run_table
 from ..resources import far_model_for, far_model_given
 from ..detector import default_model_path
@@ -110,6 +111,11 @@ def _repeat_pipeline(args: argparse.Namespace) -> int:
 
 
 def run_bench(args: argparse.Namespace) -> int:
+    if args.target == "report":
+        topics = list(TOPICS) if args.topics == "all" else [t.strip() for t in args.topics.split(",") if t.strip()]
+        took = run_report(args.doc, topics, args.quick, args.work, args.val or REAL_VAL, not args.no_progress)
+        print(f"bench report: wrote {', '.join(f'{t} ({s:.0f} s)' for t, s in took.items())} into {args.doc}")
+        return 0
     if args.frames < 1 or args.warmup < 0:
         raise ConfigError("bench", "--frames/--warmup", "need --frames >= 1 and --warmup >= 0")
     if args.repeat < 1 or (args.repeat > 1 and args.target != "pipeline"):

@@ -7,6 +7,7 @@
                                  [--repeat N] [--json]
   cone-perception bench tracker [--frames 300] [--rows 8] [--calib CAL] [--json]
   cone-perception bench table --models A.pt[,B.pt] --val DIR --gt-names A,B,.. --band V0,V1 --out DIR [--frames N]
+  cone-perception bench report [--topics speed,real,...|all] [--quick] [--doc docs/benchmarks.md] [--val DIR]
 
 ``adapter``: 1920x1080 frames (size from the calibration) in the given encoding -> cropped,
 downscaled BGR band, exactly as the ``driver_adapter`` node does it.
@@ -17,6 +18,7 @@ into PointCloud2 messages, as the ``pipeline`` node runs them; ``debug_image`` i
 ``debug_image_hz`` a second). ``--input`` replaces the
 calibration's crop and downscale by one of the runtime-table settings (:func:`cone_perception.bench.table.crop_for_setting`).
 ``table``: the runtime table (see ``bench/table.py``).
+``report``: the defaults' figures today, one table per topic, into docs/benchmarks.md (``bench/report.py``).
 ``tracker``: the cone tracker's update per frame (ego-motion from the cones, association, Kalman
 update) on a simulated drive through rows of cones, about 100 tracks with the defaults.
 Warm-up frames are excluded; median, p90, p99, min-max (noise) and frames/s (from the median
@@ -31,6 +33,7 @@ from pathlib import Path
 
 from ..bench.pipeline import BYTES_PER_PX
 from ..bench.run import run_bench
+from ..bench.report import TOPICS
 from ..bench.table import INPUT_SETTINGS
 from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, RUNTIME_THREADS
 from ..geometry.calib import DEFAULT_CAMERA
@@ -41,9 +44,10 @@ from ._args import add_far_model, add_far_verifier, parse_crop
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.description = ("Benchmark per-frame stages on real-size frames (warm-up excluded); `table` adds mAP on real "
                      "validation frames per model and input setting (the thesis's runtime table).")
-    p.add_argument("target", choices=["adapter", "pipeline", "table", "tracker"],
+    p.add_argument("target", choices=["adapter", "pipeline", "table", "tracker", "report"],
                    help="what to benchmark: adapter, pipeline, table (the runtime table: bench + mAP per model and input "
-                        "setting), or tracker (the cone tracker's update per frame on a simulated drive)")
+                        "setting), tracker (the cone tracker's update per frame on a simulated drive), or report (the "
+                        "defaults' figures, one table per topic, written into docs/benchmarks.md)")
     p.add_argument("--frames", type=int, default=300, help="timed frames (>= 200 recommended; default %(default)s)")
     p.add_argument("--warmup", type=int, default=20, help="untimed warm-up frames (default %(default)s)")
     p.add_argument("--calib", default=DEFAULT_CAMERA, help="calibration (crop, downscale, image size); default %(default)s")
@@ -102,9 +106,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="pipeline: run it this many times, each in a fresh process (this machine's speed varies "
                         "between processes), and report the spread: median range, each run's p99 / median, "
                         "how many runs kept p99 within 1.5x the median (default %(default)s)")
+    r = p.add_argument_group("report", "bench report: runs the commands behind each table of docs/benchmarks.md")
+    r.add_argument("--topics", default="all", help=f"report: topics, comma-separated, of {', '.join(TOPICS)} (default all)")
+    r.add_argument("--quick", action="store_true", help="report: fewer frames, shorter and fewer drives (minutes, not an hour)")
+    r.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"), help="report: the document (default %(default)s)")
+    r.add_argument("--work", type=Path, default=Path("runs/bench_report"), help="report: scratch folder (default %(default)s)")
     t = p.add_argument_group("table", "bench table: for each model and input setting, bench pipeline + detect + eval on real frames")
     t.add_argument("--models", default=None, help="table: model files, comma-separated (default: the shipped default model)")
-    t.add_argument("--val", type=Path, default=None, help="table: YOLO folder (images/, labels/) of real validation frames")
+    t.add_argument("--val", type=Path, default=None, help="table, report: YOLO folder (images/, labels/) of real validation "
+                                                           "frames (report's default: data/real_val_1080)")
     t.add_argument("--gt-names", default=None, help="table: class names of --val in id order, comma-separated (as eval --gt-names)")
     t.add_argument("--band", type=parse_crop, default=None, metavar="V0,V1[,U0,U1]",
                    help="table: the band of the --val frames (their camera is not the calibration's), as detect --crop")

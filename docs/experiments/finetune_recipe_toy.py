@@ -15,20 +15,30 @@ from cone_perception.model import ConeYOLO, model_config
 from cone_perception.model.loss import DetectionLoss
 from cone_perception.model.pretrained import load_imagenet
 from cone_perception.train.trainer import TrainConfig, build_optimizer, set_backbone_mode
-torch.set_num_threads(1)
-train=[_cone_batch(100+k,8) for k in range(6)]; held=_cone_batch(999,16)
-variants={'plain':{}, 'backbone_lr 0.1':{'backbone_lr':0.1}, 'backbone_lr 0.3':{'backbone_lr':0.3}, 'freeze_bn':{'freeze_bn':True}, 'frozen first 8 steps':{'freeze_backbone':1}}
-steps, per_epoch = 24, 8
-for seed in (0,1):
-  for name,kw in variants.items():
-    torch.manual_seed(seed)
-    m=ConeYOLO(model_config('mobilenet_v2-p')); load_imagenet(m.backbone)
-    cfg=TrainConfig(data='',out='',**kw)
-    crit=DetectionLoss(m.cfg.num_classes,m.cfg.reg_max,m.strides); opt=build_optimizer(m,cfg)
-    for s in range(steps):
-        m.train(); set_backbone_mode(m,cfg,s//per_epoch)
-        for g in opt.param_groups: g['lr']=2e-3*g.get('lr_mult',1.0)
-        x,t=train[s%6]; loss,_=crit(m(x),t); opt.zero_grad(); loss.backward(); opt.step()
-    m.train(); set_backbone_mode(m,cfg,steps//per_epoch)  # frozen BN stays frozen when measured
-    with torch.no_grad(): vl=crit(m.forward_raw(held[0]),held[1])[0].item()/16
-    print(seed, name, round(vl,3), flush=True)
+
+
+def main() -> None:
+    torch.set_num_threads(1)
+    train=[_cone_batch(100+k,8) for k in range(6)]; held=_cone_batch(999,16)
+    variants={'plain':{}, 'backbone_lr 0.1':{'backbone_lr':0.1}, 'backbone_lr 0.3':{'backbone_lr':0.3}, 'freeze_bn':{'freeze_bn':True}, 'frozen first 8 steps':{'freeze_backbone':1}}
+    steps, per_epoch = 24, 8
+    for seed in (0,1):
+      for name,kw in variants.items():
+        torch.manual_seed(seed)
+        m=ConeYOLO(model_config('mobilenet_v2-p')); load_imagenet(m.backbone)
+        cfg=TrainConfig(data='',out='',**kw)
+        crit=DetectionLoss(m.cfg.num_classes,m.cfg.reg_max,m.strides); opt=build_optimizer(m,cfg)
+        for s in range(steps):
+            m.train(); set_backbone_mode(m,cfg,s//per_epoch)
+            for g in opt.param_groups: g['lr']=2e-3*g.get('lr_mult',1.0)
+            x,t=train[s%6]; loss,_=crit(m(x),t); opt.zero_grad(); loss.backward(); opt.step()
+        m.train(); set_backbone_mode(m,cfg,steps//per_epoch)  # frozen BN stays frozen when measured
+        with torch.no_grad(): vl=crit(m.forward_raw(held[0]),held[1])[0].item()/16
+        print(seed, name, round(vl,3), flush=True)
+
+
+if __name__ == "__main__":
+    if len(sys.argv) > 1:  # -h, --help, or anything: it takes no arguments
+        print(__doc__)
+        sys.exit(0)
+    main()
