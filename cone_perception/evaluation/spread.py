@@ -34,20 +34,27 @@ BANDS: tuple[tuple[str, str], ...] = tuple((name, name.removesuffix(" m").replac
 @dataclass(frozen=True)
 class Figure:
     """One column of the suite: ``key`` in a row, ``label`` in the tables, ``higher_better`` (recall) or not (false
-    cones, errors), ``table``: which printed table and panel of the picture it belongs to."""
+    cones, errors), ``table``: which printed table it belongs to, ``panel``: which panel of the picture (its table's
+    where empty)."""
 
     key: str
     label: str
     higher_better: bool
     table: str
+    panel: str = ""
+
+    @property
+    def where(self) -> str:
+        """The picture's panel."""
+        return self.panel or self.table
 
 
 #: The suite's figures per drive, in the order of its tables.
 FIGURES: tuple[Figure, ...] = (
     *(Figure(f"recall_{k}", f"{n}", True, "/cones recall") for n, k in BANDS),
-    Figure("false_per_frame", "false/frame", False, "/cones recall"),
+    Figure("false_per_frame", "false/frame", False, "/cones recall", "false cones per frame within 40 m"),
     *(Figure(f"tracked_recall_{k}", f"{n}", True, "/cones/tracked recall") for n, k in BANDS),
-    Figure("tracked_false_per_frame", "false/frame", False, "/cones/tracked recall"),
+    Figure("tracked_false_per_frame", "false/frame", False, "/cones/tracked recall", "false cones per frame within 40 m"),
     *(Figure(f"err_att_{k}", f"att {n}", False, "median position error (m)") for n, k in BANDS),
     *(Figure(f"err_fixed_{k}", f"fixed {n}", False, "median position error (m)") for n, k in BANDS),
 )
@@ -149,14 +156,15 @@ def write_json(path: Path, report: dict) -> Path:
 
 def spread_plot(path: Path, rows: list[dict], dist: dict[str, dict], title: str = "",
                 figures: tuple[Figure, ...] = FIGURES) -> Path:
-    """PNG: one panel per table, per figure a box over the drives with each drive a dot (the worst named)."""
+    """PNG: one panel per :attr:`Figure.where`, per figure a box over the drives with each drive a dot (the worst
+    named)."""
     plt = pyplot()
     good = [r for r in rows if r.get("status") == OK]
-    tables = list(dict.fromkeys(f.table for f in figures))
-    fig, axes = plt.subplots(len(tables), 1, figsize=(12, 3.6 * len(tables)), squeeze=False)
+    panels = list(dict.fromkeys(f.where for f in figures))
+    fig, axes = plt.subplots(len(panels), 1, figsize=(12, 3.3 * len(panels)), squeeze=False)
     rng = np.random.default_rng(0)  # the dots' sideways jitter only
-    for ax, table in zip(axes[:, 0], tables):
-        cols = [f for f in figures if f.table == table]
+    for ax, panel in zip(axes[:, 0], panels):
+        cols = [f for f in figures if f.where == panel]
         data = [np.array([r.get(f.key, math.nan) for r in good], np.float64) for f in cols]
         finite = [d[np.isfinite(d)] for d in data]
         ax.boxplot([d if d.size else [math.nan] for d in finite], positions=range(len(cols)), widths=0.5,
@@ -168,8 +176,9 @@ def spread_plot(path: Path, rows: list[dict], dist: dict[str, dict], title: str 
             if wd is not None:
                 ax.annotate(wd, (k, dist[f.key]["worst"]), fontsize=6, xytext=(4, 0), textcoords="offset points")
         ax.set_xticks(range(len(cols)))
-        ax.set_xticklabels([f.label for f in cols], fontsize=8)
-        ax.set_title(f"{table} over {len(good)} drives", fontsize=10)
+        # a panel of its own gathers one figure of several tables: named by its table (/cones, /cones/tracked)
+        ax.set_xticklabels([f.table.split()[0] if f.panel else f.label for f in cols], fontsize=8)
+        ax.set_title(f"{panel} over {len(good)} drives", fontsize=10)
         ax.grid(alpha=0.3, axis="y")
     if title:
         fig.suptitle(title, fontsize=10)

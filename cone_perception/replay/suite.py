@@ -37,7 +37,8 @@ from ..detector import DEFAULT_BACKEND, RUNTIME_THREADS
 from ..detector.farband import FAR_ROWS_AUTO, band_rows_for
 from ..detector.verifier import load_verifier
 from ..errors import ConfigError
-from ..evaluation import GT_MIN_VISIBLE, LocalisationReport
+from ..evaluation import GT_MIN_VISIBLE, LocalisationReport, format_localisation
+from ..evaluation.attitude import format_attitude_report
 from ..evaluation.report import MIN_HEIGHT_PX, evaluate_predictions, write_report
 from ..evaluation.spread import (
     FAILED, FIGURES, MISSING, OK, REAL_FIGURES, distribution, drive_row, format_real, format_tables, real_row,
@@ -53,7 +54,7 @@ from .detect import run_detect
 from .offline import offline_replay
 from .run import offline_pipeline
 from .suite_drives import DRIVES, FPS, QUICK, REAL_SETS, SECONDS, DriveSpec, RealSet, drive_seed, tuning_drives
-from .tracking import ReplayTracking, drive_truth_beside
+from .tracking import ReplayTracking, drive_truth_beside, format_replay_tracking
 
 
 @dataclass
@@ -121,7 +122,7 @@ def render(drive: DriveSpec, cache: Path, seconds: float = SECONDS, fps: float =
     bag, meta = cache / drive.name, cache / f"{drive.name}.spec.json"
     if bag.is_dir() and meta.is_file():
         kept = json.loads(meta.read_text(encoding="utf-8"))
-        if kept.get("spec") == spec:
+        if {**kept.get("spec", {}), "note": drive.note} == spec:  # the note renders nothing
             return bag, int(kept["seed"])
     for p in (meta, *bag_side_paths(bag)):  # another specification, or a render cut short: render again
         p.unlink(missing_ok=True)
@@ -157,6 +158,12 @@ def run_drive(bag: Path, settings: Settings) -> dict:
     if not res.localisation or not res.localisation["frames"]:
         raise RuntimeError(f"no frame went through ({res.stats.summary()})")
     fixed = fixed_h_localisation(res.boxes, read_ground_truth(bag, GT_TOPIC), calib, settings)
+    print(f"{res.stats.ok} frames in {res.wall_s:.1f} s; /cones (attitude {res.attitude_mode}):")  # the drive's log
+    print(format_localisation(res.localisation))
+    print(format_attitude_report(res.localisation["attitude"]))
+    print(format_replay_tracking(res.tracking))
+    print("the same boxes through the fixed H:")
+    print(format_localisation(fixed))
     att = res.localisation["attitude"]
     return {"frames": res.localisation["frames"], "frames_dropped": sum(res.stats.dropped.values()),
             "attitude": res.attitude_mode, "pitch_err_deg": att.get("median_abs_err_pitch_deg"),

@@ -164,7 +164,7 @@ class RealSet:
 
     name: str
     path: str
-    gt_names: str
+    gt_names: str | None  # the labels' class names in order (None: from the set's data.yaml)
     crop: tuple[int, int]
     downscale: int
     far_rows: str
