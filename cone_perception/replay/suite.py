@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import shutil
 import sys
 import time
 import traceback
@@ -32,7 +31,7 @@ from tqdm import tqdm
 
 from ..attitude import FIXED
 from ..data.bags import read_ground_truth, read_twists
-from ..data.outfiles import print_written
+from ..data.outfiles import print_written, remove_bag
 from ..detector import DEFAULT_BACKEND, RUNTIME_THREADS
 from ..detector.farband import FAR_ROWS_AUTO, band_rows_for
 from ..detector.verifier import load_verifier
@@ -91,7 +90,8 @@ def check_settings(settings: Settings) -> None:
     check_options({"--min-height-ratio": ("min_height_ratio", settings.min_height_ratio),
                    "--one-ray-range": ("one_ray_range_m", settings.one_ray_range),
                    "--far-every": ("far_every", settings.far_every), "--far-tiles": ("far_tiles", settings.far_tiles)})
-    for opt, path in (("--model", settings.model), ("--far-model", settings.far_model if far_model_given(settings.far_model) else None)):
+    far_file = settings.far_model if far_model_given(settings.far_model) else None  # not auto / band
+    for opt, path in (("--model", settings.model), ("--far-model", far_file)):
         if path is not None and not Path(path).is_file():
             raise ConfigError(path, None, f"{opt}: model file not found")
     load_verifier(settings.far_verifier, "--far-verifier")  # a missing or bad verifier file: refused here
@@ -127,7 +127,7 @@ def render(drive: DriveSpec, cache: Path, seconds: float = SECONDS, fps: float =
     for p in (meta, *bag_side_paths(bag)):  # another specification, or a render cut short: render again
         p.unlink(missing_ok=True)
     if bag.exists():
-        shutil.rmtree(bag)
+        remove_bag(bag)  # a rosbag2 folder only: anything else there is refused, not removed
     cache.mkdir(parents=True, exist_ok=True)
     seed = drive_seed(drive)
     write_scene_bag(drive.config(seed), seconds, fps, bag, drive.compressed, drive.speed_mps, drive.track, progress=False)
@@ -236,10 +236,11 @@ def run_suite(drives: tuple[DriveSpec, ...], real_sets: tuple[RealSet, ...], set
     keys = ["drive", "status", "seed", "frames", "frames_dropped", "attitude", "pitch_err_deg", "wall_s"]
     files = [write_json(out / "suite.json", report),
              write_csv(out / "drives.csv", rows, keys + [f.key for f in FIGURES] + ["what", "error"]),
-             write_csv(out / "real.csv", real_rows, ["drive", "status", "images"] + [k for k, _ in REAL_FIGURES] + ["wall_s", "error"])]
+             write_csv(out / "real.csv", real_rows, ["drive", "status", "images", *(k for k, _ in REAL_FIGURES),
+                                                     "wall_s", "error"])]
     if rows:
-        files.append(spread_plot(out / "spread.png", rows, dist, f"validate: {sum(r['status'] == OK for r in rows)} drives, "
-                                                                 f"attitude {settings.attitude}"))
+        n_ok = sum(r["status"] == OK for r in rows)
+        files.append(spread_plot(out / "spread.png", rows, dist, f"validate: {n_ok} drives, attitude {settings.attitude}"))
     print_written(files, "validate")
     for name in missing:
         print(f"validate: real set {name} is missing (see its row); the rest ran", file=sys.stderr)
