@@ -98,6 +98,14 @@ def check_settings(settings: Settings) -> None:
     load_verifier(settings.far_verifier, "--far-verifier")  # a missing or bad verifier file: refused here
 
 
+def suite_list(drives, real) -> str:
+    """The drives and real sets, one line each (``validate --list``)."""
+    lines = [f"{d.name:<22} seed {d.seed:<7} {d.describe()}  ({d.note})" for d in drives]
+    lines += [f"{r.name:<22} real   {r.path}: band rows {r.crop[0]}-{r.crop[1]} / {r.downscale}, far rows {r.far_rows}"
+              for r in real]
+    return "\n".join(lines)
+
+
 def select(names: str | None, quick: bool, tuning: bool) -> tuple[tuple[DriveSpec, ...], tuple[RealSet, ...]]:
     """The drives and real sets to run: all, ``--quick``'s handful, or ``--drives NAME,...`` (drive or real-set names;
     with ``--tuning`` the drives' tuning twins, named ``tune-NAME`` or by the judging name)."""
