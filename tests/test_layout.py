@@ -102,7 +102,7 @@ LAYERS: list[tuple[str, set[str]]] = [
     ("data", {"data"}),
     ("evaluation, calibration, synthesis", {"evaluation", "calibrate", "synth"}),
     ("training, replay, benchmarks, ROS players", {"train", "replay", "bench", "nodes.live_replay", "nodes.fuzz",
-                                                   "nodes.soak"}),
+                                                   "nodes.soak", "nodes.startup"}),
     ("commands", {"commands"}),
     ("cli", {"cli"}),
 ]

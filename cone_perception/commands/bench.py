@@ -7,6 +7,7 @@
                                  [--repeat N] [--json]
   cone-perception bench tracker [--frames 300] [--rows 8] [--calib CAL] [--json]
   cone-perception bench table --models A.pt[,B.pt] --val DIR --gt-names A,B,.. --band V0,V1 --out DIR [--frames N]
+  cone-perception bench startup [--starts 10] [--cold-starts 3] [--calib CAL] [--model M] [--json]
 
 ``adapter``: 1920x1080 frames (size from the calibration) in the given encoding -> cropped,
 downscaled BGR band, exactly as the ``driver_adapter`` node does it.
@@ -17,6 +18,9 @@ into PointCloud2 messages, as the ``pipeline`` node runs them; ``debug_image`` i
 ``debug_image_hz`` a second). ``--input`` replaces the
 calibration's crop and downscale by one of the runtime-table settings (:func:`cone_perception.bench.table.crop_for_setting`).
 ``table``: the runtime table (see ``bench/table.py``).
+``startup``: the ``pipeline`` node started as ``ros2 run`` does under a 30 Hz rendered camera: seconds from exec to
+ready and to the first ``/cones``, cold (no ONNX cache), warm, and after ``kill -9``; its peak RSS
+(``nodes/startup.py``, figures ``bench/startup.py``; docs/robustness.md).
 ``tracker``: the cone tracker's update per frame (ego-motion from the cones, association, Kalman
 update) on a simulated drive through rows of cones, about 100 tracks with the defaults.
 Warm-up frames are excluded; median, p90, p99, min-max (noise) and frames/s (from the median
@@ -41,9 +45,10 @@ from ._args import add_far_model, add_far_verifier, parse_crop
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.description = ("Benchmark per-frame stages on real-size frames (warm-up excluded); `table` adds mAP on real "
                      "validation frames per model and input setting (the thesis's runtime table).")
-    p.add_argument("target", choices=["adapter", "pipeline", "table", "tracker"],
+    p.add_argument("target", choices=["adapter", "pipeline", "table", "tracker", "startup"],
                    help="what to benchmark: adapter, pipeline, table (the runtime table: bench + mAP per model and input "
-                        "setting), or tracker (the cone tracker's update per frame on a simulated drive)")
+                        "setting), tracker (the cone tracker's update per frame on a simulated drive), or startup (the "
+                        "pipeline node from exec to ready and to its first /cones, cold, warm and after kill -9)")
     p.add_argument("--frames", type=int, default=300, help="timed frames (>= 200 recommended; default %(default)s)")
     p.add_argument("--warmup", type=int, default=20, help="untimed warm-up frames (default %(default)s)")
     p.add_argument("--calib", default=DEFAULT_CAMERA, help="calibration (crop, downscale, image size); default %(default)s")
@@ -96,6 +101,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rows", type=int, default=8,
                    help="tracker: rows of cones beside the simulated drive, 2 m apart along it (default %(default)s: "
                         "about 100 tracks, 50 cones a frame with the default calibration)")
+    p.add_argument("--starts", type=int, default=10,
+                   help="startup: warm starts, and as many restarts right after a kill -9 (default %(default)s)")
+    p.add_argument("--cold-starts", type=int, default=3,
+                   help="startup: starts with the ONNX cache emptied before each (default %(default)s)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (--json implies it for pipeline)")
     p.add_argument("--repeat", type=int, default=1,
@@ -116,4 +125,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.target == "startup":
+        from ..nodes.startup import run_startup  # rclpy and the localhost DDS environment: on use only
+
+        return run_startup(args)
     return run_bench(args)
