@@ -45,6 +45,11 @@ def models_dir() -> Path:
 
 #: File name of the shipped default model under ``models/``.
 DEFAULT_MODEL_NAME = "cone_detector.pt"
+#: What an error about a missing or unreadable model file advises.
+RESTORE_HINT = (
+    "restore the shipped file with `git checkout models/` or train one with `cone-perception train` "
+    "(see README)"
+)
 
 
 def default_model_path() -> Path:

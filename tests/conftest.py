@@ -1,8 +1,11 @@
-"""Shared test set-up: DDS settings and a ROS domain of this test run's own."""
+"""Shared test set-up: DDS settings, a ROS domain of this test run's own, and a user cache folder of its own."""
 
 from __future__ import annotations
 
+import atexit
 import os
+import shutil
+import tempfile
 
 from cone_perception import ros_env
 
@@ -11,3 +14,6 @@ from cone_perception import ros_env
 TEST_DOMAINS = range(100, 200)
 os.environ.setdefault("ROS_DOMAIN_ID", str(TEST_DOMAINS[os.getpid() % len(TEST_DOMAINS)]))
 ros_env.use_localhost()  # tests never send traffic off this computer (nor do the node processes they start)
+# the ONNX cache (detector/onnx_cache.py) and TensorRT engines of this run, its node processes too: never the user's
+os.environ["XDG_CACHE_HOME"] = tempfile.mkdtemp(prefix="cone_perception_test_cache_")
+atexit.register(shutil.rmtree, os.environ["XDG_CACHE_HOME"], True)

@@ -72,7 +72,7 @@ def test_onnx_pool_threads_do_not_spin_and_the_boxes_stay(trained):
     assert n_pairs >= len(images)
 
 
-def test_auto_backend_picks_onnx_runtime_on_the_cpu_and_keeps_the_boxes(trained, monkeypatch):
+def test_auto_backend_picks_onnx_runtime_on_the_cpu_and_keeps_the_boxes(trained, monkeypatch, tmp_path):
     """``auto`` (the default): ONNX Runtime for a checkpoint on the CPU, with eager torch's boxes;
     torch where ONNX Runtime cannot serve (bf16, a GPU, not installed); an exported file its own."""
     ckpt, images = trained
@@ -89,6 +89,7 @@ def test_auto_backend_picks_onnx_runtime_on_the_cpu_and_keeps_the_boxes(trained,
     modules = __import__("sys").modules
     with monkeypatch.context() as m:  # onnx missing: torch's exporter cannot build the ONNX network
         m.setitem(modules, "onnx", None)
+        m.setenv("XDG_CACHE_HOME", str(tmp_path))  # an empty ONNX cache: the graph must be exported
         assert Detector.load(ckpt).backend == "torch"
         with pytest.raises(ConfigError, match="pip install onnx"):
             Detector.load(ckpt, backend="onnx")
@@ -127,11 +128,11 @@ def test_bf16_gives_the_fp32_boxes_and_is_refused_where_it_does_not_apply(traine
 def test_bf16_on_a_cpu_without_native_bf16_says_it_is_slower(trained, monkeypatch, caplog):
     """bf16 stays allowed where the CPU emulates it (same boxes), with a warning that fp32 is faster there;
     a cap on oneDNN's instruction set (ONEDNN_MAX_CPU_ISA=AVX512_CORE) counts as such a CPU."""
-    from cone_perception.detector import backends, detector
+    from cone_perception.detector import torch_backend
 
     ckpt, _ = trained
     monkeypatch.setenv("ONEDNN_MAX_CPU_ISA", "avx512_core")
-    assert not backends.native_bf16()
+    assert not torch_backend.native_bf16()
     with caplog.at_level(logging.WARNING):
         assert Detector.load(ckpt, backend="torch", bf16=True).precision == "bf16"
         Detector.load(ckpt, backend="torch")
@@ -139,7 +140,7 @@ def test_bf16_on_a_cpu_without_native_bf16_says_it_is_slower(trained, monkeypatc
         "bf16: this CPU has no native bfloat16 (AVX512-BF16 or AMX), so autocast emulates it and runs slower than "
         "fp32; leave bf16 off here (the boxes are the same)"]
     caplog.clear()
-    monkeypatch.setattr(detector, "native_bf16", lambda: True)
+    monkeypatch.setattr(torch_backend, "native_bf16", lambda: True)
     with caplog.at_level(logging.WARNING):
         Detector.load(ckpt, backend="torch", bf16=True)
     assert not [r for r in caplog.records if "bf16" in r.message]

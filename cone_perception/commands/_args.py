@@ -11,10 +11,11 @@ from ..params import DEFAULT_CONF, PARAMS
 from ..words import parse_size
 
 
-def size_arg(text: str) -> tuple[int, int]:
-    """argparse type of a model input ``WxH`` (``--imgsz``); a single number means a square."""
+def size_arg(text: str, option: str = "--imgsz", square: bool = True) -> tuple[int, int]:
+    """argparse type of a size ``WxH`` (``--imgsz``; with ``square`` a single number means a square; another
+    ``option``: ``functools.partial``)."""
     try:
-        return parse_size(text, "--imgsz", "WxH (e.g. 960x288)", square=True)
+        return parse_size(text, option, "WxH (e.g. 960x288)", square=square)
     except ConfigError as e:
         raise argparse.ArgumentTypeError(e.message) from None
 

@@ -1,30 +1,8 @@
-"""``cone-perception bench``: per-stage timings on real-size frames, through the code the nodes run.
-
-  cone-perception bench adapter  [--frames 300] [--calib CAL] [--encoding yuv422_yuy2] [--json]
-  cone-perception bench pipeline [--frames 300] [--calib CAL] [--model M] [--backend B] [--threads N]
-                                 [--input full|half|crop|crop_half] [--far-rows V0,V1 [--sequential]]
-                                 [--band-rows crop|auto|V0,V1]
-                                 [--repeat N] [--json]
-  cone-perception bench tracker [--frames 300] [--rows 8] [--calib CAL] [--json]
-  cone-perception bench table --models A.pt[,B.pt] --val DIR --gt-names A,B,.. --band V0,V1 --out DIR [--frames N]
-  cone-perception bench report [--topics speed,real,...|all] [--quick] [--doc docs/benchmarks.md] [--val DIR]
-
-``adapter``: 1920x1080 frames (size from the calibration) in the given encoding -> cropped,
-downscaled BGR band, exactly as the ``driver_adapter`` node does it.
-``pipeline``: rendered 1920x1080 YUYV scenes with cones through the fused pipeline (adapter,
-model input, forward, decode + NMS, mapping) and the packing of ``cone_boxes`` and ``/cones``
-into PointCloud2 messages, as the ``pipeline`` node runs them; ``debug_image`` is the cost of one
-``image_cropped/debug`` image (drawn and copied; outside end_to_end: opt-in, at most
-``debug_image_hz`` a second). ``--input`` replaces the
-calibration's crop and downscale by one of the runtime-table settings (:func:`cone_perception.bench.table.crop_for_setting`).
-``table``: the runtime table (see ``bench/table.py``).
-``report``: the defaults' figures today, one table per topic, into docs/benchmarks.md (``bench/report.py``).
-``tracker``: the cone tracker's update per frame (ego-motion from the cones, association, Kalman
-update) on a simulated drive through rows of cones, about 100 tracks with the defaults.
-Warm-up frames are excluded; median, p90, p99, min-max (noise) and frames/s (from the median
-end-to-end time) are reported, plus peak RSS. ``pipeline --repeat N`` runs it N times, each in a
-fresh process, and reports the spread across runs (:func:`timing.summarize_runs`).
-"""
+"""``cone-perception bench``: per-stage timings on real-size frames, through the code the nodes run (``bench/``):
+``adapter``, ``pipeline`` (the fused stages as the ``pipeline`` node runs them; ``--repeat N``: N fresh processes),
+``tracker``, ``table`` (the runtime table), ``startup`` (the node from exec to its first ``/cones``, cold, warm and
+after ``kill -9``: ``rostools/startup.py``, docs/robustness.md), ``report`` (docs/benchmarks.md's tables). Warm-up
+frames excluded; median, p90, p99, min-max and peak RSS."""
 
 from __future__ import annotations
 
@@ -44,10 +22,11 @@ from ._args import add_far_model, add_far_verifier, parse_crop
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.description = ("Benchmark per-frame stages on real-size frames (warm-up excluded); `table` adds mAP on real "
                      "validation frames per model and input setting (the thesis's runtime table).")
-    p.add_argument("target", choices=["adapter", "pipeline", "table", "tracker", "report"],
+    p.add_argument("target", choices=["adapter", "pipeline", "table", "tracker", "startup", "report"],
                    help="what to benchmark: adapter, pipeline, table (the runtime table: bench + mAP per model and input "
-                        "setting), tracker (the cone tracker's update per frame on a simulated drive), or report (the "
-                        "defaults' figures, one table per topic, written into docs/benchmarks.md)")
+                        "setting), tracker (the cone tracker's update per frame on a simulated drive), startup (the "
+                        "pipeline node from exec to ready and to its first /cones, cold, warm and after kill -9), or "
+                        "report (the defaults' figures, one table per topic, written into docs/benchmarks.md)")
     p.add_argument("--frames", type=int, default=300, help="timed frames (>= 200 recommended; default %(default)s)")
     p.add_argument("--warmup", type=int, default=20, help="untimed warm-up frames (default %(default)s)")
     p.add_argument("--calib", default=DEFAULT_CAMERA, help="calibration (crop, downscale, image size); default %(default)s")
@@ -100,6 +79,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rows", type=int, default=8,
                    help="tracker: rows of cones beside the simulated drive, 2 m apart along it (default %(default)s: "
                         "about 100 tracks, 50 cones a frame with the default calibration)")
+    p.add_argument("--starts", type=int, default=10,
+                   help="startup: warm starts, and as many restarts right after a kill -9 (default %(default)s)")
+    p.add_argument("--cold-starts", type=int, default=3,
+                   help="startup: starts with the ONNX cache emptied before each (default %(default)s)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (--json implies it for pipeline)")
     p.add_argument("--repeat", type=int, default=1,
@@ -126,4 +109,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.target == "startup":
+        from ..rostools.startup import run_startup  # rclpy and the localhost DDS environment: on use only
+
+        return run_startup(args)
     return run_bench(args)

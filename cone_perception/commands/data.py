@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import argparse
+from functools import partial
 
 from ..data.run import run_data
+from ._args import size_arg
 
 
 def _aspect(text: str) -> tuple[float, float]:
@@ -15,14 +17,6 @@ def _aspect(text: str) -> tuple[float, float]:
     if a <= 0 or b <= 0:
         raise argparse.ArgumentTypeError(f"expected positive W:H, got {text!r}")
     return a, b
-
-
-def _wh(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(f"expected WxH like 960x128, got {text!r}") from e
-    return w, h
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -52,7 +46,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     c.add_argument("data", help="data YAML (Ultralytics form, e.g. synth dataset's data.yaml, or our mixing form)")
     c.add_argument("out", help="output folder, new or empty (images/, labels/, data.yaml)")
     c.add_argument("--split", choices=("train", "val"), default="train", help="which split of the YAML to cut (default train)")
-    c.add_argument("--size", type=_wh, default=(960, 128),
+    c.add_argument("--size", type=partial(size_arg, option="--size", square=False), default=(960, 128),
                    help="window WxH px at the image's own scale; narrower or lower frames give their whole width or "
                         "height (default 960x128)")
     c.add_argument("--min-height", type=float, default=4.0, help="smallest cone box (px) a window is cut around (default 4)")

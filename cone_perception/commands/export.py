@@ -20,8 +20,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         f"and checked on real frames: at least {MIN_MATCHED:.0%} of the float model's boxes must have an "
         f"int8 box of the same class (IoU >= 0.5) and the pairs' mean IoU must be >= {MIN_MEAN_IOU}."
     )
-    p.add_argument("--model", required=True, help="checkpoint (.pt) written by `cone-perception train`")
-    p.add_argument("--format", choices=("torchscript", "onnx"), required=True, help="output format")
+    p.add_argument("--model", default=None, help="checkpoint (.pt) written by `cone-perception train` (with --cache: "
+                                                 "the node's model parameter, default the shipped one)")
+    p.add_argument("--format", choices=("torchscript", "onnx"), default=None, help="output format (needed but for --cache)")
+    p.add_argument("--cache", action="store_true",
+                   help="instead: write the ONNX cache (~/.cache/cone_perception/onnx, docs/robustness.md) with every "
+                        "graph the pipeline node loads with the --param values, so that it starts without torch; "
+                        "run it before driving, after a model changes")
+    p.add_argument("--param", action="append", default=[], metavar="NAME:=VALUE",
+                   help="with --cache: a pipeline node parameter as launched (repeatable), e.g. calibration:=CAM")
     p.add_argument("--imgsz", type=size_arg, default=None, help="input WxH px (default: the checkpoint's)")
     p.add_argument("--out", default=None, help="output file (default: next to the checkpoint, .torchscript / .onnx)")
     p.add_argument("--force", action="store_true", help="overwrite existing output files (the model and its sidecar <file>.yaml; with --int8 those of the int8 file too)")

@@ -2,7 +2,9 @@
 
 * :mod:`.detector`: :class:`Detector` (load a model file for a backend, run it on a band or an image) and
   :func:`detect_one` (one full image as ``detect`` runs it);
-* :mod:`.backends`: eager torch, TorchScript and ONNX Runtime runners, ``auto``'s choice (:func:`resolve_backend`);
+* :mod:`.backends`: ONNX Runtime's runner and sessions, ``auto``'s choice (:func:`resolve_backend`); the eager torch
+  and TorchScript runners: :mod:`.torch_backend` (torch, imported on use);
+* :mod:`.onnx_cache`: the ONNX graphs of the ``.pt`` models, cached, so a warm start on ONNX Runtime imports no torch;
 * :mod:`.preprocess`: letterbox and the network input blob;
 * :mod:`.model_files`: the default model's path, sidecars and embedded class names of exported models;
 * :mod:`.export`: export to TorchScript / ONNX with the description embedded, and the check against eager;

@@ -1,18 +1,21 @@
 """The backends a :class:`~cone_perception.detector.Detector` runs on: eager torch, TorchScript, ONNX Runtime.
-Each runner takes (1, 3, H, W) float32 RGB 0..1 and returns (4 + nc, N) float32 numpy."""
+Each runner takes (1, 3, H, W) float32 RGB 0..1 and returns (4 + nc, N) float32 numpy. This module imports no
+torch (the ONNX Runtime path of the nodes starts without it, issue 43); the torch runners live in
+:mod:`.torch_backend`."""
 
 from __future__ import annotations
 
+import importlib.util
 import os
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
-import torch
 
 from ..errors import ConfigError
 
 BACKENDS = ("torch", "torchscript", "onnx")
+#: The ONNX opset the package exports to (``export``, the ONNX cache).
+ONNX_OPSET = 17
 #: What ``backend`` may be: a backend, or ``auto`` (:func:`resolve_backend`), the default everywhere.
 BACKEND_CHOICES = ("auto", *BACKENDS)
 
@@ -33,51 +36,17 @@ def resolve_backend(backend: str, path: str | Path | None = None, device: str = 
         return "torchscript"
     if device != "cpu" or bf16 or fp16:
         return "torch"
-    try:  # ONNX Runtime runs it; torch's exporter needs the onnx package to build it
-        import onnx  # noqa: F401
-        import onnxruntime  # noqa: F401
-    except ImportError:
-        return "torch"
-    return "onnx"
+    # ONNX Runtime runs it; torch's exporter needs the onnx package to build it (looked up, not imported: a start
+    # from the ONNX cache imports neither onnx nor torch)
+    return "onnx" if installed("onnx") and installed("onnxruntime") else "torch"
 
 
-#: oneDNN instruction-set caps (``ONEDNN_MAX_CPU_ISA``) without AVX512-BF16 or AMX: bfloat16 is emulated there
-ONEDNN_ISAS_WITHOUT_BF16 = ("SSE41", "AVX", "AVX2", "AVX2_VNNI", "AVX2_VNNI_2", "AVX512_CORE", "AVX512_CORE_VNNI")
-
-
-def native_bf16() -> bool:
-    """Whether this CPU computes bfloat16 natively (x86 AVX512-BF16 or AMX), so bf16 autocast pays. A cap on
-    oneDNN's instruction set below that (``ONEDNN_MAX_CPU_ISA``, or the older ``DNNL_MAX_CPU_ISA``, e.g.
-    ``AVX512_CORE`` to act as a CPU without it) counts as none: the convolutions then emulate bfloat16."""
-    cap = (os.environ.get("ONEDNN_MAX_CPU_ISA") or os.environ.get("DNNL_MAX_CPU_ISA") or "").strip().upper()
-    if cap in ONEDNN_ISAS_WITHOUT_BF16:
-        return False
-    cpu = getattr(torch, "cpu", None)
-    probes = ("_is_avx512_bf16_supported", "_is_amx_tile_supported")
+def installed(module: str) -> bool:
+    """Whether ``module`` can be imported here (found on the path; not imported)."""
     try:
-        return any(bool(getattr(cpu, n)()) for n in probes if hasattr(cpu, n))
-    except RuntimeError:
+        return importlib.util.find_spec(module) is not None
+    except (ImportError, ValueError):
         return False
-
-
-class TorchRunner:
-    """Eager torch or TorchScript: (1, 3, H, W) float32 RGB 0..1 -> (4 + nc, N) float32 numpy."""
-
-    def __init__(self, module: Callable, device: str, fp16: bool, channels_last: bool, bf16: bool = False):
-        self.module, self.device, self.fp16, self.channels_last = module, torch.device(device), fp16, channels_last
-        self.bf16 = bf16  # CPU bfloat16 autocast (weights stay fp32)
-
-    def __call__(self, blob: np.ndarray) -> np.ndarray:
-        x = torch.from_numpy(blob).to(self.device)
-        if self.channels_last:
-            x = x.contiguous(memory_format=torch.channels_last)
-        if self.fp16:
-            x = x.half()
-        with torch.inference_mode(), torch.autocast("cpu", dtype=torch.bfloat16, enabled=self.bf16):
-            y = self.module(x)
-        if isinstance(y, (list, tuple)):
-            y = y[0]
-        return y[0].float().cpu().numpy()
 
 
 class OrtRunner:
@@ -111,13 +80,20 @@ def ort_spinning(threads: int | None) -> bool:
 TRT_PROVIDER, CUDA_PROVIDER, CPU_PROVIDER = "TensorrtExecutionProvider", "CUDAExecutionProvider", "CPUExecutionProvider"
 
 
+def user_cache_dir() -> Path:
+    """This package's folder in the user's cache: ``$XDG_CACHE_HOME``, else ``~/.cache``, then ``cone_perception``
+    (the TensorRT engines: :func:`trt_cache_dir`; the ONNX graphs of the torch models:
+    :func:`~cone_perception.detector.onnx_cache.onnx_cache_dir`)."""
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "cone_perception"
+
+
 def trt_cache_dir() -> Path:
-    """Where ONNX Runtime's TensorRT provider keeps the engines it builds (``$XDG_CACHE_HOME``, else ``~/.cache``,
-    then ``cone_perception/tensorrt``): the first start with a model and input size builds one (minutes on a
+    """Where ONNX Runtime's TensorRT provider keeps the engines it builds (:func:`user_cache_dir` /
+    ``tensorrt``): the first start with a model and input size builds one (minutes on a
     Jetson), later starts load it. An engine holds for one GPU, TensorRT version and input size; ONNX Runtime
     keys its files by the model and builds anew where they do not match."""
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "cone_perception" / "tensorrt"
+    return user_cache_dir() / "tensorrt"
 
 
 def ort_providers(device: str, fp16: bool, available: list[str], source: str) -> list:

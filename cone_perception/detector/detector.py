@@ -8,7 +8,9 @@
 Model files:
 
 * our checkpoint (``*.pt``, see :mod:`.checkpoint`): any backend; TorchScript
-  and ONNX Runtime are built from it at load time for the checkpoint's input size;
+  is built from it at load time for the checkpoint's (or the band's) input size, ONNX Runtime's graph is
+  exported once and kept in the ONNX cache (:mod:`.onnx_cache`), so a start with the cache warm imports
+  no torch (the torch side: :mod:`.torch_backend`);
 * TorchScript (``*.torchscript``, ``*.ts``) or ONNX (``*.onnx``) exported by us or
   by other YOLO tools: output ``(1, 4 + nc, N)`` (cx, cy, w, h in input px, then
   class scores), RGB 0..1 NCHW input, with a YAML sidecar next to it
@@ -30,25 +32,29 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
-import torch
 
 from .. import records
 from ..adapter import crop_bgr, pin_opencv_threads
 from ..classes import CLASS_NAMES, class_map_from_names
 from ..crop import CropSpec
 from ..errors import ConfigError
-from ..model.checkpoint import RESTORE_HINT, Checkpoint, load_checkpoint
-from ..model.decode import postprocess
+from ..model.postprocess import postprocess
 from ..params import DEFAULT_BACKEND, DEFAULT_CONF, DEFAULT_IOU, DEFAULT_MAX_DET
 from ..records import boxes_from_arrays
-from .backends import (
-    BACKEND_CHOICES, OrtRunner, TorchRunner, native_bf16, onnx_input_size, ort_session, resolve_backend,
-)
-from .export import onnx_bytes, trace
+from ..resources import RESTORE_HINT
+from .backends import BACKEND_CHOICES, ONNX_OPSET, OrtRunner, onnx_input_size, ort_session, resolve_backend
 from .model_files import external_names, find_sidecar, sidecar_path
+from .onnx_cache import DETECTOR, ModelInfo, detector_params, detector_problem, load_graph
 from .preprocess import band_input_size, preprocess
 
 log = logging.getLogger(__name__)
+
+
+def _torch():
+    """:mod:`.torch_backend` (torch), imported where a backend or an export needs it, never on a warm ONNX start."""
+    import cone_perception.detector.torch_backend as torch_backend  # torch: heavy, absent from a warm ONNX start
+
+    return torch_backend
 
 
 class Detector:
@@ -134,12 +140,10 @@ class Detector:
         if backend not in BACKEND_CHOICES:
             raise ConfigError(src, "backend", f"unknown backend {backend!r}; choose one of {', '.join(BACKEND_CHOICES)}")
         backend = resolve_backend(backend, path, device, bf16=bf16, fp16=fp16)
-        if device.startswith("cuda") and backend != "onnx" and not torch.cuda.is_available():  # onnx: ort_providers
-            raise ConfigError(src, "device", f"device {device!r} requested but CUDA is not available to torch")
         if fp16 and not device.startswith("cuda"):
             raise ConfigError(src, "fp16", "fp16 needs a CUDA device (CPU half precision is slower than fp32)")
-        if threads:
-            torch.set_num_threads(int(threads))
+        if backend != "onnx":  # onnx: a GPU it cannot reach is ort_providers' error
+            _torch().prepare_torch(device, threads, src)
         pin_opencv_threads()
         if not path.is_file():
             raise ConfigError(src, None, f"model file not found; {RESTORE_HINT}")
@@ -151,10 +155,26 @@ class Detector:
             det = cls._load_onnx(path, backend, device, imgsz, threads, kw, fp16)
         elif suffix in (".torchscript", ".ts"):
             det = cls._load_torchscript(path, backend, device, fp16, imgsz, kw)
+        elif backend == "onnx" and not bf16:
+            return cls._load_checkpoint_onnx(path, device, fp16, imgsz, threads, kw)
         else:
-            return cls.from_checkpoint(load_checkpoint(path), backend, device, fp16, imgsz=imgsz, threads=threads, bf16=bf16, **kw)
+            ck = _torch().load_checkpoint(path)
+            return cls.from_checkpoint(ck, backend, device, fp16, imgsz=imgsz, threads=threads, bf16=bf16, **kw)
         det._check_output_shape()
         return det
+
+    @classmethod
+    def _load_checkpoint_onnx(cls, path: Path, device: str, fp16: bool, imgsz: tuple[int, int] | None,
+                              threads: int | None, kw: dict) -> "Detector":
+        """A checkpoint on ONNX Runtime: its graph for ``imgsz`` from the ONNX cache (:func:`~.onnx_cache.load_graph`:
+        exported with torch and cached where missing or not verifying), the class names and input size with it."""
+        src = str(path)
+        sess, info, _ = load_graph(path, DETECTOR, detector_params(imgsz, ONNX_OPSET),
+                                   lambda: _torch().checkpoint_graph(path, imgsz),
+                                   lambda graph: ort_session(graph, device, threads, src, fp16), detector_problem, src)
+        ck = ModelInfo.from_info(info, src)
+        return cls(OrtRunner(sess), class_map_from_names(ck.class_names, src), ck.imgsz, True, "onnx", src,
+                   checkpoint=ck, **kw)
 
     @classmethod
     def _load_onnx(cls, path: Path, backend: str, device: str, imgsz: tuple[int, int] | None, threads: int | None,
@@ -176,29 +196,22 @@ class Detector:
         src = str(path)
         if backend != "torchscript":
             raise ConfigError(src, "backend", f"a TorchScript file runs with backend 'torchscript', not {backend!r}")
-        extra = {"config.txt": ""}
+        runner, config_txt = _torch().load_torchscript(src, device, fp16)
         try:
-            module = torch.jit.load(src, map_location=device, _extra_files=extra).eval()
-        except (RuntimeError, ValueError) as e:
-            raise ConfigError(src, None, f"not a readable TorchScript file: {e}") from e
-        try:
-            embedded = json.loads(extra["config.txt"]) if extra["config.txt"] else {}
+            embedded = json.loads(config_txt) if config_txt else {}
         except (json.JSONDecodeError, UnicodeDecodeError):
             embedded = {}
         names, side_imgsz, names_src = external_names(path, embedded)
-        if fp16:
-            module = module.half()
         size = imgsz or side_imgsz
         if size is None:
             side = find_sidecar(path) or sidecar_path(path)
             raise ConfigError(str(side), "imgsz", "TorchScript models need imgsz: [W, H] in the sidecar")
-        return cls(TorchRunner(module, device, fp16, False), class_map_from_names(names, names_src), size, True,
-                   "torchscript", src, **kw)
+        return cls(runner, class_map_from_names(names, names_src), size, True, "torchscript", src, **kw)
 
     @classmethod
     def from_checkpoint(
         cls,
-        ck: Checkpoint,
+        ck,
         backend: str = DEFAULT_BACKEND,
         device: str = "cpu",
         fp16: bool = False,
@@ -207,36 +220,26 @@ class Detector:
         bf16: bool = False,
         **kw,
     ) -> "Detector":
-        """A detector from a loaded checkpoint (or one made in memory, see :meth:`from_model`)."""
+        """A detector from a loaded :class:`~cone_perception.model.checkpoint.Checkpoint` (or one made in memory, see
+        :meth:`from_model`); backend ``onnx`` exports it in memory (a checkpoint file: :meth:`load`, cached)."""
         backend = resolve_backend(backend, None, device, bf16=bf16, fp16=fp16)
         if bf16 and (backend != "torch" or device != "cpu" or fp16):
             raise ConfigError(ck.path, "bf16", f"bf16 is CPU autocast for backend 'torch' (got backend {backend!r}, "
                               f"device {device!r}{', fp16' if fp16 else ''}); on a GPU use fp16")
+        tb = _torch()
         if bf16:
-            if not native_bf16():
+            if not tb.native_bf16():
                 log.warning("bf16: this CPU has no native bfloat16 (AVX512-BF16 or AMX), so autocast emulates it "
                             "and runs slower than fp32; leave bf16 off here (the boxes are the same)")
         class_map = class_map_from_names(ck.class_names, ck.path)
         size = (int(imgsz[0]), int(imgsz[1])) if imgsz else ck.imgsz
-        model = ck.build_model()
-        if backend == "onnx":
-            sess = ort_session(onnx_bytes(model, size), device, threads, ck.path, fp16)
-            return cls(OrtRunner(sess), class_map, size, True, "onnx", ck.path, checkpoint=ck, **kw)
-        model = model.fuse().to(device)
-        if fp16:
-            model = model.half()
-        if backend == "torchscript":
-            module = trace(model, size, device=device, fp16=fp16)
-            return cls(TorchRunner(module, device, fp16, False), class_map, size, True, "torchscript", ck.path, checkpoint=ck, **kw)
-        if backend != "torch":
-            raise ConfigError(ck.path, "backend", f"unknown backend {backend!r}; choose one of {', '.join(BACKEND_CHOICES)}")
-        model = model.to(memory_format=torch.channels_last)
-        return cls(TorchRunner(model, device, fp16, True, bf16=bf16), class_map, size, False, "torch", ck.path, checkpoint=ck, **kw)
+        run, fixed = tb.checkpoint_runner(ck, backend, device, fp16, size, threads, bf16)
+        return cls(run, class_map, size, fixed, backend, ck.path, checkpoint=ck, **kw)
 
     @classmethod
     def from_model(cls, model, imgsz: tuple[int, int], backend: str = DEFAULT_BACKEND, **kw) -> "Detector":
         """A detector around an in-memory :class:`ConeYOLO` (benchmarks, tests); classes in project order."""
-        ck = Checkpoint(model.cfg, list(CLASS_NAMES[: model.cfg.num_classes]), tuple(imgsz),
+        ck = _torch().Checkpoint(model.cfg, list(CLASS_NAMES[: model.cfg.num_classes]), tuple(imgsz),
                         {k: v.detach().clone() for k, v in model.state_dict().items()}, path=f"<{model.cfg.name} in memory>")
         return cls.from_checkpoint(ck, backend, imgsz=imgsz, **kw)
 

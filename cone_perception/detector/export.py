@@ -22,8 +22,7 @@ from .. import __version__
 from ..errors import ConfigError
 from ..model import ConeYOLO
 from ..model.checkpoint import FORMAT, VERSION
-
-ONNX_OPSET = 17
+from .backends import ONNX_OPSET
 
 
 def _example(imgsz: tuple[int, int], device: str = "cpu", fp16: bool = False) -> torch.Tensor:

@@ -40,7 +40,7 @@ from ..classes import CLASS_NAMES
 from ..crop import CropSpec
 from ..errors import ConfigError
 from ..geometry.strip import DEFAULT_STRIP, SPLIT_DOWNSCALE, StripPlan, plan_band, plan_split
-from ..model.decode import nms_per_class
+from ..model.postprocess import nms_per_class
 from ..params import DEFAULT_IOU
 from .detector import Detector
 

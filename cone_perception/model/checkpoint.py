@@ -28,16 +28,13 @@ import torch
 
 from ..classes import CLASS_NAMES, class_map_from_names
 from ..errors import ConfigError
+from ..resources import RESTORE_HINT  # noqa: F401 (re-exported: what a missing or bad model file's error advises)
 from . import ConeYOLO, ModelConfig
 
 FORMAT = "cone_perception.detector"
 VERSION = 1
 REQUIRED_KEYS = ("format", "version", "arch", "class_names", "imgsz", "state_dict")
 
-RESTORE_HINT = (
-    "restore the shipped file with `git checkout models/` or train one with `cone-perception train` "
-    "(see README)"
-)
 
 
 @dataclass

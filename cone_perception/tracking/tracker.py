@@ -26,7 +26,6 @@ from collections import Counter
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
 from ..classes import NUM_CLASSES, UNKNOWN
 from ..errors import FrameError
@@ -155,6 +154,7 @@ class ConeTracker:
     events: Counter = field(default_factory=Counter)
 
     def __post_init__(self):
+        self._assign = _linear_sum_assignment()
         self.next_id = 1
         self.last_stamp_ns: int | None = None
         self.velocity: tuple[float, float, float] | None = None  # last body twist (constant-velocity prior)
@@ -300,7 +300,7 @@ class ConeTracker:
             pc[unknown] = 1.0
             cost = d2 - cfg.class_weight * np.log(np.maximum(pc, cfg.class_floor))
             cost[~gated] = _BIG
-            rows, cols = linear_sum_assignment(cost)
+            rows, cols = self._assign(cost)
             ok = cost[rows, cols] < _BIG
             rows, cols = rows[ok], cols[ok]
         info.matched = len(rows)
@@ -430,6 +430,14 @@ class ConeTracker:
         out["cov_xx"], out["cov_xy"], out["cov_yy"] = self.P[sel, 0, 0], self.P[sel, 0, 1], self.P[sel, 1, 1]
         out["track_id"] = self.ids[sel]
         return out
+
+
+def _linear_sum_assignment():
+    """``scipy.optimize.linear_sum_assignment``, imported when a tracker is made: scipy.optimize takes 0.5 s to
+    import, which a node that does not track (the pipeline node's default) does not pay at its start."""
+    from scipy.optimize import linear_sum_assignment  # heavy (0.5 s): only where a tracker runs
+
+    return linear_sum_assignment
 
 
 def _bayes(p: np.ndarray, likelihood_ratio) -> np.ndarray:

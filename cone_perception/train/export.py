@@ -1,5 +1,6 @@
 """The ``cone-perception export`` run: a checkpoint to TorchScript or ONNX, verified against eager torch,
-and the int8 ONNX (:mod:`.quantize`) when asked.
+and the int8 ONNX (:mod:`.quantize`) when asked; ``export --cache``: the ONNX cache (:mod:`~..detector.onnx_cache`)
+filled with what the pipeline node loads, before driving.
 """
 
 from __future__ import annotations
@@ -8,11 +9,18 @@ import argparse
 from pathlib import Path
 
 from ..data.outfiles import refuse_existing
-from ..detector import Detector, sidecar_path, write_sidecar
+from ..detector import Detector, default_model_path, sidecar_path, write_sidecar
 from ..detector.export import export_metadata, export_model, with_onnx_metadata, worst_diff_to_eager
+from ..detector.farband import band_rows_for, band_split_for, far_rows_for
+from ..detector.fartiles import mosaic_widths
+from ..detector.onnx_cache import onnx_cache_dir
+from ..detector.verifier import load_verifier
 from ..errors import ConfigError
+from ..geometry.calib import load_calibration
+from ..params import PARAMS
+from ..resources import far_model_for
 from ..model.checkpoint import load_checkpoint
-from ..model.decode import postprocess
+from ..model.postprocess import postprocess
 from ..train.quantize import (
     MIN_MATCHED, MIN_MEAN_IOU, QuantOptions, calibration_blobs, compare_detections, int8_frame_pool, quantize_onnx,
     spread,
@@ -26,6 +34,11 @@ VERIFY_FRAMES = 8
 
 
 def run_export(args: argparse.Namespace) -> int:
+    if args.cache:
+        return run_cache(args)
+    if args.model is None or args.format is None:
+        raise ConfigError("export", "--model" if args.model is None else "--format",
+                          "needed (but for --cache: the ONNX cache of the pipeline node)")
     int8_flags = [f"--{k.replace('_', '-')}" for k in ("calib_images", "calib_clips", "calib_crop") if getattr(args, k) is not None]
     if not args.int8 and int8_flags:
         raise ConfigError(int8_flags[0], None, "calibration options need --int8")
@@ -109,3 +122,52 @@ def _int8(args, ck, fp32_path: Path, imgsz: tuple[int, int], eager, pool: list[P
                           f"mean IoU >= {MIN_MEAN_IOU}); files removed. Try more --calib-frames, --calib-method "
                           "percentile, or without --int8-head / --per-tensor")
     print(f"wrote {out} and {side}; {what}")
+
+
+def node_graphs(values: dict[str, str]) -> tuple[list[tuple[Path, tuple[int, int]]], bool]:
+    """((model file, input size (W, H)) of every detector the ``pipeline`` node loads with the parameters ``values``
+    (name -> text, as ``-p name:=value``; the schema's default for the rest), in the node's order: the band (or its
+    two parts with ``band_split``), the far strip's model at the strip's size, the far tiles' mosaics; whether the
+    node runs the far strip (and so loads its verifier))."""
+    p = {k: s.default for k, s in PARAMS.items()}
+    for k, v in values.items():
+        if k not in PARAMS:
+            raise ConfigError("--param", k, "not a parameter of the pipeline node (see `pipeline --help`)")
+        p[k] = type(p[k])(int(v)) if isinstance(p[k], int) and not isinstance(p[k], bool) else v
+    calib = load_calibration(p["calibration"])
+    model = Path(p["model"]) if p["model"] else default_model_path()
+    calib = band_rows_for(p["band_rows"], calib, p["far_rows"], "parameter band_rows").apply(calib)
+    far = far_rows_for(p["far_rows"], calib, "parameter far_rows").crop
+    split = band_split_for(p["band_split"], calib, "parameter band_split")
+    crops = [calib.crop] if split.upper is None else [split.upper, split.near]
+    out = [(model, (c.out_width, c.out_height)) for c in crops]
+    if far is not None:
+        far_model = Path(far_model_for(p["far_model"], model))
+        out.append((far_model, (far.out_width, far.out_height)))
+        if int(p["far_tiles"]) and int(p["far_every"]) > 1:
+            out += [(far_model, (w, far.height_full_px)) for w in mosaic_widths(int(p["far_tiles"]))]
+    return out, far is not None
+
+
+def run_cache(args: argparse.Namespace) -> int:
+    """``export --cache``: the ONNX cache filled with the graphs the pipeline node loads with ``--param``s (and the
+    far strip's verifier): a start then imports no torch. Says which were there and which it exported."""
+    values = {}
+    for item in args.param:
+        name, sep, value = item.partition(":=")
+        if not sep:
+            raise ConfigError("--param", None, f"expected NAME:=VALUE, got {item!r}")
+        values[name.strip()] = value.strip()
+    if args.model:
+        values.setdefault("model", args.model)
+    before = set(onnx_cache_dir().glob("*.onnx"))
+    graphs, far = node_graphs(values)
+    for model, size in graphs:
+        Detector.load_for_band(model, size, backend="onnx")
+    verifier = far and load_verifier(values.get("far_verifier", PARAMS["far_verifier"].default),
+                                     "parameter far_verifier") is not None
+    new = sorted(set(onnx_cache_dir().glob("*.onnx")) - before)
+    print(f"ONNX cache {onnx_cache_dir()}: {len(graphs)} detector graph(s) for the pipeline node "
+          f"({', '.join(f'{m.name} {w}x{h}' for m, (w, h) in graphs)}){' and its verifier' if verifier else ''}; "
+          f"{len(new)} written now{': ' + ', '.join(p.name for p in new) if new else ''}")
+    return 0

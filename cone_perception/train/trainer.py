@@ -26,13 +26,13 @@ from tqdm import tqdm
 
 from ..classes import CLASS_NAMES
 from ..data.datasets import load_data_yaml, summary_table
-from ..detector.backends import native_bf16
+from ..detector.torch_backend import native_bf16
 from ..detector.preprocess import round_up32
 from ..errors import ConfigError
 from ..evaluation.metrics import ImageDetections, coco_map
 from ..model import PRETRAINED_BACKBONES, ConeYOLO, is_model_name, model_config, model_names
 from ..model.checkpoint import load_checkpoint, load_matching, save_checkpoint
-from ..model.decode import postprocess
+from ..model.postprocess import postprocess
 from ..model.loss import DetectionLoss
 from ..model.pretrained import PretrainedBackbone, load_imagenet
 from . import distributed

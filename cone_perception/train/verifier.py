@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from ..detector.verifier import new_net, patches_tensor, save_verifier
+from ..detector.verifier_net import new_net, patches_tensor, save_verifier
 from ..errors import ConfigError
 
 #: The thresholds written with the weights (docs/benchmarks.md, "A second look at the far strip's boxes"): boxes

@@ -19,7 +19,8 @@ HERE = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(HERE / "tests"))
 os.environ.setdefault("ROS_DOMAIN_ID", str(100 + os.getpid() % 100))
 
-from cone_perception import ros_env, shm  # noqa: E402
+from cone_perception import ros_env  # noqa: E402
+from cone_perception.nodes import _shm as shm  # noqa: E402
 
 ros_env.use_localhost()
 
