@@ -79,3 +79,19 @@ def test_stamp_names_the_machine_and_mode():
     assert f"{os.cpu_count()} cores" in machine() and machine() in line
     assert "quick mode" in line and re.search(r"\d{4}-\d\d-\d\d \d\d:\d\d UTC", line)
     assert "quick mode" not in stamp(time.perf_counter(), None, quick=False)
+
+
+def test_the_validation_table_is_the_suites_spread_figure_by_figure():
+    """The ``validation`` topic's table reads a ``validate`` run's suite.json: each figure's median, worst tenth and
+    worst drive, a failed drive named."""
+    from cone_perception.bench.report import suite_section
+
+    dist = {"recall_25_40": {"n": 3, "median": 0.9, "worst_tenth": 0.82, "worst": 0.7, "worst_drive": "720-wide"},
+            "false_per_frame": {"n": 3, "median": 0.5, "worst_tenth": 1.7, "worst": 21.4, "worst_drive": "720-wide"}}
+    suite = {"distribution": dist, "drives": [{}, {}, {}], "seconds": 4.0, "fps": 10.0, "failed": ["bad"]}
+    sec = suite_section(suite, quick=True)
+    text = "\n".join(sec.lines)
+    assert "| /cones recall: 25-40 m | 0.900 | 0.820 | 0.700 (720-wide) |" in text
+    assert "| /cones recall: false/frame | 0.500 | 1.700 | 21.400 (720-wide) |" in text
+    assert len(sec.lines) == 2 + 2  # the header and the rule, one row per figure in the suite
+    assert sec.commands == ["cone-perception validate --out DIR --quick"] and "failed drives: bad" in sec.notes

@@ -5,13 +5,14 @@ Each topic runs the package's own commands, each in a fresh process with ``--jso
 ``detect`` + ``eval``, ``synth bag`` + ``replay``, ``bench tracker``, ``fuzz``, ``soak``): the figures are those
 commands' figures, measured by the code they run (``bench/pipeline.py``, ``evaluation/``, ``replay/``), never
 a copy of it. The topics (:data:`TOPICS`): ``speed`` (backend and threads), ``real`` (the real validation
-clips), ``rendered`` (held-out rendered drives), ``attitude``, ``tracking``, ``robustness``.
+clips), ``rendered`` (held-out rendered drives), ``validation`` (the rendered validation suite, ``validate``),
+``attitude``, ``tracking``, ``robustness``.
 
 The table of each topic goes between the markers ``<!-- bench report TOPIC -->`` and
 ``<!-- /bench report TOPIC -->`` of the document, under a line stamping the date, the commit, the machine
 (CPU model, vector flags, cores, the load average before and after) and the mode (``--quick``: fewer frames,
-shorter drives). A topic not asked for is left as it stands. A new table (the rendered validation suite's, whose
-markers ``validation`` wait in the document) is a function ``(Runner) -> Section`` added to :data:`TOPICS`.
+shorter drives). A topic not asked for is left as it stands. A new table is a function ``(Runner) -> Section``
+added to :data:`TOPICS`, with its pair of markers in the document.
 """
 
 from __future__ import annotations
@@ -173,10 +174,8 @@ def real(r: Runner) -> Section:
 
 
 def rendered(r: Runner) -> Section:
-    """``replay`` of held-out rendered drives at the defaults: ``/cones`` recall by range band, false cones, error.
-
-    The rendered validation suite (``cone-perception validate``) registers its own topic beside this one:
-    a function ``(Runner) -> Section`` in :data:`TOPICS` and a pair of markers in the document."""
+    """``replay`` of held-out rendered drives at the defaults: ``/cones`` recall by range band, false cones, error
+    (two long drives; the suite's many short ones: :func:`validation`)."""
     rows = []
     for seed in r.drives():
         d = r.replay(seed, "--track")
@@ -191,6 +190,39 @@ def rendered(r: Runner) -> Section:
                    [f"`/cones` on rendered drives never used for tuning (seeds {', '.join(map(str, r.drives()))}, "
                     f"{QUICK_DRIVE_S if r.quick else DRIVE_S} s at 20 Hz, 1920x1080, jitter on), the defaults (far strip, "
                     "attitude `fused`); true cones at least half visible, counted to 40 m."])
+
+
+def validation(r: Runner) -> Section:
+    """``validate`` (the rendered validation suite, docs/validation.md) at the defaults: per figure the median, the worst
+    tenth and the worst drive over its drives (``--quick``: a handful of them); the real set is the ``real`` topic's."""
+    out = r.work / "validate"
+    quick = ("--quick",) if r.quick else ()
+    proc = subprocess.run([sys.executable, "-m", "cone_perception.cli", "validate", "--out", str(out), "--cache",
+                           str(r.work / "validate_bags"), "--no-progress", *quick], capture_output=True, text=True)
+    suite = json.loads((out / "suite.json").read_text()) if (out / "suite.json").is_file() else None
+    if suite is None:  # exit 1 (a failed drive) still writes the suite's figures; anything else is the report's error
+        err = proc.stderr.strip().splitlines()
+        raise ConfigError(SRC, "validate", f"`cone-perception validate` failed (exit {proc.returncode}): "
+                          f"{err[-1] if err else 'no message'}")
+    if r.progress is not None:
+        r.progress.update(1)
+    return suite_section(suite, r.quick)
+
+
+def suite_section(suite: dict, quick: bool) -> Section:
+    """The ``validation`` table of a ``validate`` run's ``suite.json`` content: one row per figure, its spread."""
+    from ..evaluation.spread import FIGURES
+
+    dist = suite["distribution"]
+    rows = [[f"{f.table}: {f.label}", _f(dist[f.key]["median"]), _f(dist[f.key]["worst_tenth"]),
+             f"{_f(dist[f.key]['worst'])} ({dist[f.key]['worst_drive']})"] for f in FIGURES if f.key in dist]
+    notes = [f"{len(suite['drives'])} rendered drives across cameras, mounts, lenses, scenes and motion (docs/validation.md; "
+             f"judging seeds), {suite['seconds']:g} s at {suite['fps']:g} Hz each, the defaults as the node runs them; "
+             "worst tenth: the 10th percentile of a recall, the 90th of a count or an error."]
+    if suite.get("failed"):
+        notes.append(f"failed drives: {', '.join(suite['failed'])}")
+    return Section(_table(["figure", "median", "worst tenth", "worst (drive)"], rows),
+                   [f"cone-perception validate --out DIR{' --quick' if quick else ''}"], notes)
 
 
 def _drive_commands(r: Runner, extra: str) -> list[str]:
@@ -259,8 +291,8 @@ def robustness(r: Runner) -> Section:
 
 
 #: Topic name -> its measurement, in the document's order.
-TOPICS = {"speed": speed, "real": real, "rendered": rendered, "attitude": attitude, "tracking": tracking,
-          "robustness": robustness}
+TOPICS = {"speed": speed, "real": real, "rendered": rendered, "validation": validation, "attitude": attitude,
+          "tracking": tracking, "robustness": robustness}
 #: Topics that replay the held-out drives (each drive rendered and replayed at the defaults once per report).
 DRIVE_TOPICS = ("rendered", "attitude", "tracking")
 
@@ -268,7 +300,7 @@ DRIVE_TOPICS = ("rendered", "attitude", "tracking")
 def planned_runs(topics: list[str], quick: bool) -> int:
     """How many sub-commands a report of ``topics`` runs (the progress bar's total)."""
     n = len(QUICK_DRIVES if quick else DRIVES)
-    runs = {"speed": 6, "real": 8, "tracking": 1, "robustness": 2, "attitude": 3 * n}
+    runs = {"speed": 6, "real": 8, "validation": 1, "tracking": 1, "robustness": 2, "attitude": 3 * n}
     return sum(runs.get(t, 0) for t in topics) + (2 * n if any(t in DRIVE_TOPICS for t in topics) else 0)
 
 
