@@ -30,6 +30,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "export": ("export", "export a detector checkpoint to TorchScript or ONNX, verified against eager"),
     "data": ("data", "dataset converters: fsoco-to-yolo, restore-aspect, far-crops, verifier-crops"),
     "speed": ("speed", "forward micro-benchmark of detector sizes and backends"),
+    "validate": ("validate", "the validation suite: rendered drives and real sets through the pipeline -> rows and their spread"),
     "eval": ("eval", "evaluate a prediction file against ground truth -> report.md, metrics.json, plots"),
     "params": ("params", "the nodes' parameters from their schema; --write / --check the tables of docs/nodes.md and the docstrings"),
     "fuzz": ("fuzz", "malformed messages through the nodes' callbacks: crashes, counts, time, RSS"),

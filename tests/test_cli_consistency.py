@@ -17,7 +17,7 @@ def test_version(capsys):
 
 @pytest.mark.parametrize("argv", [
     ["train"], ["detect"], ["eval"], ["export"], ["synth", "dataset"], ["synth", "bag"], ["data", "restore-aspect"],
-    ["data", "fsoco-to-yolo"], ["replay"], ["demo"], ["bench"], ["calibrate"], ["soak"],
+    ["data", "fsoco-to-yolo"], ["replay"], ["demo"], ["bench"], ["calibrate"], ["soak"], ["validate"],
 ], ids=lambda a: " ".join(a))
 def test_every_command_with_a_bar_takes_no_progress(argv, capsys):
     with pytest.raises(SystemExit):

@@ -127,8 +127,10 @@ def box_model_choice(args) -> str:
     return "rendered" if args.gt_topic and args.box_behaviour != "real" else "model"
 
 
-def _run_offline(args, calib) -> dict:
-    tracking = _tracking(args, calib)  # its bad options fail before the model loads
+def offline_pipeline(args: argparse.Namespace, calib) -> Pipeline:
+    """The :class:`Pipeline` of an offline replay with ``replay``'s options (``args``: the attributes of its parsed
+    command line that build it, ``--model`` to ``--one-ray-range``), for ``calib`` as ``replay`` has prepared it (band
+    rows, range). Used by ``replay`` and the validation suite (:mod:`.suite`), so both judge the very same stages."""
     # built for the calibration's band, as the pipeline node does (a fixed-size backend never letterboxes)
     conf = args.track_conf if args.track_conf is not None else args.conf  # the pipeline splits at --conf
     strip_on = far_rows_for(args.far_rows, calib, "--far-rows").crop is not None  # auto (None): the calibration's
@@ -165,6 +167,13 @@ def _run_offline(args, calib) -> dict:
                             threads=plan.network_threads or None, bf16=args.bf16))
     if pipeline.attitude_mode in ("image", "fused"):
         print(f"replay: the image attitude reads the boxes through {att_what}")
+    return pipeline
+
+
+def _run_offline(args, calib) -> dict:
+    tracking = _tracking(args, calib)  # its bad options fail before the model loads
+    pipeline = offline_pipeline(args, calib)
+    far = pipeline.far
     with pipeline:  # joins the strip's worker thread, if one ran
         res = offline_replay(args.bag, pipeline, args.topic, args.out, args.gt_topic,
                              _progress(args.no_progress), imu_topic=args.imu_topic, tracking=tracking)

@@ -180,6 +180,16 @@ def bag_side_paths(bag: Path) -> tuple[Path, Path]:
     return bag.parent / f"{bag.name}_calib.yaml", bag.parent / f"{bag.name}_gt.jsonl"
 
 
+def bag_scene(cfg: SynthConfig, fps: float, speed_mps: float, track_kind: str):
+    """The scene a bag of ``cfg`` draws before its first frame: ``(rng, track, renderer, look)``, the generator then
+    at the state the drive goes on from (:func:`write_scene_bag`; the validation suite reads a seed's look, e.g. its
+    sun, from it without rendering)."""
+    rng = np.random.default_rng(cfg.seed)
+    track = make_track(track_kind, int(rng.integers(0, 2**31)), cfg.missing_frac, cfg.stray, cfg.knocked_frac)
+    renderer = cfg.renderer(jpeg_prob=0.0, speed_mps=max(speed_mps, 1e-3), fps=fps, steady_photometric=True)
+    return rng, track, renderer, renderer.new_look(rng)
+
+
 def write_scene_bag(
     cfg: SynthConfig,
     seconds: float,
@@ -212,10 +222,7 @@ def write_scene_bag(
         if p.exists():
             raise ConfigError(str(p), None, "exists; remove it or choose another bag path")
     n = max(int(round(seconds * fps)), 1)
-    rng = np.random.default_rng(cfg.seed)
-    track = make_track(track_kind, int(rng.integers(0, 2**31)), cfg.missing_frac, cfg.stray, cfg.knocked_frac)
-    renderer = cfg.renderer(jpeg_prob=0.0, speed_mps=max(speed_mps, 1e-3), fps=fps, steady_photometric=True)
-    look = renderer.new_look(rng)
+    rng, track, renderer, look = bag_scene(cfg, fps, speed_mps, track_kind)
     poses, drive = _drive(cfg, track, n, fps, speed_mps, rng)
     n_stand = int(round(stand_s * fps))
     still, imu = imu_samples(drive, np.array([p.yaw_rad for p in poses]), fps, np.random.default_rng([cfg.seed, 15]), n_stand)
