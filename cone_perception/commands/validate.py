@@ -20,7 +20,7 @@ from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, RUNTIME_THREADS
 from ..params import DEFAULT_CONF, PARAMS
 from ..replay.suite import Settings, run_suite, select
 from ..replay.suite_drives import FPS, SECONDS
-from ._args import add_far_model, add_far_verifier
+from ._args import add_far_box_model, add_far_model, add_far_verifier
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -45,6 +45,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--far-rows", default=None, metavar="auto|none|V0,V1", help="the far strip (replay --far-rows)")
     add_far_model(g)
     add_far_verifier(g)
+    add_far_box_model(g)
     g.add_argument("--far-every", type=int, default=PARAMS["far_every"].default, metavar="N", help="replay --far-every")
     g.add_argument("--far-tiles", type=int, default=PARAMS["far_tiles"].default, metavar="W", help="replay --far-tiles")
     g.add_argument("--band-rows", default=None, metavar="crop|auto|V0,V1", help="replay --band-rows")

@@ -69,6 +69,7 @@ class Settings:
     far_rows: str | None = None
     far_model: str | None = None
     far_verifier: str | None = None
+    far_box_model: str = PARAMS["far_box_model"].default
     far_every: int = PARAMS["far_every"].default
     far_tiles: int = PARAMS["far_tiles"].default
     band_rows: str | None = None
