@@ -644,8 +644,8 @@ def test_first_frames_keep_the_calibration_unless_the_fit_says_otherwise():
 def test_far_cones_whose_boxes_look_near_are_cut_by_their_feet():
     """Far cones drawn with boxes too tall for their range (a small camera's few-pixel boxes cover every pixel the
     cone touches, and more) pass the fit's cut by size; their feet, mapped with the start (the filter's prediction;
-    zero here), lie beyond
-    the cut, so they are left out (``feet_cut_factor``) and do not pull the pitch towards bringing them closer."""
+    zero here), lie beyond the cut, so they are left out (``feet_cut_factor``) and do not pull the pitch towards
+    bringing them closer."""
     pitch, roll = 0.5, 0.3
     sc = _tilted_camera(pitch, roll)
     near = _cone_boxes(sc, CONES_XY, CONES_CLS)
