@@ -168,7 +168,8 @@ def _estimator(**cfg) -> ImageAttitude:
 def test_image_fit_recovers_the_attitude_from_exact_boxes(pitch, roll):
     boxes = _cone_boxes(_tilted_camera(pitch, roll), CONES_XY, CONES_CLS)
     theta, cov, n = _estimator().fit(boxes, CONES_CLS)
-    assert n >= 14
+    # 18 cones 4-20 m; a fit started at zero 2 degrees off maps the farthest feet beyond the feet cut (1.5 x 20 m)
+    assert n >= (13 if abs(pitch) >= 2.0 else 14)
     assert abs(theta[0] - pitch) < 0.15 and abs(theta[1] - roll) < 0.25, theta
     assert 0 < np.sqrt(cov[0, 0]) < 0.3
 
@@ -638,3 +639,26 @@ def test_first_frames_keep_the_calibration_unless_the_fit_says_otherwise():
     assert not mapper.image_attitude(replace(cfg, still_start_sigmas=0.0)).update(level, CONES_CLS).is_zero  # as before
     tilted = scattered(_cone_boxes(_tilted_camera(1.0, 0.0), CONES_XY, CONES_CLS))
     assert mapper.image_attitude(cfg).update(tilted, CONES_CLS).pitch_deg == pytest.approx(1.0, abs=0.3)
+
+
+def test_far_cones_whose_boxes_look_near_are_cut_by_their_feet():
+    """Far cones drawn with boxes too tall for their range (a small camera's few-pixel boxes cover every pixel the
+    cone touches, and more) pass the fit's cut by size; their feet, mapped with the start (the filter's prediction;
+    zero here), lie beyond the cut, so they are left out (``feet_cut_factor``) and do not pull the pitch towards
+    bringing them closer."""
+    pitch, roll = 0.5, 0.3
+    sc = _tilted_camera(pitch, roll)
+    near = _cone_boxes(sc, CONES_XY, CONES_CLS)
+    far_xy = np.array([[x, s * 3.0] for x in (32.0, 34.0, 36.0, 38.0, 40.0) for s in (-1, 1)] * 2)
+    far_cls = np.array([BLUE if y > 0 else YELLOW for _, y in far_xy])
+    far = _cone_boxes(sc, far_xy, far_cls)
+    as_near = _cone_boxes(sc, far_xy * 0.45, far_cls)  # the height of a cone 2.2x nearer (14-18 m)
+    far[:, 1] = far[:, 3] - (as_near[:, 3] - as_near[:, 1])
+    far[:, 0] -= 0.5 * ((as_near[:, 2] - as_near[:, 0]) - (far[:, 2] - far[:, 0]))  # its width too (aspect kept)
+    far[:, 2] = far[:, 0] + (as_near[:, 2] - as_near[:, 0])
+    boxes, cls = np.vstack([near, far]), np.append(CONES_CLS, far_cls)
+    theta_cut, _, n_cut = _estimator().fit(boxes, cls)
+    theta_all, _, n_all = _estimator(feet_cut_factor=0.0).fit(boxes, cls)
+    assert n_all > n_cut  # without the feet cut the far boxes are in the fit (and pull it off)
+    assert abs(theta_cut[0] - pitch) < 0.15 and abs(theta_cut[1] - roll) < 0.25, theta_cut
+    assert abs(theta_all[0] - pitch) > 2 * abs(theta_cut[0] - pitch), (theta_all, theta_cut)

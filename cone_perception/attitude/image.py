@@ -94,6 +94,9 @@ class ImageAttitudeConfig:
     size_frames: bool = True
     size_rendered: bool = False  # average the rendered table's boxes too (measured worse: docs/benchmarks.md)
     size_tracks: SizeTrackConfig = SizeTrackConfig()
+    #: cut by the feet too where the boxes are cut by their size (no averaging): a box whose foot maps (with the
+    #: filter's prediction) beyond this x its range cut is left out whatever its height says; 0 = off
+    feet_cut_factor: float = 1.5
 
 
 class ImageAttitude:
@@ -300,10 +303,11 @@ class ImageAttitude:
         theta = np.zeros(2) if start_deg is None else np.clip(np.asarray(start_deg, dtype=np.float64), -2.0, 2.0)
         # averaging: cones cut at their range by the feet, not the scattered heights (those that came out tall would start tall)
         sel = self._select(boxes, class_ids, by_size=not averaging, far=far) & read  # unmeasured sizes: out
-        if averaging and int(sel.sum()) >= c.min_cones:
+        feet_factor = 1.0 if averaging else c.feet_cut_factor
+        if feet_factor > 0 and int(sel.sum()) >= c.min_cones:
             rays, _, _ = self._prepare(boxes[sel], class_ids[sel])
             away = self.ground_feet(theta, rays)[0] - self.p0[:2]
-            cut = range_cuts(len(boxes), far, c.max_range_m, c.far_max_range_m)[sel]
+            cut = range_cuts(len(boxes), far, c.max_range_m, c.far_max_range_m)[sel] * feet_factor
             with np.errstate(invalid="ignore"):
                 sel[sel] = np.hypot(away[:, 0], away[:, 1]) <= cut  # NaN (misses the ground): out
         if int(sel.sum()) < c.min_cones:
