@@ -56,14 +56,15 @@ class Runner:
     progress: tqdm | None = None
     cache: dict = field(default_factory=dict)
 
-    def cli(self, *args: str) -> str:
-        """Run ``cone-perception ARGS``; its stdout. A failure raises naming the command and its last error line."""
+    def cli(self, *args: str, ok: tuple[int, ...] = (0,)) -> str:
+        """Run ``cone-perception ARGS``; its stdout. An exit code not in ``ok`` raises naming the command and its last
+        error line (``soak`` exits 1 where a target is missed: its table says so)."""
         key = tuple(args)
         if key not in self.cache:
             if self.progress is not None:
                 self.progress.set_postfix_str(" ".join(args[:2]) if args[0] in ("bench", "synth") else args[0])
             proc = subprocess.run([sys.executable, "-m", "cone_perception.cli", *args], capture_output=True, text=True)
-            if proc.returncode != 0:
+            if proc.returncode not in ok:
                 err = proc.stderr.strip().splitlines()
                 raise ConfigError(SRC, " ".join(args[:2]), f"`cone-perception {' '.join(args)}` failed (exit "
                                   f"{proc.returncode}): {err[-1] if err else 'no message'}")
@@ -72,10 +73,10 @@ class Runner:
                 self.progress.update(1)
         return self.cache[key]
 
-    def json_out(self, *args: str, name: str, flag: str = "--json") -> dict:
+    def json_out(self, *args: str, name: str, flag: str = "--json", ok: tuple[int, ...] = (0,)) -> dict:
         """Run a command that writes its figures to a JSON file (``flag FILE``); the file's content."""
         out = self.work / name
-        self.cli(*args, flag, str(out), "--force")
+        self.cli(*args, flag, str(out), "--force", ok=ok)
         return json.loads(out.read_text())
 
     def drive(self, seed: int) -> tuple[Path, Path]:
@@ -279,7 +280,7 @@ def robustness(r: Runner) -> Section:
     lines = _table(["node (fuzz)", "messages", "crashes", "counted", "ok", "max ms / message", "RSS (MB)"], rows)
     secs = "10" if r.quick else "60"
     sk = r.json_out("soak", "--rate", "30", "--seconds", secs, "--window", str(int(secs) // 2), "--no-progress",
-                    name="soak.json")
+                    name="soak.json", ok=(0, 1))  # 1: a target missed, said in the table
     lines += ["", *_table(["soak", "sent", "processed", "replaced in the queue", "dropped", "uncounted", "RSS growth",
                            "latency p50 / p99 (ms)", "targets met"],
                           [[f"30 Hz, {secs} s", str(sk["sent"]), str(sk["processed"]), str(sk["replaced"]),
