@@ -215,29 +215,21 @@ def read_boxes(boxes: np.ndarray, far: np.ndarray | None, band: BoxReading, far_
     (its ``read_by_band`` and ``unmeasured``: :class:`~cone_perception.attitude.model.AttitudeCounts`), where given."""
     n = len(boxes)
     out, extra, rel = boxes.copy(), np.zeros(n), np.full(n, float(sigma_rel))
-    scatter, used = np.zeros(n), np.ones(n, dtype=bool)
+    scatter = np.zeros(n)
     heights = boxes[:, 3] - boxes[:, 1]
-    band_m = np.ones(n, dtype=bool)
-    parts = []
-    if far is not None and far_reading is not None:
-        far = np.asarray(far, dtype=bool).ravel()
-        band_m = ~far
-        if far_reading.box_model is not None and far.any():
-            own = far & far_reading.box_model.measured(heights)
-            by_band = far & ~own
-            if band.box_model is not None:  # the unknown sizes through the band's measured model, where it knows them
-                by_band &= band.box_model.measured(heights)
-            if counts is not None:
-                counts.read_by_band += int(by_band.sum())
-            band_m |= by_band
-            used &= ~far | own | by_band
-            parts.append((far_reading, own))
-        else:
-            parts.append((far_reading, far))
-    parts.insert(0, (band, band_m))
-    for rd, m in parts:
-        if rd.box_model is not None:
-            m = m & rd.box_model.measured(heights)
+    use_far = far is not None and far_reading is not None
+    far = np.asarray(far, dtype=bool).ravel() if use_far else np.zeros(n, dtype=bool)
+    band_known = band.box_model.measured(heights) if band.box_model is not None else np.ones(n, dtype=bool)
+    far_bm = far_reading.box_model if use_far else None
+    far_known = far_bm.measured(heights) if far_bm is not None else np.ones(n, dtype=bool)
+    own = far & far_known  # the strip's boxes its own reading knows
+    by_band = far & ~far_known & band_known  # the rest through the band's measured model, where it knows their size
+    band_m = (~far & band_known) | by_band
+    used = own | band_m
+    if counts is not None:
+        counts.read_by_band += int(by_band.sum())
+        counts.unmeasured += int((~used).sum())
+    for rd, m in ((band, band_m), (far_reading, own)):
         if not m.any():
             continue
         if rd.box_model is not None:
@@ -246,10 +238,6 @@ def read_boxes(boxes: np.ndarray, far: np.ndarray | None, band: BoxReading, far_
             scatter[m] = rd.box_model.sigma_rel
         else:
             extra[m] = box_top_extra_px(heights[m], rd.table)
-    if band.box_model is not None:  # the band's own boxes where its model has no measurement
-        used &= ~band_m | band.box_model.measured(heights)
-    if counts is not None:
-        counts.unmeasured += int((~used).sum())
     return out, extra, rel, scatter, used
 
 
