@@ -115,3 +115,12 @@ def resolve_in(directory: Path, name_or_path: str | os.PathLike, suffixes: tuple
         if cand.is_file():
             return cand
     return p
+
+
+def user_cache_dir() -> Path:
+    """This package's folder in the user's cache: ``$XDG_CACHE_HOME``, else ``~/.cache``, then ``cone_perception``
+    (the TensorRT engines: :func:`~cone_perception.detector.backends.trt_cache_dir`; the ONNX graphs of the torch
+    models: :func:`~cone_perception.detector.onnx_cache.onnx_cache_dir`; the DDS profiles of a restart after a
+    crash: :func:`~cone_perception.ros_env.with_participant_id`)."""
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / PACKAGE_NAME

@@ -123,6 +123,54 @@ def test_only_the_files_of_dead_processes_are_removed(tmp_path: Path) -> None:
     assert sorted(shm.stale(tmp_path)) == sorted(live)  # their holders are dead now
 
 
+_MAP = """
+import mmap, os, sys, time
+fd = os.open(sys.argv[1], os.O_RDONLY)
+m = mmap.mmap(fd, 0, prot=mmap.PROT_READ)
+print("mapped", flush=True)
+time.sleep(60)
+"""
+
+
+def test_a_dead_port_a_live_peer_maps_is_named_and_a_free_participant_id_chosen(tmp_path: Path, capsys) -> None:
+    from cone_perception.nodes import _common
+
+    domain = 3
+    meta0, user0 = shm.participant_ports(domain, 0)
+    assert (meta0, user0) == (7400 + 750 + 10, 7400 + 750 + 11)
+    for port in (meta0, user0):  # participant 0's ports: its owner dead, a live peer still maps one
+        _segment(tmp_path, f"fastrtps_port{port}")
+    _segment(tmp_path, f"fastrtps_port{shm.participant_ports(domain, 1)[0]}")  # participant 1's: dead, not mapped
+    _segment(tmp_path, "fastrtps_port7001", "_sl")  # a shared port, dead, mapped: any node's, not named
+    peers = [subprocess.Popen([sys.executable, "-c", _MAP, str(tmp_path / f"fastrtps_port{port}")],
+                              stdout=subprocess.PIPE, text=True) for port in (user0, 7001)]
+    try:
+        assert all(peer.stdout.readline().strip() == "mapped" for peer in peers)
+        assert shm.dead_ports_in_use(tmp_path) == [user0]
+        shm.clean_stale(tmp_path)  # removes the unmapped ones, participant 1's and 0's metatraffic port
+        assert shm.dead_ports_in_use(tmp_path) == [user0]
+        # participant 0 has a port in /dev/shm; 1 is free there but its UDP port is taken; 2 is free
+        taken = {shm.participant_ports(domain, 1)[1]}
+        assert shm.free_participant_id(domain, tmp_path, udp_free=lambda p: p not in taken) == 2
+        assert shm.free_participant_id(domain, tmp_path, udp_free=lambda p: False) is None
+        env = {"FASTRTPS_DEFAULT_PROFILES_FILE": str(_common.ros_env.dds_profile_path("localhost")), "ROS_DOMAIN_ID": "3"}
+        old = dict(os.environ)
+        os.environ.update(env, XDG_CACHE_HOME=str(tmp_path / "cache"))
+        try:
+            pid = _common.avoid_dead_ports("test", tmp_path)
+            profile = os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"]
+        finally:
+            os.environ.clear()
+            os.environ.update(old)
+        assert pid is not None and pid >= 1 and f"<participantID>{pid}</participantID>" in Path(profile).read_text()
+        assert f"port(s) {user0} still mapped" in capsys.readouterr().err
+    finally:
+        for peer in peers:
+            peer.kill()
+            peer.wait()
+    assert shm.dead_ports_in_use(tmp_path) == []  # nobody maps it now: the next clean-up removes it
+
+
 # -- kill -9 and restart through DDS --------------------------------------------------------------
 
 def test_a_node_killed_with_kill9_gets_frames_again_within_5s_ten_times(ros) -> None:  # noqa: F811
@@ -156,7 +204,7 @@ def test_a_node_killed_with_kill9_gets_frames_again_within_5s_ten_times(ros) -> 
     def gids() -> set[bytes]:
         return {bytes(i.endpoint_gid) for i in node.get_publishers_info_by_topic("/image_cropped")}
 
-    trials, dead_files, seen, p = [], {}, set(), None
+    trials, dead_files, seen, p, dead_ports = [], {}, set(), None, set()
     try:
         for trial in range(11):  # the first start, then ten restarts after kill -9
             n0, t0 = len(got), time.monotonic()
@@ -167,6 +215,11 @@ def test_a_node_killed_with_kill9_gets_frames_again_within_5s_ten_times(ros) -> 
             seen |= gids()
             back = pump(lambda: len(got) > n0, 5.0)
             if trial:
+                # it did not open a port of the killed node that this process (the camera) still maps: it took a
+                # participant id of its own (nodes/_common.avoid_dead_ports), else its frames would wait for the
+                # camera's health check on the dead port
+                ports = {_base(f) for f in owned_shm(p.pid) if "_port" in f}
+                assert not ports & dead_ports, f"restart {trial}: took the killed node's port(s) {sorted(ports & dead_ports)}"
                 trials.append((round(time.monotonic() - t_ready, 2) if back else None, round(time.monotonic() - t0, 1)))
                 # its data segments are gone; its ports too, unless a live writer still maps them (shm.py)
                 used = shm.mapped()
@@ -184,9 +237,15 @@ def test_a_node_killed_with_kill9_gets_frames_again_within_5s_ten_times(ros) -> 
             p.wait(timeout=10)
             # what it held alone is stale now (a port it shared with a live process is that one's too)
             stale = set(shm.stale())
+            # the killed node's ports numbered from its participant id (Fast DDS's ports 7000, 7001, ... are
+            # numbered per process, not from the id, and change nothing here)
+            domain = int(os.environ.get("ROS_DOMAIN_ID", "0"))
+            by_id = {port for k in range(shm.MAX_PARTICIPANT_ID + 1) for port in shm.participant_ports(domain, k)}
+            dead_ports = {f"fastrtps_port{n}" for n in shm.dead_ports_in_use() if n in by_id}
             dead_files = pin(f for f in dead_files if _base(f) in stale or "_port" not in f)
             assert any("_port" not in f for f in dead_files) and still_there(dead_files) == set(dead_files), \
                 "kill -9 left nothing behind: the test would prove nothing"
+            assert dead_ports, "no port of the killed node is mapped by this process: the port check would prove nothing"
         # (s from ready to the first frame out, s from the start): 10 of 10 within 5 s of being ready
         print("restarts:", trials)
         assert len(trials) == 10 and all(t is not None and t < 5.0 for t, _ in trials), trials

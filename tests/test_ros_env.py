@@ -86,3 +86,38 @@ def test_profiles_shm_segment_and_udp_reach():
         assert len(udp) == 1
         allow = [a.text for a in udp[0].iterfind(".//p:address", NS)]
         assert allow == (["127.0.0.1"] if kind == "localhost" else [])  # shm: every interface, as the builtin one
+
+
+@pytest.mark.parametrize("kind", ["shm", "localhost"])
+def test_a_restart_can_take_a_participant_id_of_its_own(tmp_path, kind):
+    shipped = {"FASTRTPS_DEFAULT_PROFILES_FILE": str(dds_profile_path(kind))}
+    env = dict(shipped)
+    out = ros_env.with_participant_id(7, env, folder=tmp_path)
+    assert out is not None and out.parent == tmp_path and env["FASTRTPS_DEFAULT_PROFILES_FILE"] == str(out)
+    new, old = ET.parse(out).getroot(), ET.parse(dds_profile_path(kind)).getroot()
+    assert new.tag == old.tag == "{%s}profiles" % NS["p"]  # the default namespace kept (Fast DDS reads plain names)
+    assert "ns0:" not in out.read_text()
+    rtps = new.find("p:participant[@is_default_profile='true']/p:rtps", NS)
+    assert [e.text for e in rtps.findall("p:participantID", NS)] == ["7"]
+    # everything else as shipped: the transports, the discovery settings
+    strip = [e for e in rtps if e.tag != "{%s}participantID" % NS["p"]]
+    assert [ET.tostring(e) for e in strip] == [ET.tostring(e) for e in old.find("p:participant/p:rtps", NS)]
+    assert [ET.tostring(e) for e in new.find("p:transport_descriptors", NS)] == \
+        [ET.tostring(e) for e in old.find("p:transport_descriptors", NS)]
+    # again with another id: its own file, the first one unchanged; the same id again: the same file
+    assert ros_env.with_participant_id(8, dict(shipped), folder=tmp_path) not in (out, None)
+    assert ros_env.with_participant_id(7, dict(shipped), folder=tmp_path) == out
+    assert ros_env.with_participant_id(9, env, folder=tmp_path) is None  # the copy is not the package's own
+
+
+def test_a_users_own_profile_is_never_rewritten(tmp_path):
+    env = {"FASTRTPS_DEFAULT_PROFILES_FILE": "/home/team/dds.xml"}
+    assert ros_env.with_participant_id(3, env, folder=tmp_path) is None
+    assert env == {"FASTRTPS_DEFAULT_PROFILES_FILE": "/home/team/dds.xml"} and not list(tmp_path.iterdir())
+
+
+def test_an_unwritable_folder_leaves_the_profile_as_it_was(tmp_path):
+    (tmp_path / "file").write_text("")
+    env = {"FASTRTPS_DEFAULT_PROFILES_FILE": str(dds_profile_path("localhost"))}
+    assert ros_env.with_participant_id(3, env, folder=tmp_path / "file" / "dds") is None
+    assert env["FASTRTPS_DEFAULT_PROFILES_FILE"] == str(dds_profile_path("localhost"))

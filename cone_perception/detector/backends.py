@@ -6,12 +6,12 @@ torch (the ONNX Runtime path of the nodes starts without it, issue 43); the torc
 from __future__ import annotations
 
 import importlib.util
-import os
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import ConfigError
+from ..resources import user_cache_dir
 
 BACKENDS = ("torch", "torchscript", "onnx")
 #: The ONNX opset the package exports to (``export``, the ONNX cache).
@@ -78,14 +78,6 @@ def ort_spinning(threads: int | None) -> bool:
 
 
 TRT_PROVIDER, CUDA_PROVIDER, CPU_PROVIDER = "TensorrtExecutionProvider", "CUDAExecutionProvider", "CPUExecutionProvider"
-
-
-def user_cache_dir() -> Path:
-    """This package's folder in the user's cache: ``$XDG_CACHE_HOME``, else ``~/.cache``, then ``cone_perception``
-    (the TensorRT engines: :func:`trt_cache_dir`; the ONNX graphs of the torch models:
-    :func:`~cone_perception.detector.onnx_cache.onnx_cache_dir`)."""
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "cone_perception"
 
 
 def trt_cache_dir() -> Path:

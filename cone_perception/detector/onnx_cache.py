@@ -37,7 +37,7 @@ from typing import Any, Callable
 from .. import __version__
 from ..errors import ConfigError
 from ..model.config import ModelConfig
-from .backends import user_cache_dir
+from ..resources import user_cache_dir
 
 log = logging.getLogger(__name__)
 
@@ -53,7 +53,7 @@ _unwritable_said: set[str] = set()  # folders already warned about (one warning 
 
 
 def onnx_cache_dir() -> Path:
-    """The cache's folder: :func:`~.backends.user_cache_dir` / ``onnx``."""
+    """The cache's folder: :func:`~cone_perception.resources.user_cache_dir` / ``onnx``."""
     return user_cache_dir() / "onnx"
 
 

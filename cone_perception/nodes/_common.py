@@ -281,17 +281,40 @@ def _stamp_ns(msg) -> int | None:
 def clean_stale_shm(name: str) -> None:
     """Before the participant starts: remove the shared-memory files of dead processes (a node killed
     with ``kill -9``, its predecessor under launch's respawn), never a live one's
-    (:func:`cone_perception.nodes._shm.clean_stale`). Not in the ``system`` DDS mode (the car's own set-up
-    is left alone) nor with ``CONE_PERCEPTION_SHM_CLEAN=0``."""
+    (:func:`cone_perception.nodes._shm.clean_stale`); where a dead node's port is left because a live peer still
+    maps it, start with the first participant id whose ports are free (:func:`avoid_dead_ports`). Not in the
+    ``system`` DDS mode (the car's own set-up is left alone) nor with ``CONE_PERCEPTION_SHM_CLEAN=0``."""
     if ros_env.mode_of() == "system" or os.environ.get(SHM_CLEAN_VAR, "1").strip() == "0":
         return
     try:
         rep = shm.clean_stale()
+        if rep.removed:
+            print(f"[{name}] {rep.line()}", file=sys.stderr)
+        avoid_dead_ports(name)
     except Exception as e:  # noqa: BLE001 - a failed clean-up must not keep the node from starting
         print(f"[{name}] shared-memory clean-up failed: {type(e).__name__}: {e}", file=sys.stderr)
-        return
-    if rep.removed:
-        print(f"[{name}] {rep.line()}", file=sys.stderr)
+
+
+def avoid_dead_ports(name: str, shm_dir=shm.SHM_DIR) -> int | None:
+    """A node restarted after ``kill -9`` would take the dead node's participant id, so its ports, which a live peer
+    still maps and writes into until its health check gives up (1-3 s without frames): where such a port is in
+    ``shm_dir``, start this process's participant with the first id whose ports are free
+    (:func:`cone_perception.ros_env.with_participant_id`, one line said) and return it; None where none is
+    needed or possible (the package's profile not in use, no free id, the cache not writable)."""
+    dead = shm.dead_ports_in_use(shm_dir)
+    if not dead:
+        return None
+    try:
+        domain = int(os.environ.get("ROS_DOMAIN_ID", "0") or 0)
+    except ValueError:
+        return None
+    pid = shm.free_participant_id(domain, shm_dir)
+    if pid is None or ros_env.with_participant_id(pid) is None:
+        return None
+    ports = "/".join(str(p) for p in shm.participant_ports(domain, pid))
+    print(f"[{name}] a dead node's shared-memory port(s) {', '.join(map(str, dead))} still mapped by a live peer: "
+          f"starting as DDS participant {pid} (ports {ports}) so its writers reach this node at once", file=sys.stderr)
+    return pid
 
 
 def run_node(factory: Callable[[], Node], args: list[str] | None = None, name: str = "cone_perception") -> int:

@@ -18,6 +18,14 @@ mapped already and keep their mapping. Files without a lock file are left alone 
 its segment has not locked it yet). ``fastdds shm clean`` checks the locks only, between the check and
 the removal unlocked. (Fast DDS itself may recreate a live process's port under it when a restarted
 peer finds it slow to answer its health check, with or without this clean-up: docs/robustness.md.)
+
+A port left that way is where a restart loses time: Fast DDS numbers a participant's listening ports from its
+participant id, the first free one, and a node restarted after ``kill -9`` takes the dead one's id (its locks and
+UDP sockets died with it), so it opens the dead node's port. A live peer's writers go on pushing into their old
+mapping of it and hear from the new node only after their health check on it times out (about 1 s, at times
+2-3 s). :func:`dead_ports_in_use` names such ports and :func:`free_participant_id` the first participant id
+whose ports are neither in ``/dev/shm`` nor bound; the node then starts with that id
+(:func:`cone_perception.ros_env.with_participant_id`).
 """
 
 from __future__ import annotations
@@ -25,11 +33,17 @@ from __future__ import annotations
 import fcntl
 import os
 import re
+import socket
 from dataclasses import dataclass, field
 from pathlib import Path
 
 SHM_DIR = Path("/dev/shm")
 _LOCK = re.compile(r"^(fastrtps_(?:[0-9a-z]{16}|port\d{1,5}))_(el|sl)$")
+#: The RTPS port mapping Fast DDS uses by default (PB + DG * domain + d + PG * participant id): the metatraffic
+#: (discovery) and user-traffic unicast ports of a participant, the UDP ports and the shared-memory ports alike.
+PORT_BASE, DOMAIN_GAIN, PARTICIPANT_GAIN, OFFSET_META_UNICAST, OFFSET_USER_UNICAST = 7400, 250, 2, 10, 11
+#: Participant ids :func:`free_participant_id` tries (ROS 2's limit of 120 participants a domain).
+MAX_PARTICIPANT_ID = 119
 
 
 @dataclass
@@ -112,6 +126,51 @@ def stale(shm_dir: Path = SHM_DIR) -> list[str]:
     locks = _locks(shm_dir)
     used = mapped(shm_dir)
     return sorted(b for b, ls in locks.items() if not any(held(shm_dir / x) for x in ls) and not _port_in_use(b, used))
+
+
+def dead_ports_in_use(shm_dir: Path = SHM_DIR) -> list[int]:
+    """Numbers of the unicast listening ports (one owner: an ``_el`` lock file) whose owner is dead (every lock
+    file free) that a live process still maps: those :func:`clean_stale` leaves, and a restarted node must not take
+    (the module's doc). Shared ports (``_sl``: every participant listens there) are any node's, not a dead one's."""
+    locks = _locks(shm_dir)
+    used = mapped(shm_dir)
+    return sorted(int(b[len("fastrtps_port"):]) for b, ls in locks.items()
+                  if any(x.endswith("_el") for x in ls) and _port_in_use(b, used)
+                  and not any(held(shm_dir / x) for x in ls))
+
+
+def participant_ports(domain_id: int, participant_id: int) -> tuple[int, int]:
+    """(metatraffic, user-traffic) unicast port of participant ``participant_id`` in ``domain_id`` (RTPS defaults)."""
+    base = PORT_BASE + DOMAIN_GAIN * int(domain_id) + PARTICIPANT_GAIN * int(participant_id)
+    return base + OFFSET_META_UNICAST, base + OFFSET_USER_UNICAST
+
+
+def _udp_free(port: int) -> bool:
+    """Whether ``port`` can be bound for UDP on every interface now (nobody listens there)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        try:
+            s.bind(("", port))
+        except OSError:
+            return False
+    return True
+
+
+def free_participant_id(domain_id: int, shm_dir: Path = SHM_DIR, udp_free=_udp_free) -> int | None:
+    """The first participant id of ``domain_id`` whose unicast ports (:func:`participant_ports`) have no
+    shared-memory port in ``shm_dir`` (a live one's or a dead one's) and are free for UDP; None when none is."""
+    try:
+        names = set(os.listdir(shm_dir))
+    except OSError:
+        names = set()
+    for pid in range(MAX_PARTICIPANT_ID + 1):
+        ports = participant_ports(domain_id, pid)
+        if ports[1] > 65535:
+            break
+        if any(f"fastrtps_port{p}" in names or f"fastrtps_port{p}_el" in names for p in ports):
+            continue
+        if all(udp_free(p) for p in ports):
+            return pid
+    return None
 
 
 def clean_stale(shm_dir: Path = SHM_DIR) -> CleanReport:
