@@ -11,6 +11,8 @@ with a ``reason`` key; the caller drops that frame and counts it.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
+from typing import Callable
 
 import cv2
 import numpy as np
@@ -185,16 +187,30 @@ class DriverAdapter:
         """sensor_msgs/Image fields -> (the band as :meth:`from_raw`, the far band's full-resolution
         strip ``(V1 - V0, W, 3)`` BGR or None without one); the frame is validated once. ``far``: this
         frame's strip rows (the strip moved with the attitude, inside the image), else :attr:`far`'s."""
+        band, strip = self.cutters_raw(encoding, width, height, step, data, far)
+        return band(), (strip() if strip is not None else None)
+
+    def cutters_raw(self, encoding: str, width: int, height: int, step: int, data, far: CropSpec | None = None
+                    ) -> tuple[Callable[[], np.ndarray], Callable[[], np.ndarray] | None]:
+        """As :meth:`bands_from_raw`, but the frame is only validated now (a :class:`FrameError` here): the band and
+        the strip are cut and converted when their callables are called, each on the thread that runs its detector
+        (the pipeline: the strip's on the far strip's worker, at the same time as the band's)."""
         name, view = self._raw_view(encoding, width, height, step, data)
         far = far or self.far
-        strip = crop_raw_to_bgr(name, view, far) if far is not None else None
-        return crop_raw_to_bgr(name, view, self.crop), strip
+        strip = partial(crop_raw_to_bgr, name, view, far) if far is not None else None
+        return partial(crop_raw_to_bgr, name, view, self.crop), strip
 
     def bands_from_compressed(self, data, far: CropSpec | None = None) -> tuple[np.ndarray, np.ndarray | None]:
         """Compressed image -> (band, far band's strip or None), decoded once; ``far`` as :meth:`bands_from_raw`."""
+        band, strip = self.cutters_compressed(data, far)
+        return band(), (strip() if strip is not None else None)
+
+    def cutters_compressed(self, data, far: CropSpec | None = None
+                           ) -> tuple[Callable[[], np.ndarray], Callable[[], np.ndarray] | None]:
+        """As :meth:`cutters_raw` for a compressed image: decoded now (once), band and strip cut when called."""
         img = decode_compressed(data, expect_wh=(self.image_width, self.image_height))
         far = far or self.far
-        return crop_bgr(img, self.crop), (crop_bgr(img, far) if far is not None else None)
+        return partial(crop_bgr, img, self.crop), (partial(crop_bgr, img, far) if far is not None else None)
 
     def camera_info_fields(self) -> dict:
         """Fields of the ``image_cropped/camera_info`` that goes with each output."""

@@ -147,25 +147,39 @@ class Pipeline:
         self.strip_counts["tiles"] += 1
         return crop, clamped, windows
 
-    def _run(self, band: np.ndarray, t_adapter_s: float, strip: np.ndarray | None, stamp_ns: int | None,
+    def _run(self, cut_band, t_adapter_s: float, cut_strip, stamp_ns: int | None,
              far_crop=None, clamped: bool = False, windows=None) -> FrameResult:
+        """One frame from its validated image: ``cut_band`` / ``cut_strip`` (None: no strip this frame) cut and convert
+        the band and the strip when called (:meth:`DriverAdapter.cutters_raw`), each on the thread of its detector;
+        ``t_adapter_s``: the validation (or decoding) before; the band's cut adds to the ``adapter`` stage, the
+        strip's to ``far_band``."""
         timing = {"adapter": t_adapter_s * 1e3}
+        cut: dict = {}  # the band and the strip as cut (the debug image shows the band, the verifier reads the strip)
+
+        def band_boxes() -> np.ndarray:
+            t0 = time.perf_counter()
+            cut["band"] = cut_band()
+            timing["adapter"] += (time.perf_counter() - t0) * 1e3
+            return self.detector.detect(cut["band"], self.calib.crop)
+
         far_boxes = None  # the far strip's boxes: the image attitude reads those kept through the far model's box model
-        if self.far is not None and strip is not None:  # two forwards, at once with a concurrent plan
+        if self.far is not None and cut_strip is not None:  # two forwards, at once with a concurrent plan
             if windows is None:
                 def second():
-                    return self.far.detect(strip, far_crop)
+                    cut["strip"] = cut_strip()
+                    return self.far.detect(cut["strip"], far_crop)
             else:  # the tiles: the strip's windows around the last frames' far cones, one mosaic
                 def second():
-                    return self.far_tiles.detect(strip, far_crop, windows, self.calib.image_width)
-            boxes, far_boxes, t = self._pair.run(lambda: self.detector.detect(band, self.calib.crop), second)
+                    cut["strip"] = cut_strip()
+                    return self.far_tiles.detect(cut["strip"], far_crop, windows, self.calib.image_width)
+            boxes, far_boxes, t = self._pair.run(band_boxes, second)
             far_det = self.far.detector if windows is None else self.far_tiles.detector  # the network that ran
             t0 = time.perf_counter()
             boxes = merge_boxes(boxes, far_boxes, getattr(self.far.detector, "iou", DEFAULT_IOU))
             t_merge = (time.perf_counter() - t0) * 1e3
             if self.far.verifier is not None:  # its second look (tile frames too: the whole strip is cut)
                 t0 = time.perf_counter()
-                boxes = self.far.verify(boxes, strip, far_crop)
+                boxes = self.far.verify(boxes, cut["strip"], far_crop)
                 timing["verifier"] = (time.perf_counter() - t0) * 1e3
                 t_merge += timing["verifier"]
             timing.update({k.removesuffix("_ms"): v for k, v in self.detector.timing.items()})
@@ -179,7 +193,7 @@ class Pipeline:
             self.strip_counts["clamped"] += int(clamped)
             self.strip_rows = (far_crop.v0, far_crop.v1) if far_crop is not None else None
         else:
-            boxes = self.detector.detect(band, self.calib.crop)
+            boxes = band_boxes()
             timing.update({k.removesuffix("_ms"): v for k, v in self.detector.timing.items()})
         # the mapping stage: the frame's boxes as columns, made once; every step below takes them
         cols = BoxColumns.of(boxes)
@@ -204,7 +218,7 @@ class Pipeline:
         cones = self.mapper.map_boxes(cols, att)
         weak_cones = self.mapper.map_boxes(weak, att) if weak is not None else None
         timing["mapping"] = (time.perf_counter() - t0) * 1e3
-        return FrameResult(cols.records, cones, timing, att, band, weak_cones)
+        return FrameResult(cols.records, cones, timing, att, cut["band"], weak_cones)
 
     @property
     def concurrent(self) -> bool:
@@ -235,7 +249,7 @@ class Pipeline:
         t0 = time.perf_counter()
         far, clamped, windows = self._far_crop(stamp_ns)
         adapter = self.adapter if far is not None else self._band_adapter
-        band, strip = adapter.bands_from_raw(encoding, width, height, step, data, far)
+        band, strip = adapter.cutters_raw(encoding, width, height, step, data, far)
         return self._run(band, time.perf_counter() - t0, strip, stamp_ns, far, clamped, windows)
 
     def process_compressed(self, data, stamp_ns: int | None = None) -> FrameResult:
@@ -245,5 +259,5 @@ class Pipeline:
         t0 = time.perf_counter()
         far, clamped, windows = self._far_crop(stamp_ns)
         adapter = self.adapter if far is not None else self._band_adapter
-        band, strip = adapter.bands_from_compressed(data, far)
+        band, strip = adapter.cutters_compressed(data, far)
         return self._run(band, time.perf_counter() - t0, strip, stamp_ns, far, clamped, windows)

@@ -186,3 +186,31 @@ def test_the_pipeline_node_runs_both_forwards_at_once_on_two_threads_and_joins_a
         assert one.pipeline.far.detector._run.session.get_session_options().intra_op_num_threads == 1
     finally:
         one.destroy_node()
+
+
+def test_the_strip_is_cut_on_the_worker_and_the_band_on_the_calling_thread(monkeypatch):
+    """The strip's rows are cut and converted on the worker, beside the band's cut and forward: the frame waits for
+    the later of the two, not for both cuts first; the band the frame returns is the adapter's band."""
+    import cone_perception.adapter as adapter_mod
+
+    calib = load_calibration("example_mainhoop")
+    det = Detector.load_for_band(default_model_path(), (calib.crop.out_width, calib.crop.out_height), threads=1,
+                                 backend="onnx")
+    far = FarBand.load(default_model_path(), "384,480", calib.image_width, calib.image_height, calib.crop, threads=1,
+                       backend="onnx")
+    cut_on: dict[int, str] = {}
+    real_cut = adapter_mod.crop_raw_to_bgr
+
+    def cut(name, view, crop):
+        cut_on[crop.v1 - crop.v0] = threading.current_thread().name
+        return real_cut(name, view, crop)
+
+    monkeypatch.setattr(adapter_mod, "crop_raw_to_bgr", cut)
+    data = rendered_frames(calib, 1)[0]
+    with Pipeline(calib, det, "fixed", far=far, concurrent=True) as pipe:
+        res = _process(pipe, calib, data)
+    assert cut_on[STRIP.height_full_px].startswith(WORKER_NAME)
+    assert cut_on[calib.crop.height_full_px] == threading.main_thread().name
+    band = pipe.adapter.from_raw("yuv422_yuy2", calib.image_width, calib.image_height, 2 * calib.image_width, data)
+    np.testing.assert_array_equal(res.band, band)
+    assert res.timing_ms["adapter"] > 0 and res.timing_ms["far_band"] > res.timing_ms["far_forward"]

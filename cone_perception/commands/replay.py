@@ -44,10 +44,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-range", type=float, default=None, metavar="M",
                    help="offline: use this max_range_m instead of the calibration's (cones farther are dropped; to "
                         "measure a range before setting it in a calibration)")
-    p.add_argument("--band-split", default=None, metavar="none|auto|N0,U1",
-                   help="offline: the band in two (docs/detector.md 'Row-scaled band'): none (default) = one band; auto = "
-                        "split from the calibration, the near rows at a quarter of full resolution; N0,U1 = the near band "
-                        "from row N0, the upper band to row U1")
     p.add_argument("--live", choices=["fused", "separate"], default=None,
                    help="play the bag into live node processes instead of replaying offline")
     p.add_argument("--pace", choices=["lockstep", "rate"], default="lockstep",

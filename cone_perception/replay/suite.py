@@ -33,7 +33,7 @@ from ..attitude import FIXED
 from ..data.bags import read_ground_truth, read_twists
 from ..data.outfiles import print_written, remove_bag
 from ..detector import DEFAULT_BACKEND, RUNTIME_THREADS
-from ..detector.farband import FAR_ROWS_AUTO, band_rows_for
+from ..detector.farband import BAND_SPLIT_OFF, FAR_ROWS_AUTO, band_rows_for
 from ..detector.verifier import load_verifier
 from ..errors import ConfigError
 from ..evaluation import GT_MIN_VISIBLE, LocalisationReport, format_localisation
@@ -72,6 +72,7 @@ class Settings:
     far_every: int = PARAMS["far_every"].default
     far_tiles: int = PARAMS["far_tiles"].default
     band_rows: str | None = None
+    band_split: str | None = None
     attitude: str = "image"
     box_model: str = "auto"
     box_behaviour: str = "as-is"
@@ -82,7 +83,7 @@ class Settings:
 def replay_args(settings: Settings, bag: Path) -> argparse.Namespace:
     """The options ``replay BAG --gt-topic /cones_gt`` would have with these settings (what
     :func:`.run.offline_pipeline` reads)."""
-    return argparse.Namespace(**asdict(settings), bag=bag, bf16=False, band_split=None, track_conf=None, box_jitter=None,
+    return argparse.Namespace(**asdict(settings), bag=bag, bf16=False, track_conf=None, box_jitter=None,
                               imu_topic="/imu", imu_rest="0,0", gt_topic=GT_TOPIC)
 
 
@@ -189,8 +190,10 @@ def run_real_set(real: RealSet, settings: Settings, out: Path) -> dict:
     pred = out / "pred.jsonl"
     rows = settings.far_rows
     far_rows = real.far_rows if rows is None or str(rows).strip().lower() == FAR_ROWS_AUTO else rows
+    split = settings.band_split
+    band_split = None if split is None or split.strip().lower() in BAND_SPLIT_OFF else real.band_split
     run_detect(argparse.Namespace(source=gt, out=pred, model=settings.model, backend=settings.backend, bf16=False, imgsz=None,
-                                  crop=real.crop, downscale=real.downscale, calib=None, band_split=None, far_rows=far_rows,
+                                  crop=real.crop, downscale=real.downscale, calib=None, band_split=band_split, far_rows=far_rows,
                                   far_model=settings.far_model, far_verifier=settings.far_verifier, conf=0.001, iou=DEFAULT_IOU,
                                   topic=None, save_vis=None, every=1, no_progress=True))
     res = evaluate_predictions(pred, gt, real.gt_names, conf=settings.conf, progress=False, verbose=False, band=real.crop)

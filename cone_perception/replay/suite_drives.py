@@ -160,7 +160,9 @@ def drive_seed(drive: DriveSpec) -> int:
 class RealSet:
     """A real labelled set scored as the car runs its camera: ``detect`` with the band (``crop`` rows at
     ``downscale``) and the far strip (``far_rows``), then ``eval`` in the band. ``path``: relative to the
-    working directory (the repository's root); ``build``: how to make it when it is missing."""
+    working directory (the repository's root); ``build``: how to make it when it is missing; ``band_split``: the
+    set's split of its band (``N0,U1``) where the suite judges a split band (the clips have no calibration to place
+    ``auto`` from)."""
 
     name: str
     path: str
@@ -169,6 +171,7 @@ class RealSet:
     downscale: int
     far_rows: str
     build: str
+    band_split: str = "416,544"
 
 
 REAL_SETS: tuple[RealSet, ...] = (
