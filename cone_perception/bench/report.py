@@ -120,11 +120,16 @@ def _ms(stages: dict, name: str) -> str:
 
 
 def speed(r: Runner) -> Section:
-    """``bench pipeline`` at the defaults (band + far strip) and the band alone, by backend and network threads."""
+    """``bench pipeline`` at the defaults (band + far strip) and the band alone, by backend and network threads, the
+    row-scaled band (an option); and the YOLO11n-sized ``n`` network's forward alone on two threads (``speed``), the
+    peer of issue 43's goal: each two-thread row's end to end against it."""
     frames, warmup = ("40", "5") if r.quick else ("300", "20")
     designs = [("defaults (band + far strip)", "onnx", t, ()) for t in (1, 2)]
     designs += [("defaults (band + far strip)", "torch", t, ()) for t in (1, 2)]
     designs += [("the band alone", "onnx", t, ("--far-rows", "none")) for t in (1, 2)]
+    designs += [("row-scaled band + far strip (`--band-split auto`, an option)", "onnx", 2, ("--band-split", "auto"))]
+    peer = json.loads(r.cli("speed", "--sizes", "n", "--backends", "onnx", "--threads", "2", "--imgsz", "960x288",
+                            "--frames", "20" if r.quick else "100", "--json"))[0]["median_ms"]
     rows = []
     for what, backend, threads, extra in designs:
         d = json.loads(r.cli("bench", "pipeline", "--json", "--frames", frames, "--warmup", warmup, "--backend", backend,
@@ -132,13 +137,19 @@ def speed(r: Runner) -> Section:
         s, e2e = d["stages"], d["stages"]["end_to_end"]
         rows.append([what, "ONNX Runtime" if d["backend"] == "onnx" else d["backend"], str(threads), _ms(s, "forward"),
                      _ms(s, "far_forward"), _f(e2e["median_ms"], 1), f"{e2e['p99_ms'] / e2e['median_ms']:.2f}x",
-                     _f(d["fps"], 1), f"{d['peak_rss_mb']:.0f}"])
+                     _f(d["fps"], 1), f"{peer / e2e['median_ms']:.2f}x" if threads == 2 else "-",
+                     f"{d['peak_rss_mb']:.0f}"])
+    rows.append(["YOLO11n-sized `n`, its forward alone (`speed`)", "ONNX Runtime", "2", _f(peer, 1), "-", "-", "-",
+                 _f(1000.0 / peer, 1), "1.00x", "-"])
     head = ["design", "backend", "network threads", "band forward (ms)", "strip forward (ms)", "end to end (ms)",
-            "p99 / median", "frames/s", "peak RSS (MB)"]
+            "p99 / median", "frames/s", "vs `n`'s forward", "peak RSS (MB)"]
     return Section(_table(head, rows), [f"cone-perception bench pipeline --frames {frames} --warmup {warmup} --encoding "
-                                        "yuv422_yuy2 --backend onnx|torch --threads 1|2 [--far-rows none]"],
+                                        "yuv422_yuy2 --backend onnx|torch --threads 1|2 [--far-rows none | --band-split auto]",
+                                        "cone-perception speed --sizes n --backends onnx --threads 2 --imgsz 960x288 "
+                                        f"--frames {20 if r.quick else 100}"],
                    [f"1920x1080 YUYV rendered scenes, {frames} timed frames a run after {warmup} of warm-up, one run "
-                    "each, back to back; medians."])
+                    "each, back to back; medians. \"vs `n`'s forward\": the YOLO11n-sized network's forward alone at "
+                    "960x288 on two threads (the peer of issue 43's goal, 2x) over the row's end to end."])
 
 
 def _eval(r: Runner, pred: Path, name: str, *extra: str) -> dict:
@@ -301,7 +312,7 @@ DRIVE_TOPICS = ("rendered", "attitude", "tracking")
 def planned_runs(topics: list[str], quick: bool) -> int:
     """How many sub-commands a report of ``topics`` runs (the progress bar's total)."""
     n = len(QUICK_DRIVES if quick else DRIVES)
-    runs = {"speed": 6, "real": 8, "validation": 1, "tracking": 1, "robustness": 2, "attitude": 3 * n}
+    runs = {"speed": 8, "real": 8, "validation": 1, "tracking": 1, "robustness": 2, "attitude": 3 * n}
     return sum(runs.get(t, 0) for t in topics) + (2 * n if any(t in DRIVE_TOPICS for t in topics) else 0)
 
 
