@@ -71,7 +71,7 @@ def test_planned_runs_count_the_drives_once():
     assert planned_runs(["rendered"], True) == 2
     assert planned_runs(["rendered", "attitude", "tracking"], True) == 2 + 3 + 1
     assert planned_runs(["attitude"], False) == 4 + 6
-    assert planned_runs(["speed", "real", "robustness"], False) == 6 + 8 + 2
+    assert planned_runs(["speed", "real", "robustness"], False) == 8 + 8 + 2  # speed: 7 pipelines + n's forward
 
 
 def test_stamp_names_the_machine_and_mode():
