@@ -165,3 +165,26 @@ def test_the_docs_list_every_drive_with_its_seed() -> None:
     text = (Path(__file__).resolve().parents[1] / "docs" / "validation.md").read_text(encoding="utf-8")
     for d in DRIVES:
         assert f"| `{d.name}`" in text and f"| {d.seed} |" in text, d.name
+
+
+def test_the_targets_are_read_off_the_distribution_met_or_missed_with_the_deciding_drive():
+    from cone_perception.evaluation.spread import TARGETS, check_targets, distribution, format_targets
+
+    def row(name, r25, false, att):
+        return {"drive": name, "status": "ok", "recall_15_25": 0.99, "recall_25_40": r25, "false_per_frame": false,
+                "err_att_7_15": att}
+
+    rows = [row("a", 0.90, 0.10, 0.08), row("b", 0.85, 0.25, 0.09), row("c", 0.79, 0.15, 0.12)]
+    checks = {(c["key"], c["stat"]): c for c in check_targets(distribution(rows))}
+    assert len(checks) == len(TARGETS)
+    assert checks[("recall_15_25", "worst")]["met"]
+    miss = checks[("recall_25_40", "worst")]
+    assert not miss["met"] and miss["drive"] == "c" and miss["value"] == pytest.approx(0.79) and miss["at_least"]
+    assert checks[("false_per_frame", "worst")]["met"] and checks[("false_per_frame", "worst")]["drive"] == "b"
+    assert checks[("false_per_frame", "median")]["met"] and checks[("false_per_frame", "median")]["drive"] is None
+    assert checks[("err_att_7_15", "median")]["met"]  # median 0.09 <= 0.10
+    text = format_targets(list(checks.values()))
+    assert "0.790 (c) >= 0.8 MISSED" in text and "0.250 (b) <= 0.3 met" in text
+    # a figure no drive has (every band empty) is not met
+    none = check_targets(distribution([{"drive": "x", "status": "ok"}]))
+    assert not any(c["met"] for c in none)

@@ -7,6 +7,9 @@ least half visible, false cones per frame within 40 m, the median position error
 pipeline used), the same report of the same boxes mapped through the fixed H, and the tracker's scoring
 (:class:`~cone_perception.evaluation.tracking.DriveEvaluation`, ``/cones/tracked`` by band).
 
+The targets (:data:`TARGETS`, issue 41's for the rendered drives, :func:`check_targets`) are read off the
+distribution: met or missed, with the drive that decides it.
+
 The distribution (:func:`distribution`) of each figure over the drives that ran (failed rows left out, a drive
 where a band holds no true cone left out of that figure): the median; the *worst tenth*, the 10th percentile of a
 figure where higher is better (recall) and the 90th where lower is better (false cones, errors), linearly
@@ -110,6 +113,53 @@ def distribution(rows: list[dict], figures: tuple[Figure, ...] = FIGURES) -> dic
         s["worst_drive"] = good[s.pop("worst_index")]["drive"] if s["n"] else None
         out[f.key] = s
     return out
+
+
+@dataclass(frozen=True)
+class Target:
+    """A target on the rendered drives: the ``stat`` (``worst``: every drive; ``median``: the middle one) of figure
+    ``key`` at least ``bound`` where the figure is higher-better (recall), at most ``bound`` where not."""
+
+    key: str
+    stat: str
+    bound: float
+    label: str
+
+
+#: Issue 41's targets for the rendered drives at the defaults.
+TARGETS: tuple[Target, ...] = (
+    Target("recall_15_25", "worst", 0.98, "/cones recall 15-25 m, every drive"),
+    Target("recall_25_40", "worst", 0.80, "/cones recall 25-40 m, every drive"),
+    Target("false_per_frame", "worst", 0.3, "false cones per frame within 40 m, every drive"),
+    Target("false_per_frame", "median", 0.2, "false cones per frame within 40 m, median of the drives"),
+    Target("err_att_7_15", "median", 0.10, "the attitude's median position error 7-15 m (m), median of the drives"),
+)
+
+
+def check_targets(dist: dict[str, dict], targets: tuple[Target, ...] = TARGETS,
+                  figures: tuple[Figure, ...] = FIGURES) -> list[dict]:
+    """Per target ``{label, key, stat, bound, at_least, value, met, drive}`` from :func:`distribution`'s ``dist`` (``drive``: the
+    worst drive for a ``worst`` target, else None; ``met`` False where no drive had the figure)."""
+    higher = {f.key: f.higher_better for f in figures}
+    out = []
+    for t in targets:
+        d = dist.get(t.key, {})
+        v = float(d.get(t.stat, math.nan))
+        met = bool(math.isfinite(v) and (v >= t.bound if higher[t.key] else v <= t.bound))
+        out.append({"label": t.label, "key": t.key, "stat": t.stat, "bound": t.bound, "at_least": higher[t.key],
+                    "value": v, "met": met,
+                    "drive": d.get("worst_drive") if t.stat == "worst" else None})
+    return out
+
+
+def format_targets(checks: list[dict]) -> str:
+    """One line per target: its value against its bound, met or MISSED, and the deciding drive."""
+    lines = ["targets (issue 41, rendered drives):"]
+    for c in checks:
+        op = ">=" if c["at_least"] else "<="
+        where = f" ({c['drive']})" if c["drive"] else ""
+        lines.append(f"  {c['label']}: {c['value']:.3f}{where} {op} {c['bound']:g} {'met' if c['met'] else 'MISSED'}")
+    return "\n".join(lines)
 
 
 def _cell(v, width: int = 8, nd: int = 3) -> str:

@@ -40,8 +40,8 @@ from ..evaluation import GT_MIN_VISIBLE, LocalisationReport, format_localisation
 from ..evaluation.attitude import format_attitude_report
 from ..evaluation.report import MIN_HEIGHT_PX, evaluate_predictions, write_report
 from ..evaluation.spread import (
-    FAILED, FIGURES, MISSING, OK, REAL_FIGURES, distribution, drive_row, format_real, format_tables, real_row,
-    spread_plot, write_csv, write_json,
+    FAILED, FIGURES, MISSING, OK, REAL_FIGURES, check_targets, distribution, drive_row, format_real, format_tables,
+    format_targets, real_row, spread_plot, write_csv, write_json,
 )
 from ..geometry.calib import load_calibration
 from ..mapping import ConeMapper
@@ -235,8 +235,10 @@ def run_suite(drives: tuple[DriveSpec, ...], real_sets: tuple[RealSet, ...], set
         (rows if kind == "drive" else real_rows).append(row)
     wall = time.perf_counter() - t0
     dist = distribution(rows)
+    targets = check_targets(dist)
     if rows:
         print(format_tables(rows, dist))
+        print(format_targets(targets))
     if real_rows:
         print(format_real(real_rows))
     failed = [r["drive"] for r in rows + real_rows if r["status"] == FAILED]
@@ -244,7 +246,7 @@ def run_suite(drives: tuple[DriveSpec, ...], real_sets: tuple[RealSet, ...], set
     print(f"validate: {len(rows)} drives ({sum(r['status'] == OK for r in rows)} ran), {len(real_rows)} real sets, "
           f"{wall / 60:.1f} min; settings: " + ", ".join(f"{k} {v}" for k, v in asdict(settings).items()))
     report = {"command": command, "settings": asdict(settings), "seconds": seconds, "fps": fps, "wall_s": wall,
-              "drives": rows, "distribution": dist, "real_sets": real_rows, "failed": failed, "missing": missing}
+              "drives": rows, "distribution": dist, "targets": targets, "real_sets": real_rows, "failed": failed, "missing": missing}
     keys = ["drive", "status", "seed", "frames", "frames_dropped", "attitude", "pitch_err_deg", "wall_s"]
     files = [write_json(out / "suite.json", report),
              write_csv(out / "drives.csv", rows, keys + [f.key for f in FIGURES] + ["what", "error"]),
