@@ -480,6 +480,34 @@ def test_fused_still_body_on_level_ground_gets_zero_not_the_imu_bias():
     assert a.source == "fused" and a.pitch_deg == 0.0 and a.roll_deg == 0.0
 
 
+def test_fused_keeps_the_imu_where_it_sees_the_body_move_though_the_fits_look_still():
+    """A body jittering in roll by less than the image fits' own 1-sigma: the fits look still (their scatter is their
+    noise), but the IMU sees the motion, so ``fused`` keeps the IMU's reading instead of returning to zero."""
+    from cone_perception.attitude import ImuAttitude, attitude_estimator
+    from cone_perception.attitude.fused import ImuStillTest
+
+    rng = np.random.default_rng(5)
+    imu = ImuAttitude()
+    _, est = attitude_estimator(ConeMapper(_calib()), "fused", imu)
+    rolls = rng.normal(0.0, 0.5, 60)
+    out = []
+    for k in range(60):
+        imu.add(k * 50_000_000, _q(0.0, float(rolls[k])))
+        a = est.update(_noisy(_cone_boxes(_tilted_camera(0.0, 0.0), CONES_XY, CONES_CLS), rng), CONES_CLS,
+                       k * 50_000_000)
+        out.append(a.roll_deg)
+    assert est.image.motion_weight(None, None) == 0.0  # the image's still test alone: still
+    out = np.array(out[30:])
+    assert np.abs(out).max() > 0.3 and np.corrcoef(out, rolls[30:])[0, 1] > 0.9
+    # the test on its own: noise only -> still; jitter or a lean -> moving; nothing judged before its first frames
+    cfg = ImageAttitudeConfig()
+    for readings, want in ((rng.normal(0.0, 0.03, (60, 2)), 0.0), (rng.normal(0.0, 0.5, (60, 2)), 1.0),
+                           (np.full((60, 2), 1.0) + rng.normal(0.0, 0.03, (60, 2)), 1.0)):
+        t = ImuStillTest(cfg)
+        w = [t.weight(r, 0.1) for r in readings]
+        assert w[0] == 1.0 and w[-1] == want
+
+
 def test_eval_fits_each_images_attitude_and_reports_the_uncertainty_per_group(tmp_path, capsys):
     """``eval --attitude image``: each image's attitude from its own detections (as ``map --boxes``), and
     the localisation table's median predicted 1-sigma per distance group (the attitude's included)."""

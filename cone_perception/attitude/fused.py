@@ -81,6 +81,35 @@ class GroundGate:
     hold_frames: float = 1000.0
 
 
+class ImuStillTest:
+    """The image's still test (``ImageAttitudeConfig`` ``still_frames``, ``still_min_frames``, ``still_ratio``,
+    ``still_ramp``, ``still_max_mean_deg``) run on the IMU's readings against the IMU's own 1-sigma: in ``fused`` a
+    body is still only where its IMU says so too. The image fits alone cannot tell a body that jitters by less than
+    their own 1-sigma (0.2-0.4° in roll on a small wide camera) from a still one, and the attitude returned to zero
+    there threw the IMU's reading away (docs/attitude.md, "still test")."""
+
+    def __init__(self, cfg):
+        self.cfg = cfg
+        self.n, self.m1, self.m2 = 0, np.zeros(2), np.zeros(2)
+
+    def weight(self, body: np.ndarray, sigma_deg: float) -> float:
+        """Fold one reading (pitch, roll; degrees) in; 1 = the IMU sees the body move or lean (keep the estimate),
+        0 = still (as far as the IMU can tell); 1 until ``still_min_frames`` readings are in."""
+        c = self.cfg
+        if c.still_frames <= 0:
+            return 1.0
+        self.n += 1
+        a = 1.0 / min(self.n, c.still_frames)
+        self.m1 += a * (body - self.m1)
+        self.m2 += a * (body * body - self.m2)
+        if self.n < c.still_min_frames:
+            return 1.0
+        spread = np.sqrt(np.maximum(self.m2 - self.m1**2, 0.0)) / max(sigma_deg, 1e-6)
+        moving = (np.max(spread) - (c.still_ratio - c.still_ramp)) / c.still_ramp
+        sloped = (np.max(np.abs(self.m1)) - c.still_max_mean_deg) / (0.5 * c.still_max_mean_deg)
+        return float(np.clip(max(moving, sloped), 0.0, 1.0))
+
+
 def _log_odds(p_flat: float) -> float:
     return math.log((1.0 - p_flat) / p_flat)
 
@@ -115,6 +144,7 @@ class FusedAttitude:
         self.roll_bias_prior = float(roll_bias_prior_frames)
         self.roll_bias = 0.0  # the image fit's roll bias against the IMU, degrees
         self.n_roll_bias = 0
+        self.imu_still = ImuStillTest(image.cfg)  # still only where the IMU says so too
 
     @property
     def counts(self) -> AttitudeCounts:
@@ -182,6 +212,7 @@ class FusedAttitude:
             self.image.counts.fitted += 1
         if wm is None:
             wm = self.image.motion_weight(None, None)
+        wm = max(wm, self.imu_still.weight(body, s_imu))
         g, var_g = self.step_ground_gate()
         att = (body + g) * wm  # still body and ground (the image's still test): the calibration's zero
         self.image.x = att.copy()  # keeps the image filter warm for frames without IMU

@@ -1,6 +1,7 @@
 """Image-attitude designs screened on the validation suite's cached drives (issue 41, part 3).
 
     .venv/bin/python docs/experiments/suite_attitude_designs.py BAG [BAG ...] [--set FIELD=VALUE,...] [--truth]
+        [--attitude image|fused|imu|fixed]
 
 Each BAG is a drive the suite rendered (`cone-perception validate --tuning --seconds 2 --cache DIR` leaves them in
 DIR, named `tune-NAME`: screen on those, never on the judging drives). Each is replayed as the suite replays it
@@ -84,6 +85,8 @@ def main() -> None:
     ap.add_argument("bags", nargs="+", type=Path)
     ap.add_argument("--set", default=None, help="ImageAttitudeConfig FIELD=VALUE,... (default: none changed)")
     ap.add_argument("--truth", action="store_true", help="also the false cones with the true attitude")
+    ap.add_argument("--attitude", default="image", choices=("image", "fused", "imu", "fixed"),
+                    help="the attitude the drives are replayed with (default image, the suite's)")
     args = ap.parse_args()
     patch_config(parse_set(args.set))
     from cone_perception.replay import suite  # after the patch: the pipeline builds its config then
@@ -98,7 +101,7 @@ def main() -> None:
     rows = []
     for bag in args.bags:
         with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
-            r = suite.run_drive(bag, suite.Settings())
+            r = suite.run_drive(bag, suite.Settings(attitude=args.attitude))
         rows.append(r)
         line = (f"{bag.name:28s} false {r['false_per_frame']:.2f} recall 15-25 {r['recall_15_25']:.3f} "
                 f"25-40 {r['recall_25_40']:.3f} att 7-15 {r['err_att_7_15']:.3f} m (fixed H {r['err_fixed_7_15']:.3f})")
