@@ -251,7 +251,7 @@ def attitude(r: Runner) -> Section:
         for mode in ("fixed", "image", "imu", "fused"):
             d = r.replay(seed, "--track") if mode == "fused" else r.replay(seed, "--attitude", mode)
             a, loc = d["localisation"].get("attitude", {}), d["localisation"]["extra_groups"]
-            rows.append([str(seed), mode + (" (default)" if mode == "fused" else ""),
+            rows.append([str(seed), mode + (" (replay's default)" if mode == "fused" else ""),
                          _f(a.get("median_abs_err_pitch_deg")), _f(a.get("p90_abs_err_pitch_deg")),
                          _f(a.get("median_abs_err_roll_deg")), _f(loc["7-15 m"]["median_err_m"]),
                          _f(loc["15-25 m"]["median_err_m"]), _ms(d["stages"], "attitude")])
@@ -259,7 +259,8 @@ def attitude(r: Runner) -> Section:
             "median error 7-15 m (m)", "median error 15-25 m (m)", "attitude stage (ms)"]
     return Section(_table(head, rows), _drive_commands(r, "--attitude fixed|image|imu|fused"),
                    ["The drives of the rendered table; `fixed` is the calibration's pitch and roll, `imu` the bag's "
-                    "IMU, `image` the fit to the boxes, `fused` both (the nodes' default)."])
+                    "IMU, `image` the fit to the boxes, `fused` both (`replay`'s default on a bag with an IMU; the nodes run "
+                    "`image` unless their `attitude` parameter asks for `imu` or `fused`)."])
 
 
 def tracking(r: Runner) -> Section:
