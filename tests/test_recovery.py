@@ -204,7 +204,10 @@ def test_a_node_killed_with_kill9_gets_frames_again_within_5s_ten_times(ros) -> 
     def gids() -> set[bytes]:
         return {bytes(i.endpoint_gid) for i in node.get_publishers_info_by_topic("/image_cropped")}
 
-    trials, dead_files, seen, p, dead_ports = [], {}, set(), None, set()
+    trials, dead_files, seen, p, killed_ports = [], {}, set(), None, {}
+    domain = int(os.environ.get("ROS_DOMAIN_ID", "0"))
+    # ports numbered from a participant id (Fast DDS's ports 7000, 7001, ... are numbered per process, not from the id)
+    by_id = {f"fastrtps_port{port}" for k in range(shm.MAX_PARTICIPANT_ID + 1) for port in shm.participant_ports(domain, k)}
     try:
         for trial in range(11):  # the first start, then ten restarts after kill -9
             n0, t0 = len(got), time.monotonic()
@@ -215,11 +218,15 @@ def test_a_node_killed_with_kill9_gets_frames_again_within_5s_ten_times(ros) -> 
             seen |= gids()
             back = pump(lambda: len(got) > n0, 5.0)
             if trial:
-                # it did not open a port of the killed node that this process (the camera) still maps: it took a
+                # it did not open the killed node's port that this process (the camera) still mapped: it took a
                 # participant id of its own (nodes/_common.avoid_dead_ports), else its frames would wait for the
-                # camera's health check on the dead port
-                ports = {_base(f) for f in owned_shm(p.pid) if "_port" in f}
-                assert not ports & dead_ports, f"restart {trial}: took the killed node's port(s) {sorted(ports & dead_ports)}"
+                # camera's health check on the dead port. The same file (inode, pinned), not the same number: once
+                # the camera lets go of a dead port, a clean-up removes it and its number is free again
+                held = owned_shm(p.pid)
+                taken = sorted(f for f, fd in killed_ports.items() if held.get(f) == os.fstat(fd).st_ino)
+                unpin(killed_ports)
+                killed_ports = {}
+                assert not taken, f"restart {trial}: opened the killed node's port(s) {taken}"
                 trials.append((round(time.monotonic() - t_ready, 2) if back else None, round(time.monotonic() - t0, 1)))
                 # its data segments are gone; its ports too, unless a live writer still maps them (shm.py)
                 used = shm.mapped()
@@ -233,23 +240,21 @@ def test_a_node_killed_with_kill9_gets_frames_again_within_5s_ten_times(ros) -> 
                 break  # the last one is stopped, not killed
             dead_files = owned_shm(p.pid)
             assert dead_files, "the node holds no shared-memory lock (is the SHM transport on?)"
+            killed_ports = pin(f for f in dead_files if f in by_id)
             os.kill(p.pid, signal.SIGKILL)
             p.wait(timeout=10)
             # what it held alone is stale now (a port it shared with a live process is that one's too)
             stale = set(shm.stale())
-            # the killed node's ports numbered from its participant id (Fast DDS's ports 7000, 7001, ... are
-            # numbered per process, not from the id, and change nothing here)
-            domain = int(os.environ.get("ROS_DOMAIN_ID", "0"))
-            by_id = {port for k in range(shm.MAX_PARTICIPANT_ID + 1) for port in shm.participant_ports(domain, k)}
-            dead_ports = {f"fastrtps_port{n}" for n in shm.dead_ports_in_use() if n in by_id}
             dead_files = pin(f for f in dead_files if _base(f) in stale or "_port" not in f)
             assert any("_port" not in f for f in dead_files) and still_there(dead_files) == set(dead_files), \
                 "kill -9 left nothing behind: the test would prove nothing"
-            assert dead_ports, "no port of the killed node is mapped by this process: the port check would prove nothing"
+            assert {f"fastrtps_port{n}" for n in shm.dead_ports_in_use()} & set(killed_ports), \
+                "no port of the killed node is mapped by this process: the port check would prove nothing"
         # (s from ready to the first frame out, s from the start): 10 of 10 within 5 s of being ready
         print("restarts:", trials)
         assert len(trials) == 10 and all(t is not None and t < 5.0 for t, _ in trials), trials
     finally:
         unpin(mine)
+        unpin(killed_ports)
         if p is not None and p.poll() is None:
             stop_process(p)
