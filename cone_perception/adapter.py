@@ -180,30 +180,19 @@ class DriverAdapter:
     def from_compressed(self, data) -> np.ndarray:
         """sensor_msgs/CompressedImage data (JPEG/PNG/...) -> cropped BGR; a header declaring another
         size than the calibration's is refused before decoding."""
-        return self.bands_from_compressed(data)[0]
-
-    def bands_from_raw(self, encoding: str, width: int, height: int, step: int, data, far: CropSpec | None = None
-                       ) -> tuple[np.ndarray, np.ndarray | None]:
-        """sensor_msgs/Image fields -> (the band as :meth:`from_raw`, the far band's full-resolution
-        strip ``(V1 - V0, W, 3)`` BGR or None without one); the frame is validated once. ``far``: this
-        frame's strip rows (the strip moved with the attitude, inside the image), else :attr:`far`'s."""
-        band, strip = self.cutters_raw(encoding, width, height, step, data, far)
-        return band(), (strip() if strip is not None else None)
+        return self.cutters_compressed(data)[0]()
 
     def cutters_raw(self, encoding: str, width: int, height: int, step: int, data, far: CropSpec | None = None
                     ) -> tuple[Callable[[], np.ndarray], Callable[[], np.ndarray] | None]:
-        """As :meth:`bands_from_raw`, but the frame is only validated now (a :class:`FrameError` here): the band and
-        the strip are cut and converted when their callables are called, each on the thread that runs its detector
-        (the pipeline: the strip's on the far strip's worker, at the same time as the band's)."""
+        """sensor_msgs/Image fields -> (the band as :meth:`from_raw`, the far band's full-resolution strip
+        ``(V1 - V0, W, 3)`` BGR or None without one), each as a callable: the frame is validated now (once; a
+        :class:`FrameError` here), the band and the strip are cut and converted when called, each on the thread that
+        runs its detector (the pipeline: the strip's on the far strip's worker, at the same time as the band's).
+        ``far``: this frame's strip rows (the strip moved with the attitude, inside the image), else :attr:`far`'s."""
         name, view = self._raw_view(encoding, width, height, step, data)
         far = far or self.far
         strip = partial(crop_raw_to_bgr, name, view, far) if far is not None else None
         return partial(crop_raw_to_bgr, name, view, self.crop), strip
-
-    def bands_from_compressed(self, data, far: CropSpec | None = None) -> tuple[np.ndarray, np.ndarray | None]:
-        """Compressed image -> (band, far band's strip or None), decoded once; ``far`` as :meth:`bands_from_raw`."""
-        band, strip = self.cutters_compressed(data, far)
-        return band(), (strip() if strip is not None else None)
 
     def cutters_compressed(self, data, far: CropSpec | None = None
                            ) -> tuple[Callable[[], np.ndarray], Callable[[], np.ndarray] | None]:

@@ -12,7 +12,7 @@ import numpy as np
 from ..errors import ConfigError
 from ..geometry.linalg import inv2
 from ..records import BoxColumns
-from .image import ImageAttitude
+from .image import ImageAttitude, still_weight
 from .model import AttitudeCounts
 from .imu import ImuAttitude
 from .model import ATTITUDE_MODES, FIXED, Attitude, default_attitude_mode
@@ -104,10 +104,7 @@ class ImuStillTest:
         self.m2 += a * (body * body - self.m2)
         if self.n < c.still_min_frames:
             return 1.0
-        spread = np.sqrt(np.maximum(self.m2 - self.m1**2, 0.0)) / max(sigma_deg, 1e-6)
-        moving = (np.max(spread) - (c.still_ratio - c.still_ramp)) / c.still_ramp
-        sloped = (np.max(np.abs(self.m1)) - c.still_max_mean_deg) / (0.5 * c.still_max_mean_deg)
-        return float(np.clip(max(moving, sloped), 0.0, 1.0))
+        return still_weight(c, self.m1, self.m2, sigma_deg**2)
 
 
 def _log_odds(p_flat: float) -> float:

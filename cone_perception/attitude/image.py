@@ -162,10 +162,7 @@ class ImageAttitude:
                 return 1.0
             # not judged yet: this fit's own evidence that the body is off zero (a ramp of one sigma)
             return float(np.clip(np.max(np.abs(z) / np.sqrt(np.maximum(np.diag(Rz), 1e-12))) - c.still_start_sigmas, 0.0, 1.0))
-        spread = np.sqrt(np.maximum(self._m2 - self._m1**2, 0.0) / np.maximum(self._mv, 1e-12))
-        moving = (np.max(spread) - (c.still_ratio - c.still_ramp)) / c.still_ramp
-        sloped = (np.max(np.abs(self._m1)) - c.still_max_mean_deg) / (0.5 * c.still_max_mean_deg)
-        return float(np.clip(max(moving, sloped), 0.0, 1.0))
+        return still_weight(c, self._m1, self._m2, self._mv)
 
     def still_sigma(self, sd: np.ndarray, wm: float) -> np.ndarray:
         """(2,) 1-sigma (degrees) of the attitude used: the estimate's ``sd`` while the body moves; while it is
@@ -459,6 +456,16 @@ class ImageAttitude:
             return self.calibration_fallback(n)
         x = self.x * wm
         return Attitude(float(x[0]), float(x[1]), float(sd[0]), float(sd[1]), source, n)
+
+
+def still_weight(cfg: ImageAttitudeConfig, m1: np.ndarray, m2: np.ndarray, ref_var) -> float:
+    """The still test's verdict from the running mean ``m1`` and mean square ``m2`` (pitch, roll; degrees) of what it
+    watched and the variance ``ref_var`` they would scatter by on a still body: 1 = moving or leaning (their spread
+    above ``still_ratio`` of it, or their mean beyond ``still_max_mean_deg``), 0 = still, a ramp between."""
+    spread = np.sqrt(np.maximum(m2 - m1**2, 0.0) / np.maximum(ref_var, 1e-12))
+    moving = (np.max(spread) - (cfg.still_ratio - cfg.still_ramp)) / cfg.still_ramp
+    sloped = (np.max(np.abs(m1)) - cfg.still_max_mean_deg) / (0.5 * cfg.still_max_mean_deg)
+    return float(np.clip(max(moving, sloped), 0.0, 1.0))
 
 
 def _irls(r0: np.ndarray, j0: np.ndarray, j1: np.ndarray, inv_s: np.ndarray, delta: np.ndarray, theta: np.ndarray,

@@ -39,6 +39,15 @@ def add_far_model(p: argparse.ArgumentParser, scope: str = "", after: str = "") 
                         f"must be the band model's{after}")
 
 
+def add_band_split(p: argparse.ArgumentParser, scope: str = "", after: str = "") -> None:
+    """``--band-split none|auto|N0,U1``, the row-scaled band (one text for every command that runs it); ``scope``
+    and ``after`` as :func:`add_far_model`."""
+    p.add_argument("--band-split", default=None, metavar="none|auto|N0,U1",
+                   help=f"{scope}the band in two (docs/detector.md 'Row-scaled band'): none (default) = one band; auto = "
+                        f"split from the calibration, the near rows at a quarter of full resolution; N0,U1 = the near "
+                        f"band from row N0, the upper band to row U1{after}")
+
+
 def add_far_verifier(p: argparse.ArgumentParser, scope: str = "") -> None:
     """``--far-verifier auto|none|PATH``: the far strip's second look at its doubtful boxes (detector/verifier.py)."""
     p.add_argument("--far-verifier", default=None, metavar="auto|none|PATH",
@@ -91,10 +100,7 @@ def add_pipeline_settings(p) -> None:
                    help="the band's rows (docs/detector.md 'Band rows'): crop (default) = the calibration's crop, auto = "
                         "placed from the calibration, V0,V1 = these rows; the cones expected in view follow the band. "
                         "Live: the pipeline node's band_rows (fused only)")
-    p.add_argument("--band-split", default=None, metavar="none|auto|N0,U1",
-                   help="the band in two (docs/detector.md 'Row-scaled band'): none (default) = one band; auto = "
-                        "split from the calibration, the near rows at a quarter of full resolution; N0,U1 = the near band "
-                        "from row N0, the upper band to row U1. Offline only (live: the pipeline node's band_split)")
+    add_band_split(p, after=". Offline only (live: the pipeline node's band_split)")
     add_far_model(p, after="; live: the node's far_model")
     add_far_verifier(p)
     add_far_box_model(p)

@@ -16,7 +16,7 @@ from ..bench.table import INPUT_SETTINGS
 from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND, RUNTIME_THREADS
 from ..geometry.calib import DEFAULT_CAMERA
 from ..params import DEFAULT_CONF, PARAMS
-from ._args import add_far_model, add_far_verifier, parse_crop
+from ._args import add_band_split, add_far_model, add_far_verifier, parse_crop
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -60,11 +60,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--band-rows", default=None, metavar="crop|auto|V0,V1",
                    help="pipeline: the band's rows (docs/detector.md 'Band rows'): crop (default) = the calibration's crop, "
                         "auto = placed from the calibration, V0,V1 = these rows")
-    p.add_argument("--band-split", default=None, metavar="none|auto|N0,U1",
-                   help="pipeline: the band in two (docs/detector.md 'Row-scaled band'): none (default) = one band; "
-                        "auto = split from the calibration: the near rows, where every cone is large, at a quarter "
-                        "of full resolution, the upper rows at the band's half; N0,U1 = the near band from row N0, "
-                        "the upper band to row U1")
+    add_band_split(p, "pipeline: ")
     add_far_model(p, "pipeline: ")
     add_far_verifier(p, "pipeline: ")
     p.add_argument("--sequential", action="store_true",

@@ -11,7 +11,7 @@ from pathlib import Path
 from ..detector import BACKEND_CHOICES, DEFAULT_BACKEND
 from ..params import DEFAULT_CONF, DEFAULT_IOU
 from ..replay.detect import run_detect
-from ._args import add_far_model, add_far_verifier, parse_crop, size_arg
+from ._args import add_band_split, add_far_model, add_far_verifier, parse_crop, size_arg
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -30,10 +30,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--calib", default=None, metavar="C",
                    help="as the car runs this camera: the calibration's band (crop, downscale) and, unless --far-rows "
                         "says otherwise, its far strip at its calibrated rows (instead of --crop/--downscale)")
-    p.add_argument("--band-split", default=None, metavar="none|auto|N0,U1",
-                   help="with --crop or --calib: the band in two (docs/detector.md 'Row-scaled band'): none (default) = one "
-                        "band; auto (needs --calib) = split from the calibration, the near rows at a quarter of full "
-                        "resolution; N0,U1 = the near band from row N0, the upper band to row U1")
+    add_band_split(p, "with --crop or --calib: ", "; auto needs --calib")
     p.add_argument("--far-rows", default=None, metavar="auto|none|V0,V1",
                    help="the far band: image rows also run at full resolution, the whole width, merged with the band's "
                         "boxes (docs/detector.md 'Far band'): auto = the --calib calibration's far strip (the default "

@@ -290,18 +290,19 @@ def clean_stale_shm(name: str) -> None:
         rep = shm.clean_stale()
         if rep.removed:
             print(f"[{name}] {rep.line()}", file=sys.stderr)
-        avoid_dead_ports(name)
+        avoid_dead_ports(name, dead=rep.dead_ports)
     except Exception as e:  # noqa: BLE001 - a failed clean-up must not keep the node from starting
         print(f"[{name}] shared-memory clean-up failed: {type(e).__name__}: {e}", file=sys.stderr)
 
 
-def avoid_dead_ports(name: str, shm_dir=shm.SHM_DIR) -> int | None:
+def avoid_dead_ports(name: str, shm_dir=shm.SHM_DIR, dead: list[int] | None = None) -> int | None:
     """A node restarted after ``kill -9`` would take the dead node's participant id, so its ports, which a live peer
     still maps and writes into until its health check gives up (1-3 s without frames): where such a port is in
     ``shm_dir``, start this process's participant with the first id whose ports are free
     (:func:`cone_perception.ros_env.with_participant_id`, one line said) and return it; None where none is
-    needed or possible (the package's profile not in use, no free id, the cache not writable)."""
-    dead = shm.dead_ports_in_use(shm_dir)
+    needed or possible (the package's profile not in use, no free id, the cache not writable). ``dead``: those ports
+    as the clean-up found them (:attr:`~cone_perception.nodes._shm.CleanReport.dead_ports`); None: looked up."""
+    dead = shm.dead_ports_in_use(shm_dir) if dead is None else dead
     if not dead:
         return None
     try:

@@ -51,6 +51,7 @@ class CleanReport:
     removed: list = field(default_factory=list)  # file names removed
     in_use: int = 0  # segments and ports a live process holds or maps
     bytes_freed: int = 0
+    dead_ports: list = field(default_factory=list)  # of those, the dead ones' ports a live process maps (numbers)
 
     def line(self) -> str:
         n = len({_base(f) for f in self.removed if _LOCK.match(f)})
@@ -134,9 +135,15 @@ def dead_ports_in_use(shm_dir: Path = SHM_DIR) -> list[int]:
     (the module's doc). Shared ports (``_sl``: every participant listens there) are any node's, not a dead one's."""
     locks = _locks(shm_dir)
     used = mapped(shm_dir)
-    return sorted(int(b[len("fastrtps_port"):]) for b, ls in locks.items()
-                  if any(x.endswith("_el") for x in ls) and _port_in_use(b, used)
-                  and not any(held(shm_dir / x) for x in ls))
+    return sorted(n for b, ls in locks.items() if (n := _dead_port_in_use(b, ls, used, shm_dir)) is not None)
+
+
+def _dead_port_in_use(base: str, lock_names: list[str], used: set[str], shm_dir: Path) -> int | None:
+    """``base``'s port number where it is a unicast port (an ``_el`` lock) whose owner is dead but a live process
+    maps it (:func:`dead_ports_in_use`), else None."""
+    if not (_port_in_use(base, used) and any(x.endswith("_el") for x in lock_names)):
+        return None
+    return None if any(held(shm_dir / x) for x in lock_names) else int(base[len("fastrtps_port"):])
 
 
 def participant_ports(domain_id: int, participant_id: int) -> tuple[int, int]:
@@ -181,6 +188,8 @@ def clean_stale(shm_dir: Path = SHM_DIR) -> CleanReport:
     for base, lock_names in sorted(locks.items()):
         if _port_in_use(base, used):  # a live writer still maps this port (see the module's doc)
             rep.in_use += 1
+            if (n := _dead_port_in_use(base, lock_names, used, shm_dir)) is not None:
+                rep.dead_ports.append(n)
             continue
         fds = []
         try:
