@@ -24,7 +24,8 @@ SCRIPTS = (
     "attitude_designs", "attitude_fused_designs", "attitude_gated_designs", "attitude_heldout", "band_rows",
     "box_model_scales", "false_cones", "false_cones_designs", "false_cones_ray", "far_box_model", "far_cadence_cost",
     "far_strip_recall", "finetune_recipe_toy", "kill_restart", "real_false_detections", "small_cone_pr",
-    "strip_per_camera", "suite_attitude_designs", "tracking_designs", "tracking_error_decomposition", "weak_confirm",
+    "ort_graph_levels", "strip_per_camera", "suite_attitude_designs", "tracking_designs", "tracking_error_decomposition",
+    "weak_confirm",
 )
 #: Scripts whose ``__main__`` takes no ``--help`` (kill_restart kills and restarts nodes): imported only.
 IMPORT_ONLY = ("kill_restart",)
