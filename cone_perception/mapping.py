@@ -17,7 +17,8 @@ offset (half of it, clipped to ``s/2 .. s/sqrt(2)``) instead of the class's fixe
 
 Before the mapping, the pipeline and the ``mapping`` node keep one box per cone (:func:`one_box_per_cone`): a
 second box of a cone another, better-scored box already has (another class on the same spot, or a much weaker
-small box of its class) would be a second, false cone (issue 26g).
+small box of its class) would be a second, false cone (issue 26g); so would a box of a part of a cone inside that
+cone's taller box, its top at that box's top (issue 41).
 
 A box on the ground must also stand up like a cone (``min_height_ratio``, :meth:`ConeMapper.height_ratios`): its
 height against the height a cone of its class has, standing where the box's foot maps (the cone model of the
@@ -47,7 +48,7 @@ from .classes import CONE_SIZE_M, NUM_CLASSES
 from .errors import FrameError
 from .geometry import GroundMapper, apply_homography, foot_point_weights, foot_points
 from .geometry.calib import Calibration
-from .records import CONE_DTYPE, BoxColumns
+from .records import CONE_DTYPE, BoxColumns, xyxy_area, xyxy_intersection, xyxy_iou
 
 #: causes of :attr:`ConeMapper.dropped`: a second box of a cone (:func:`one_box_per_cone`, counted by its
 #: callers); the foot above the horizon or beyond ``max_range_m``; a box lower
@@ -91,6 +92,16 @@ CROSS_CLASS_IOU = 0.6
 SMALL_BOX_PX = 16.0
 SMALL_SAME_IOU = 0.3
 SMALL_WEAKER = 0.6
+#: A part of a cone (:func:`part_of`): the upper half of a large orange cone another cone overlaps got a box of its
+#: own (issue 41). On flat ground a farther cone's top stands above a nearer one's, so no other cone's box lies inside
+#: a cone's box with its top at that box's top. Chosen on the tuning drives (docs/validation.md, "Parts of a cone"):
+#: under PART_MIN_PX the two are two boxes of one far cone, the shorter as often the better; a taller box scored
+#: under PART_WEAKER x the part's is the one drawn too tall.
+PART_INSIDE = 0.8
+PART_MAX_HEIGHT = 0.8
+PART_TOP_FRAC = 0.15
+PART_MIN_PX = 32.0
+PART_WEAKER = 0.6
 
 
 def box_iou(a: Boxes, b: Boxes) -> np.ndarray:
@@ -98,19 +109,11 @@ def box_iou(a: Boxes, b: Boxes) -> np.ndarray:
     return xyxy_iou(BoxColumns.of(a).xyxy, BoxColumns.of(b).xyxy)
 
 
-def xyxy_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(N, M) IoU of (N, 4) and (M, 4) ``u1 v1 u2 v2`` boxes (pixel edges), in float64."""
-    au1, av1, au2, av2 = np.asarray(a, np.float64).reshape(-1, 4).T
-    bu1, bv1, bu2, bv2 = np.asarray(b, np.float64).reshape(-1, 4).T
-    iw = np.clip(np.minimum(au2[:, None], bu2[None]) - np.maximum(au1[:, None], bu1[None]), 0.0, None)
-    ih = np.clip(np.minimum(av2[:, None], bv2[None]) - np.maximum(av1[:, None], bv1[None]), 0.0, None)
-    inter = iw * ih
-    union = ((au2 - au1) * (av2 - av1))[:, None] + ((bu2 - bu1) * (bv2 - bv1))[None] - inter
-    return np.divide(inter, union, out=np.zeros_like(inter), where=union > 0)
-
-
 def one_box_per_cone(boxes: Boxes, iou: float = CROSS_CLASS_IOU, small_px: float = SMALL_BOX_PX,
-                     small_iou: float = SMALL_SAME_IOU, small_weaker: float = SMALL_WEAKER) -> Boxes:
+                     small_iou: float = SMALL_SAME_IOU, small_weaker: float = SMALL_WEAKER, *,
+                     part_inside: float = PART_INSIDE, part_max_height: float = PART_MAX_HEIGHT,
+                     part_top_frac: float = PART_TOP_FRAC, part_min_px: float = PART_MIN_PX,
+                     part_weaker: float = PART_WEAKER) -> Boxes:
     """``boxes`` minus those that are a second box of a cone a better-scored box already has (greedy, best score
     first; order kept), of the kind given (:class:`~cone_perception.records.BoxColumns` or :data:`BOX_DTYPE`
     records):
@@ -118,7 +121,9 @@ def one_box_per_cone(boxes: Boxes, iou: float = CROSS_CLASS_IOU, small_px: float
     * a box of ANOTHER class overlapping it at IoU >= ``iou``: the detector's NMS is per class, so a far cone it
       is unsure of can come out as a blue and a yellow box on one spot (two cones on ``/cones``, one false);
     * a box of the same class, both under ``small_px`` tall, overlapping it at IoU >= ``small_iou`` and scored
-      under ``small_weaker`` x its score (``small_weaker`` 0: off).
+      under ``small_weaker`` x its score (``small_weaker`` 0: off);
+    * whatever the classes, a part of a taller box's cone (:func:`part_of` with the ``part_*`` settings), that box
+      scored at least ``part_weaker`` x its score (``part_inside`` above 1: off).
 
     Everything else is left to the detector's NMS."""
     n = len(boxes)
@@ -137,13 +142,29 @@ def one_box_per_cone(boxes: Boxes, iou: float = CROSS_CLASS_IOU, small_px: float
         weaker = np.minimum(score[:, None], score[None, :]) < small_weaker * np.maximum(score[:, None], score[None, :])
         over |= (ov >= small_iou) & same & small & weaker
     np.fill_diagonal(over, False)
-    if not over.any():
+    part = part_of(xyxy, part_inside, part_max_height, part_top_frac, part_min_px)
+    part &= score[:, None] >= part_weaker * score[None, :]
+    if not over.any() and not part.any():
         return boxes
-    keep = np.ones(n, dtype=bool)
+    keep = ~part.any(axis=0)  # a part goes: its cone keeps its whole box
     for i in np.argsort(-score, kind="stable"):
         if keep[i]:  # a kept box removes the lower-scored (ties: the later) boxes it pairs with
             keep[over[i] & (score <= score[i])] = False
     return cols.take(keep) if isinstance(boxes, BoxColumns) else boxes[keep]
+
+
+def part_of(xyxy: np.ndarray, inside: float = PART_INSIDE, max_height: float = PART_MAX_HEIGHT,
+            top_frac: float = PART_TOP_FRAC, min_px: float = PART_MIN_PX) -> np.ndarray:
+    """(N, N) bool: box j lies where a part of box i's cone would (:func:`one_box_per_cone`; scores aside): at least
+    ``inside`` of j's area inside i (at least ``min_px`` tall), at most ``max_height`` x as tall, its top within
+    ``top_frac`` x i's height of i's top."""
+    _, v1, _, v2 = np.asarray(xyxy, np.float64).reshape(-1, 4).T
+    h, area = v2 - v1, xyxy_area(xyxy)[None, :]
+    share = np.divide(xyxy_intersection(xyxy, xyxy), area, out=np.zeros((len(h), len(h))), where=area > 0)
+    part = ((share >= inside) & (h[:, None] >= min_px) & (h[None, :] <= max_height * h[:, None])
+            & (np.abs(v1[None, :] - v1[:, None]) <= top_frac * h[:, None]))
+    np.fill_diagonal(part, False)
+    return part
 
 
 #: :func:`one_cone_per_ray`'s ways to make one cone of a pair: ``drop`` (the better-scored cone as it was),

@@ -15,7 +15,8 @@ rclpy messages in the nodes and rosbags messages in the offline tools; this
 module imports neither.
 
 On the mapping path a frame's boxes are read as columns (:class:`BoxColumns`): made once from the
-records, handed to every step (one box per cone, the attitude fit, the mapping), subsets taken from it.
+records, handed to every step (one box per cone, the attitude fit, the mapping), subsets taken from it. Their
+``xyxy`` corners' areas, overlaps and IoU: :func:`xyxy_area`, :func:`xyxy_intersection`, :func:`xyxy_iou`.
 """
 
 from __future__ import annotations
@@ -252,3 +253,24 @@ def with_cdr_stamp(raw: bytes, stamp_ns: int) -> bytes:
         raise ValueError("not a CDR-serialized message with a header")
     sec, nsec = divmod(int(stamp_ns), 1_000_000_000)
     return raw[:4] + struct.pack(endian + "iI", sec, nsec) + raw[12:]
+
+
+def xyxy_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(N, M) IoU of (N, 4) and (M, 4) ``u1 v1 u2 v2`` boxes (pixel edges), in float64."""
+    inter = xyxy_intersection(a, b)
+    union = xyxy_area(a)[:, None] + xyxy_area(b)[None] - inter
+    return np.divide(inter, union, out=np.zeros_like(inter), where=union > 0)
+
+
+def xyxy_area(a: np.ndarray) -> np.ndarray:
+    """(N,) area (px^2) of (N, 4) ``u1 v1 u2 v2`` boxes, in float64."""
+    u1, v1, u2, v2 = np.asarray(a, np.float64).reshape(-1, 4).T
+    return (u2 - u1) * (v2 - v1)
+
+
+def xyxy_intersection(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(N, M) area (px^2) shared by each of (N, 4) and (M, 4) ``u1 v1 u2 v2`` boxes, in float64."""
+    au1, av1, au2, av2 = np.asarray(a, np.float64).reshape(-1, 4).T
+    bu1, bv1, bu2, bv2 = np.asarray(b, np.float64).reshape(-1, 4).T
+    iw = np.clip(np.minimum(au2[:, None], bu2[None]) - np.maximum(au1[:, None], bu1[None]), 0.0, None)
+    return iw * np.clip(np.minimum(av2[:, None], bv2[None]) - np.maximum(av1[:, None], bv1[None]), 0.0, None)

@@ -90,6 +90,30 @@ def test_a_low_score_far_box_does_not_remove_a_confident_band_box():
     assert {(int(b["class_id"]), round(float(b["u1"]))) for b in confident} >= {(0, 100), (1, 300)}
 
 
+def test_a_cone_the_band_sees_large_keeps_the_band_box():
+    """Issue 41: the far model, trained for far cones, boxed only the top of near cones the strip also covers (a
+    held-out-like 2048x1536 camera pitched 15 deg down: its strip reaches 7 m), and that box replaced the band's
+    whole one (0-7 m recall 0.87-0.94, the start line's large cones). Of a pair of boxes of one cone the band's
+    wins from FAR_MAX_BAND_PX on while scored at least half the far box's; under it, or scored less, the far
+    box wins as before."""
+    from cone_perception.detector.farband import FAR_MAX_BAND_PX, FAR_PREFER, seen_by_far
+
+    assert (FAR_MAX_BAND_PX, FAR_PREFER) == (64.0, 0.5)
+    band = _boxes([[100, 400, 150, 500, 0.50, 3],   # 100 px: its far box (the top 60 %) scores 0.70: band's kept
+                   [300, 400, 350, 500, 0.30, 3],   # 100 px, scored under half the far box's: the far box wins
+                   [500, 400, 530, 463, 0.50, 0],   # 63 px: under the height, the far box wins as before
+                   [700, 400, 740, 464, 0.40, 0]])  # 64 px, the far box 0.80 = 2x: the band's kept (ties go to it)
+    far = _boxes([[105, 400, 145, 460, 0.70, 3], [305, 400, 345, 460, 0.70, 3], [501, 401, 531, 464, 0.60, 0],
+                  [701, 401, 741, 465, 0.80, 0]])
+    band_out, far_out = seen_by_far(band, far)
+    assert band_out.tolist() == [False, True, True, False]
+    assert far_out.tolist() == [True, False, False, True]
+    merged = merge_boxes(band, far, iou=0.45)
+    assert sorted(merged["u1"].tolist()) == [100, 305, 501, 700]
+    # the height off: the far box wins every pair it outscores by half (the rule before)
+    assert seen_by_far(band, far, max_band_px=np.inf)[0].all()
+
+
 def test_far_band_finds_far_cones_the_halved_band_misses():
     """Rendered scenes through the example calibration (band rows 384-960 halved to 960x288), the shipped
     model: with the far band (rows 384-576 at full resolution) more of the cones beyond 15 m are found,

@@ -245,6 +245,34 @@ def test_one_box_per_cone_drops_a_much_weaker_small_box_of_one_class_on_one_far_
     assert len(one_box_per_cone(b, small_weaker=0.0)) == len(b)  # the small rule off
 
 
+def test_one_box_per_cone_drops_a_box_of_a_part_of_a_taller_box_cone() -> None:
+    """Issue 41: the upper half of a large orange cone that another cone overlaps got a box of its own (the start
+    line of the held-out-like camera: a second cone 1-2 m behind the true one). A box lying inside a taller box (at
+    least 32 px), at most 0.8x as tall, its top at that box's top (within 15 % of its height), goes whatever the
+    classes while the taller box scores at least 0.6x its score. A far cone behind a near one stands with its top
+    above the near cone's (flat ground), so its box is not taken; nor is a part that outscores the tall box
+    1/0.6-fold, or a part of a box under 32 px (two boxes of one far cone: the shorter is as often the better)."""
+    from cone_perception.mapping import (PART_INSIDE, PART_MAX_HEIGHT, PART_MIN_PX, PART_TOP_FRAC, PART_WEAKER,
+                                         one_box_per_cone, part_of)
+
+    assert (PART_INSIDE, PART_MAX_HEIGHT, PART_TOP_FRAC, PART_MIN_PX, PART_WEAKER) == (0.8, 0.8, 0.15, 32.0, 0.6)
+    b = _boxes([[100, 400, 160, 500, 0.50, 3],      # a large orange cone, 100 px
+                [110, 402, 150, 460, 0.60, 2],      # its top 58 %, another class: a part, goes
+                [300, 400, 360, 500, 0.50, 3],
+                [312, 430, 348, 480, 0.60, 3],      # inside but its top 30 px lower: kept
+                [500, 400, 560, 500, 0.30, 3],
+                [510, 400, 550, 460, 0.60, 3],      # a part scored 2x the tall box (0.3 < 0.6 x 0.6): kept
+                [700, 400, 720, 430, 0.50, 0],      # 30 px: too small to judge
+                [703, 400, 717, 420, 0.45, 0],      # kept
+                [900, 400, 960, 500, 0.50, 3],
+                [905, 401, 955, 487, 0.45, 3]])     # 0.86x as tall: a second box, left to the NMS
+    xyxy = np.c_[b["u1"], b["v1"], b["u2"], b["v2"]]
+    assert part_of(xyxy)[0, 1] and not part_of(xyxy)[1, 0]
+    out = one_box_per_cone(b)
+    assert sorted(out["u1"].tolist()) == [100, 300, 312, 500, 510, 700, 703, 900, 905]
+    assert len(one_box_per_cone(b, part_inside=2.0)) == len(b)  # the part rule off
+
+
 def _cone_box(mapper, xy, cls, scale=1.0, score=0.4):
     """The box of a cone of class ``cls`` standing at ``xy`` (m): its foot where the mapping expects it, its height
     the image fit's cone model's (``scale`` x: a lower box) and as wide as tall."""

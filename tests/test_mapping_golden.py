@@ -17,6 +17,14 @@ file itself run with that code on the import path::
 (``--write`` renders the drive, runs the shipped models on it, records their boxes and replays them through the
 three set-ups; it uses only the API both versions share). Bytes are compared with the records' padding zeroed
 (:func:`canonical`): every field to the bit.
+
+A change meant to change the cones rewrites only the cones, from the golden's own recorded boxes (so that the
+models' float noise on another CPU stays out), and says so in its commit::
+
+    PYTHONPATH=$PWD python tests/test_mapping_golden.py --rewrite-cones tests/data/mapping_golden.npz
+
+Rewritten so once: issue 41's parts of a cone (``mapping.one_box_per_cone``) and the band's box of a cone it sees
+large (``farband.FAR_MAX_BAND_PX``), 2026-12-07.
 """
 
 from __future__ import annotations
@@ -155,6 +163,20 @@ def write_golden(out: Path, folder: Path) -> None:
     np.savez_compressed(out, **arrays)
 
 
+def rewrite_cones(path: Path, folder: Path) -> None:
+    """The golden at ``path`` with its cones replayed by this code from its own recorded boxes."""
+    g = dict(np.load(path))
+    band, far = _unpack(g["band_boxes"], g["band_n"], BOX_DTYPE), _unpack(g["far_boxes"], g["far_n"], BOX_DTYPE)
+    bag = render(folder)
+    for v in VARIANTS:
+        cones, weak = replay(bag, v, Playback(band), Playback(far))
+        stamps = sorted(cones)
+        assert stamps == g["stamps"].tolist()
+        g[f"{v}_cones"], g[f"{v}_cones_n"] = _pack([cones[s] for s in stamps], CONE_DTYPE)
+        g[f"{v}_weak"], g[f"{v}_weak_n"] = _pack([weak[s] for s in stamps], CONE_DTYPE)
+    np.savez_compressed(path, **g)
+
+
 @pytest.fixture(scope="module")
 def drive(tmp_path_factory) -> Path:
     return render(tmp_path_factory.mktemp("golden"))
@@ -202,9 +224,13 @@ if __name__ == "__main__":
     import argparse
     import tempfile
 
-    ap = argparse.ArgumentParser(description="write the mapping stage's golden (run with the code before the change)")
-    ap.add_argument("--write", type=Path, required=True, help="the .npz to write")
+    ap = argparse.ArgumentParser(description="write the mapping stage's golden (run with the code before the change), "
+                                             "or rewrite its cones from its recorded boxes (a change meant to change them)")
+    how = ap.add_mutually_exclusive_group(required=True)
+    how.add_argument("--write", type=Path, help="the .npz to write")
+    how.add_argument("--rewrite-cones", type=Path, help="the .npz whose cones to replay again")
     a = ap.parse_args()
+    out = a.write or a.rewrite_cones
     with tempfile.TemporaryDirectory() as d:
-        write_golden(a.write, Path(d))
-    print(f"wrote {a.write} ({a.write.stat().st_size} bytes)", file=sys.stderr)
+        (write_golden if a.write else rewrite_cones)(out, Path(d))
+    print(f"wrote {out} ({out.stat().st_size} bytes)", file=sys.stderr)

@@ -10,7 +10,9 @@ its boxes with the band's:
 * of a band box and a far-band box of one cone and class (:func:`same_cone`: the halved band's box of a
   small cone is too rough for IoU to pair them) one is kept (:func:`seen_by_far`): the far band's while its
   score is at least ``FAR_PREFER`` (half) of the band box's, else the band's (a low-score far box must not
-  remove a confident band box);
+  remove a confident band box); of a cone the band sees at least ``FAR_MAX_BAND_PX`` tall the band's, while its
+  score is at least half the far box's (a near cone's box from the far model, trained for far cones, often covers
+  only its top);
 * the rest join the band's boxes, and one class-aware NMS keeps the best box of each cone.
 
 Its rows (``far_rows``, one spelling for the node parameter and the commands' ``--far-rows``):
@@ -47,6 +49,12 @@ from .detector import Detector
 #: A far-band box whose top or bottom is this close to the strip's edge (full-image px) is a cut cone.
 EDGE_PX = 2.0
 FAR_PREFER = 0.5  # a far box wins over a band box of its cone while scored >= this x the band box's
+#: ... while the band box is under this tall (full-image px); from this height on the band's box wins while scored >=
+#: FAR_PREFER x the far box's: a cone the band sees this large is outside what the strip is for, and the far
+#: model's box of it is the worse one (on the tuning drives, against the rendered box:
+#: median IoU 0.85 far / 0.71 band under 16 px, 0.94 / 0.95 at 48-64 px, 0.62 / 0.91 from 96 px; docs/validation.md,
+#: "Parts of a cone")
+FAR_MAX_BAND_PX = 64.0
 FAR_SAME_CLASS = True  # pair only boxes of one class (seen_by_far)
 #: ``far_rows`` values: the calibration's strip, and no far band (``none``; the commands also take ``off``,
 #: which a ROS parameter cannot hold: ``-p far_rows:=off`` reads as a boolean).
@@ -197,24 +205,29 @@ def same_cone(band_boxes: np.ndarray, far_boxes: np.ndarray, same_class: bool = 
 
 
 def seen_by_far(band_boxes: np.ndarray, far_boxes: np.ndarray, prefer: float = FAR_PREFER,
-                same_class: bool = FAR_SAME_CLASS) -> tuple[np.ndarray, np.ndarray]:
+                same_class: bool = FAR_SAME_CLASS, max_band_px: float = FAR_MAX_BAND_PX) -> tuple[np.ndarray, np.ndarray]:
     """(band box gives way, far box gives way), a bool per box: of each pair of boxes of one cone
-    (:func:`same_cone`) one is kept. The far band's, placed at full resolution, wins while its score is at
-    least ``prefer`` times the band box's; a far box scored lower gives way to the band's (a low-score far
-    box must not remove a confident band box: at ``detect --conf 0.001`` it cost recall, issue 26)."""
+    (:func:`same_cone`) one is kept. Where the band box is under ``max_band_px`` tall (full-image px), the far
+    band's, placed at full resolution, wins while its score is at least ``prefer`` times the band box's (a low-score
+    far box must not remove a confident band box: at ``detect --conf 0.001`` it cost recall, issue 26); where it is
+    taller, the band's wins while its score is at least ``prefer`` times the far box's (the far model's box of a
+    cone the band sees large is the worse one, issue 41)."""
     m = same_cone(band_boxes, far_boxes, same_class)
-    far_wins = m & (far_boxes["score"][None, :] >= prefer * band_boxes["score"][:, None])
+    small = ((band_boxes["v2"] - band_boxes["v1"]) < max_band_px)[:, None]
+    fs, bs = far_boxes["score"][None, :], band_boxes["score"][:, None]
+    far_wins = m & np.where(small, fs >= prefer * bs, prefer * fs > bs)
     return far_wins.any(1), (m & ~far_wins).any(0)
 
 
 def merge_boxes(band_boxes: np.ndarray, far_boxes: np.ndarray, iou: float = DEFAULT_IOU,
-                prefer: float = FAR_PREFER, same_class: bool = FAR_SAME_CLASS) -> np.ndarray:
+                prefer: float = FAR_PREFER, same_class: bool = FAR_SAME_CLASS,
+                max_band_px: float = FAR_MAX_BAND_PX) -> np.ndarray:
     """Boxes of the band and of the far band (``BOX_DTYPE``, full-image px) -> one set, best first: of a band
     box and a far box of one cone one gives way (:func:`seen_by_far`), then one class-aware NMS over both
     keeps the best box of what still overlaps."""
     if len(far_boxes) == 0:
         return band_boxes
-    band_out, far_out = seen_by_far(band_boxes, far_boxes, prefer, same_class)
+    band_out, far_out = seen_by_far(band_boxes, far_boxes, prefer, same_class, max_band_px)
     both = np.concatenate([band_boxes[~band_out], far_boxes[~far_out]])
     xywh = np.stack([both["u1"], both["v1"], both["u2"] - both["u1"], both["v2"] - both["v1"]], 1)
     keep = nms_per_class(xywh, both["score"], both["class_id"], 0.0, iou)

@@ -1,7 +1,7 @@
 """Image-attitude designs screened on the validation suite's cached drives (issue 41, part 3).
 
     .venv/bin/python docs/experiments/suite_attitude_designs.py BAG [BAG ...] [--set FIELD=VALUE,...] [--truth]
-        [--attitude image|fused|imu|fixed]
+        [--attitude image|fused|imu|fixed] [--one-box NAME=VALUE,...] [--merge NAME=VALUE,...]
 
 Each BAG is a drive the suite rendered (`cone-perception validate --tuning --seconds 2 --cache DIR` leaves them in
 DIR, named `tune-NAME`: screen on those, never on the judging drives). Each is replayed as the suite replays it
@@ -9,6 +9,11 @@ DIR, named `tune-NAME`: screen on those, never on the judging drives). Each is r
 `--set feet_cut_factor=0`, `--set min_height_px=12.0`, `--set process_sigma_deg=1.2,still_frames=0`), and one line
 per drive plus the distribution (median / worst) of false cones per frame within 40 m, `/cones` recall 25-40 m and
 the image attitude's median error at 7-15 m is printed.
+
+`--one-box`: the keyword-only settings of `mapping.one_box_per_cone` changed (e.g. `--one-box part_inside=2.0`: the
+rule that drops a part of a taller box's cone off); `--merge`: the keyword settings of `farband.merge_boxes` the
+pipeline merges the band's and the strip's boxes with (e.g. `--merge max_band_px=1e9`: the far box wins whatever
+the band box's size, as before issue 41's part 3).
 
 `--truth`: also how many false cones per frame the same boxes give when mapped with the TRUE attitude
 (`/attitude_gt`), with the true pitch and the fitted roll, and the other way round: how much of the false cones
@@ -87,8 +92,22 @@ def main() -> None:
     ap.add_argument("--truth", action="store_true", help="also the false cones with the true attitude")
     ap.add_argument("--attitude", default="image", choices=("image", "fused", "imu", "fixed"),
                     help="the attitude the drives are replayed with (default image, the suite's)")
+    ap.add_argument("--one-box", default=None, help="mapping.one_box_per_cone NAME=VALUE,... (keyword-only settings)")
+    ap.add_argument("--merge", default=None, help="farband.merge_boxes NAME=VALUE,... (keyword settings)")
     args = ap.parse_args()
     patch_config(parse_set(args.set))
+    if args.merge:
+        import functools
+
+        from cone_perception import pipeline
+        kw = {k: float(v) for k, v in (kv.split("=", 1) for kv in args.merge.split(","))}
+        pipeline.merge_boxes = functools.partial(pipeline.merge_boxes, **kw)
+    from cone_perception.mapping import one_box_per_cone
+    for kv in filter(None, (args.one_box or "").split(",")):
+        k, v = kv.split("=", 1)
+        if k not in one_box_per_cone.__kwdefaults__:
+            raise SystemExit(f"--one-box: {k} is none of {sorted(one_box_per_cone.__kwdefaults__)}")
+        one_box_per_cone.__kwdefaults__[k] = float(v)
     from cone_perception.replay import suite  # after the patch: the pipeline builds its config then
 
     captured = {}
@@ -111,7 +130,7 @@ def main() -> None:
                 (("fit", "fit"), ("true", "true"), ("true", "fit"), ("fit", "true")))
         print(line, flush=True)
     f, rc, a = (np.array([r[k] for r in rows], float) for k in ("false_per_frame", "recall_25_40", "err_att_7_15"))
-    print(f"{args.set or 'defaults'}: false/frame median {np.median(f):.2f} worst {f.max():.2f} (mean {f.mean():.2f}); "
+    print(f"{args.set or 'defaults'}{' one-box ' + args.one_box if args.one_box else ''}{' merge ' + args.merge if args.merge else ''}: false/frame median {np.median(f):.2f} worst {f.max():.2f} (mean {f.mean():.2f}); "
           f"recall 25-40 median {np.median(rc):.3f} worst {rc.min():.3f}; att 7-15 median {np.median(a):.3f} "
           f"worst {a.max():.3f} m ({len(rows)} drives)")
 
