@@ -22,7 +22,7 @@ EXPERIMENTS = ROOT / "docs" / "experiments"
 #: The scripts kept, each checked below; a new script joins this list (test_every_script_is_checked).
 SCRIPTS = (
     "attitude_designs", "attitude_fused_designs", "attitude_gated_designs", "attitude_heldout", "band_rows",
-    "box_model_scales", "false_cones", "false_cones_designs", "false_cones_ray", "far_box_model", "far_cadence_cost",
+    "box_model_scales", "box_pairs", "false_cones", "false_cones_designs", "false_cones_ray", "far_box_model", "far_cadence_cost",
     "far_strip_recall", "finetune_recipe_toy", "kill_restart", "real_false_detections", "small_cone_pr",
     "ort_graph_levels", "strip_per_camera", "suite_attitude_designs", "tracking_designs", "tracking_error_decomposition",
     "weak_confirm",
