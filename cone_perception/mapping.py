@@ -134,7 +134,8 @@ def one_box_per_cone(boxes: Boxes, iou: float = CROSS_CLASS_IOU, small_px: float
     cls = cols.class_id
     same = cls[:, None] == cls[None, :]
     xyxy = np.asarray(cols.xyxy, np.float64)
-    ov = xyxy_iou(xyxy, xyxy)
+    inter = xyxy_intersection(xyxy, xyxy)  # the overlaps, for the IoU and the parts
+    ov = xyxy_iou(xyxy, xyxy, inter)
     over = (ov >= iou) & ~same
     if small_weaker > 0:
         h = xyxy[:, 3] - xyxy[:, 1]
@@ -142,7 +143,7 @@ def one_box_per_cone(boxes: Boxes, iou: float = CROSS_CLASS_IOU, small_px: float
         weaker = np.minimum(score[:, None], score[None, :]) < small_weaker * np.maximum(score[:, None], score[None, :])
         over |= (ov >= small_iou) & same & small & weaker
     np.fill_diagonal(over, False)
-    part = part_of(xyxy, part_inside, part_max_height, part_top_frac, part_min_px)
+    part = part_of(xyxy, part_inside, part_max_height, part_top_frac, part_min_px, inter)
     part &= score[:, None] >= part_weaker * score[None, :]
     if not over.any() and not part.any():
         return boxes
@@ -154,13 +155,14 @@ def one_box_per_cone(boxes: Boxes, iou: float = CROSS_CLASS_IOU, small_px: float
 
 
 def part_of(xyxy: np.ndarray, inside: float = PART_INSIDE, max_height: float = PART_MAX_HEIGHT,
-            top_frac: float = PART_TOP_FRAC, min_px: float = PART_MIN_PX) -> np.ndarray:
+            top_frac: float = PART_TOP_FRAC, min_px: float = PART_MIN_PX, inter: np.ndarray | None = None) -> np.ndarray:
     """(N, N) bool: box j lies where a part of box i's cone would (:func:`one_box_per_cone`; scores aside): at least
     ``inside`` of j's area inside i (at least ``min_px`` tall), at most ``max_height`` x as tall, its top within
-    ``top_frac`` x i's height of i's top."""
+    ``top_frac`` x i's height of i's top; ``inter``: their :func:`xyxy_intersection` if at hand."""
     _, v1, _, v2 = np.asarray(xyxy, np.float64).reshape(-1, 4).T
     h, area = v2 - v1, xyxy_area(xyxy)[None, :]
-    share = np.divide(xyxy_intersection(xyxy, xyxy), area, out=np.zeros((len(h), len(h))), where=area > 0)
+    inter = xyxy_intersection(xyxy, xyxy) if inter is None else inter
+    share = np.divide(inter, area, out=np.zeros((len(h), len(h))), where=area > 0)
     part = ((share >= inside) & (h[:, None] >= min_px) & (h[None, :] <= max_height * h[:, None])
             & (np.abs(v1[None, :] - v1[:, None]) <= top_frac * h[:, None]))
     np.fill_diagonal(part, False)

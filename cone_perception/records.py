@@ -255,9 +255,10 @@ def with_cdr_stamp(raw: bytes, stamp_ns: int) -> bytes:
     return raw[:4] + struct.pack(endian + "iI", sec, nsec) + raw[12:]
 
 
-def xyxy_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(N, M) IoU of (N, 4) and (M, 4) ``u1 v1 u2 v2`` boxes (pixel edges), in float64."""
-    inter = xyxy_intersection(a, b)
+def xyxy_iou(a: np.ndarray, b: np.ndarray, inter: np.ndarray | None = None) -> np.ndarray:
+    """(N, M) IoU of (N, 4) and (M, 4) ``u1 v1 u2 v2`` boxes (pixel edges), in float64 (``inter``: their
+    :func:`xyxy_intersection` if at hand)."""
+    inter = xyxy_intersection(a, b) if inter is None else inter
     union = xyxy_area(a)[:, None] + xyxy_area(b)[None] - inter
     return np.divide(inter, union, out=np.zeros_like(inter), where=union > 0)
 
