@@ -412,6 +412,37 @@ def _noisy(boxes: np.ndarray, rng: np.random.Generator, px: float = 0.7) -> np.n
     return boxes + np.round(rng.normal(0.0, px, boxes.shape))
 
 
+def test_the_filter_settings_per_frame_mean_the_same_in_seconds_at_any_frame_rate():
+    """Issue 41: the filter's settings per frame (process noise, decay, the still test's and the bias's windows) were
+    counted in frames, chosen at 20 fps, and a 10 fps stream (the suite's drives) got half their time in seconds. Each
+    update now scales by its frame's length in ``frame_s`` (0.05 s) from the stamps: a 10 fps stream through the
+    defaults gives, frame by frame, what 20-fps-equivalent settings counted per frame give (``frame_s`` 0), and
+    without stamps (or at 20 fps) the defaults per frame as before."""
+    rng = np.random.default_rng(11)
+    frames = [(_noisy(_cone_boxes(_tilted_camera(p, r), CONES_XY, CONES_CLS), rng), p)
+              for p, r in zip(0.6 * np.sin(np.arange(50) / 3.0), 0.3 * np.cos(np.arange(50) / 4.0))]
+    at_10fps = _estimator(top_bias_extra_px=())
+    per_frame = _estimator(top_bias_extra_px=(), frame_s=0.0, process_sigma_deg=0.6 * np.sqrt(2.0), decay=0.95**2,
+                           still_frames=20.0, still_min_frames=5.0, bias_tau_frames=600.0, bias_prior_frames=50.0)
+    plain, at_20fps = _estimator(top_bias_extra_px=()), _estimator(top_bias_extra_px=())
+    at_10fps.clock.step(-100_000_000)  # the frame before the first: its length is known from the first on
+    for k, (boxes, _) in enumerate(frames):
+        a = at_10fps.update(boxes, CONES_CLS, stamp_ns=k * 100_000_000)
+        b = per_frame.update(boxes, CONES_CLS)
+        assert (a.pitch_deg, a.roll_deg, a.sigma_pitch_deg) == pytest.approx((b.pitch_deg, b.roll_deg, b.sigma_pitch_deg),
+                                                                             abs=1e-9), k
+        c, d = plain.update(boxes, CONES_CLS), at_20fps.update(boxes, CONES_CLS, stamp_ns=k * 50_000_000)
+        assert (c.pitch_deg, c.roll_deg) == (d.pitch_deg, d.roll_deg)
+    assert at_10fps.clock.k == 2.0 and plain.clock.k == 1.0
+    # without the scaling a 10 fps stream gets another filter: the settings counted in frames
+    unscaled = _estimator(top_bias_extra_px=(), frame_s=0.0)
+    again = _estimator(top_bias_extra_px=())
+    again.clock.step(-100_000_000)
+    e = [unscaled.update(b, CONES_CLS, stamp_ns=k * 100_000_000) for k, (b, _) in enumerate(frames)]
+    f = [again.update(b, CONES_CLS, stamp_ns=k * 100_000_000) for k, (b, _) in enumerate(frames)]
+    assert max(abs(x.pitch_deg - y.pitch_deg) for x, y in zip(e, f)) > 0.01
+
+
 @pytest.mark.parametrize("kind", ["still", "sloped", "moving"])
 def test_still_body_returns_to_zero_but_a_slope_or_motion_does_not(kind):
     """A body that does not move (the fits scatter only as much as their own sigma says) and stands

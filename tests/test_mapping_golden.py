@@ -23,8 +23,9 @@ models' float noise on another CPU stays out), and says so in its commit::
 
     PYTHONPATH=$PWD python tests/test_mapping_golden.py --rewrite-cones tests/data/mapping_golden.npz
 
-Rewritten so once: issue 41's parts of a cone (``mapping.one_box_per_cone``) and the band's box of a cone it sees
-large (``farband.FAR_MAX_BAND_PX``), 2026-12-07.
+Rewritten so: issue 41's parts of a cone (``mapping.one_box_per_cone``) and the band's box of a cone it sees
+large (``farband.FAR_MAX_BAND_PX``); then the image attitude's settings per frame scaled by the frames' stamps
+(``ImageAttitudeConfig.frame_s``: this 10 fps drive's frames are two of 20 fps), 2026-12-07.
 """
 
 from __future__ import annotations

@@ -56,7 +56,7 @@ def attitude_for_boxes(estimator, boxes: BoxColumns | np.ndarray, stamp_ns: int 
     b = cols.xyxy.astype(np.float64)
     if isinstance(estimator, FusedAttitude):
         return estimator.update(b, cols.class_id.astype(np.intp), stamp_ns, far)
-    return estimator.update(b, cols.class_id.astype(np.intp), far)
+    return estimator.update(b, cols.class_id.astype(np.intp), far, stamp_ns=stamp_ns)
 
 
 @dataclass(frozen=True)
@@ -186,7 +186,8 @@ class FusedAttitude:
         """``far``: (N,) bool, the far strip's network's boxes (:meth:`ImageAttitude.fit`)."""
         body = self.imu.at(stamp_ns)
         if body is None:
-            return self.image.update(boxes, class_ids, far)
+            return self.image.update(boxes, class_ids, far, stamp_ns=stamp_ns)
+        self.image.clock.step(stamp_ns)  # the image's still test counts in its frame_s
         s_imu = self.imu.sigma_deg
         if not self.use_image:
             return Attitude(float(body[0]), float(body[1]), s_imu, s_imu, "imu", 0)

@@ -26,7 +26,7 @@ from ..geometry.camera import MountPose
 from ..geometry.homography import undistort_pixels
 from ..geometry.linalg import inv2
 from .boxes import BoxModel, BoxReading, box_top_extra_px, range_cuts, read_boxes
-from .model import MAX_ABS_DEG, Attitude, AttitudeCounts, attitude_rotation
+from .model import MAX_ABS_DEG, Attitude, AttitudeCounts, FrameClock, attitude_rotation
 from .sizes import SizeTrackConfig, SizeTracks
 
 
@@ -53,6 +53,9 @@ class ImageAttitudeConfig:
     prior_sigma_deg: float = 2.0  # per-frame prior around zero
     process_sigma_deg: float = 0.6  # random walk per frame (body motion at 20 fps)
     decay: float = 0.95  # per frame, towards zero
+    #: the frame interval (s) the settings "per frame" and "frames" are given for: other stamps scale each update by
+    #: their own interval (process variance, decay, the still test's and bias's windows); 0 = per frame at any rate
+    frame_s: float = 0.05
     max_abs_deg: float = MAX_ABS_DEG
     #: the fit's own slowly varying bias (box edges of this detector on this drive's cones): the long-run
     #: mean of the fits, since the car's mean attitude over a lap is the calibration's (zero). A running
@@ -142,6 +145,7 @@ class ImageAttitude:
         self._m2 = np.zeros(2)
         self._mv = np.zeros(2)
         self._n_still = 0
+        self.clock = FrameClock(self.cfg.frame_s)  # this frame's length in frame_s (the updates scale by it)
         self.sizes.reset()
 
     def motion_weight(self, z: np.ndarray | None, Rz: np.ndarray | None, start_from_fit: bool = True) -> float:
@@ -151,9 +155,9 @@ class ImageAttitude:
         c = self.cfg
         if c.still_frames <= 0:
             return 1.0
-        if z is not None:
-            self._n_still += 1
-            a = 1.0 / min(self._n_still, c.still_frames)
+        if z is not None:  # counted in frames of frame_s
+            self._n_still += self.clock.k
+            a = self.clock.k / min(self._n_still, c.still_frames)
             self._m1 += a * (z - self._m1)
             self._m2 += a * (z * z - self._m2)
             self._mv += a * (np.diag(Rz) - self._mv)
@@ -177,8 +181,8 @@ class ImageAttitude:
         c = self.cfg
         if c.bias_tau_frames <= 0:
             return z
-        self.n_bias += 1
-        self.bias = self.bias + (z - self.bias) / min(self.n_bias + c.bias_prior_frames, c.bias_tau_frames)
+        self.n_bias += self.clock.k
+        self.bias = self.bias + (z - self.bias) * self.clock.k / min(self.n_bias + c.bias_prior_frames, c.bias_tau_frames)
         if not c.bias_pitch:
             self.bias[0] = 0.0
         return z - self.bias
@@ -425,15 +429,17 @@ class ImageAttitude:
             return self.calibration_fallback(res[2])
         return Attitude(float(res[0][0]), float(res[0][1]), float(sd[0]), float(sd[1]), "image", res[2])
 
-    def update(self, boxes: np.ndarray, class_ids: np.ndarray, far: np.ndarray | None = None) -> Attitude:
+    def update(self, boxes: np.ndarray, class_ids: np.ndarray, far: np.ndarray | None = None, *,
+               stamp_ns: int | None = None) -> Attitude:
         """Fit this frame, fold it into the filter, return the attitude to map this frame with.
 
         A fit whose residuals or cones fail :meth:`trusted` (its own 1-sigma aside: the filter averages
         fits) is not folded in (counted as ``rejected``); a frame whose filtered estimate's 1-sigma exceeds
-        ``trust_max_sigma_deg`` is mapped with the calibration's H (counted as ``used_calibration``); ``far``: :meth:`fit`."""
-        c = self.cfg
-        self.x = self.x * c.decay  # predict: random walk decaying to zero
-        self.P = self.P * c.decay**2 + np.eye(2) * c.process_sigma_deg**2
+        ``trust_max_sigma_deg`` is mapped with the calibration's H (counted as ``used_calibration``); ``far``: :meth:`fit`;
+        ``stamp_ns``: the frame's stamp (:class:`~.model.FrameClock`)."""
+        c, k = self.cfg, self.clock.step(stamp_ns)
+        self.x = self.x * c.decay**k  # predict: random walk decaying to zero
+        self.P = self.P * c.decay ** (2 * k) + np.eye(2) * c.process_sigma_deg**2 * k
         res = self.fit(boxes, class_ids, self.x + self.bias, self.sizes if c.size_frames else None, self.P, far=far)
         source, n = "hold", 0
         if res is None:

@@ -118,3 +118,19 @@ class AttitudeCounts:
         return {"fitted": self.fitted, "too_few_cones": self.too_few, "rejected_beyond_limit": self.rejected,
                 "used_calibration": self.calibration, "size_cones": self.size_cones, "size_followed": self.size_followed,
                 "boxes_read_by_band_model": self.read_by_band, "boxes_unmeasured_size": self.unmeasured}
+
+
+class FrameClock:
+    """How long each frame of a stream is in frames of ``frame_s`` seconds (the interval a filter's settings "per
+    frame" are given for), from the frames' stamps: :meth:`step` with each frame's stamp gives its :attr:`k`, the time
+    since the last stamp in ``frame_s`` (0.25-4); without a stamp the last frame's, 1 at the first; ``frame_s`` 0: 1."""
+
+    def __init__(self, frame_s: float):
+        self.frame_s, self.k, self.last_ns = float(frame_s), 1.0, None
+
+    def step(self, stamp_ns: int | None) -> float:
+        """This frame's :attr:`k` from its stamp (None: the last frame's)."""
+        if stamp_ns is not None and self.last_ns is not None and self.frame_s > 0 and stamp_ns > self.last_ns:
+            self.k = float(np.clip((stamp_ns - self.last_ns) * 1e-9 / self.frame_s, 0.25, 4.0))
+        self.last_ns = stamp_ns if stamp_ns is not None else self.last_ns
+        return self.k
