@@ -611,6 +611,33 @@ def test_fused_learns_the_fits_roll_bias_against_the_imu_not_the_bodys_roll():
     assert np.median(np.abs(errs)) < 0.05
 
 
+def test_fused_settings_per_frame_mean_the_same_in_seconds_at_any_frame_rate():
+    """``fused`` counts its own settings per frame (the ground offset's process noise, the ground gate's evidence
+    mean and latch, the roll bias against the IMU, the IMU's still test) in the image's frames of ``frame_s`` too: a
+    10 fps stream gives what settings for half as many frames give, counted per frame (the latch's decay per frame is
+    (1 - 1/1000)^2 against 1 - 1/500: equal to a millionth)."""
+    from cone_perception.attitude import FusedAttitude, GroundGate, ImageAttitudeConfig, ImuAttitude
+
+    rng = np.random.default_rng(5)
+    mapper = ConeMapper(_calib())
+    per_frame_cfg = ImageAttitudeConfig(top_bias_extra_px=(), frame_s=0.0, process_sigma_deg=0.6 * np.sqrt(2.0),
+                                        decay=0.95**2, still_frames=20.0, still_min_frames=5.0, bias_tau_frames=600.0,
+                                        bias_prior_frames=50.0)
+    imus = ImuAttitude(), ImuAttitude()
+    scaled = FusedAttitude(mapper.image_attitude(ImageAttitudeConfig(top_bias_extra_px=())), imus[0])
+    per_frame = FusedAttitude(mapper.image_attitude(per_frame_cfg), imus[1], offset_process_sigma_deg=0.05 * np.sqrt(2.0),
+                              roll_bias_prior_frames=15.0, gate=GroundGate(evidence_frames=10.0, hold_frames=500.0))
+    scaled.image.clock.step(-100_000_000)
+    for k in range(80):
+        body = np.array([0.5 * np.sin(k / 5.0), 0.3 * np.sin(k / 7.0)])
+        boxes = _noisy(_cone_boxes(_tilted_camera(body[0] + 0.4 * (k > 40), body[1]), CONES_XY, CONES_CLS), rng, 0.4)
+        for imu in imus:
+            imu.add(k * 100_000_000, _q(*body))
+        a, b = scaled.update(boxes, CONES_CLS, k * 100_000_000), per_frame.update(boxes, CONES_CLS, k * 100_000_000)
+        assert (a.pitch_deg, a.roll_deg) == pytest.approx((b.pitch_deg, b.roll_deg), abs=1e-6), k
+    assert scaled.image.clock.k == 2.0 and np.any(scaled.gate_latch > 0.5)  # the grade change opened the gate
+
+
 @pytest.mark.parametrize("offset", [0.06, 0.6])
 def test_fused_ground_gate_applies_the_images_offset_only_where_it_is_significant(offset):
     """The IMU (rest captured) feels the body; the camera sees body + an offset of the road ahead. An

@@ -92,14 +92,15 @@ class ImuStillTest:
         self.cfg = cfg
         self.n, self.m1, self.m2 = 0, np.zeros(2), np.zeros(2)
 
-    def weight(self, body: np.ndarray, sigma_deg: float) -> float:
+    def weight(self, body: np.ndarray, sigma_deg: float, k: float = 1.0) -> float:
         """Fold one reading (pitch, roll; degrees) in; 1 = the IMU sees the body move or lean (keep the estimate),
-        0 = still (as far as the IMU can tell); 1 until ``still_min_frames`` readings are in."""
+        0 = still (as far as the IMU can tell); 1 until ``still_min_frames`` readings are in (``k``: this frame's
+        length in ``frame_s``, :class:`~.model.FrameClock`; the windows count in those)."""
         c = self.cfg
         if c.still_frames <= 0:
             return 1.0
-        self.n += 1
-        a = 1.0 / min(self.n, c.still_frames)
+        self.n += k
+        a = k / min(self.n, c.still_frames)
         self.m1 += a * (body - self.m1)
         self.m2 += a * (body * body - self.m2)
         if self.n < c.still_min_frames:
@@ -151,9 +152,10 @@ class FusedAttitude:
         """Fold one accepted fit's roll minus the IMU's (degrees) into the roll bias; return the bias
         (pitch, roll) to take off the fit."""
         tau = self.image.cfg.bias_tau_frames
-        if tau > 0:
-            self.n_roll_bias += 1
-            self.roll_bias += (d_roll - self.roll_bias) / min(self.n_roll_bias + self.roll_bias_prior, tau)
+        if tau > 0:  # counted in frames of frame_s
+            k = self.image.clock.k
+            self.n_roll_bias += k
+            self.roll_bias += (d_roll - self.roll_bias) * k / min(self.n_roll_bias + self.roll_bias_prior, tau)
         return np.array([0.0, self.roll_bias])
 
     def step_ground_gate(self) -> tuple[np.ndarray, np.ndarray]:
@@ -163,9 +165,10 @@ class FusedAttitude:
         if self.gate is None:
             return self.g.copy(), var
         slow2, grade2, lo_mean, lo_now, decay, n_mean = self._gate_k
+        k = self.image.clock.k  # this frame in frames of frame_s: the mean's and the latch's steps
         s2 = var + slow2  # the offset's error: the filter's and the fits' slow one
         t2 = grade2 + s2  # its spread where the road does change grade
-        self.g_mean += (self.g - self.g_mean) / n_mean
+        self.g_mean += (self.g - self.g_mean) * min(k / n_mean, 1.0)
 
         def log_bf(g):  # grade change : flat, per axis
             return 0.5 * np.log(s2 / t2) + 0.5 * g**2 * (1.0 / s2 - 1.0 / t2)
@@ -177,7 +180,7 @@ class FusedAttitude:
         w_mean, w_now = prob(lo_mean + b_mean), prob(lo_now + b_now)
         w = np.maximum(w_mean, w_now)
         shown = np.where(w_now > w_mean, b_now, b_mean) > 0  # the evidence favours a grade change
-        self.gate_latch = np.maximum(self.gate_latch * decay, np.where(shown, w, 0.0))
+        self.gate_latch = np.maximum(self.gate_latch * decay**k, np.where(shown, w, 0.0))
         w = np.maximum(w, self.gate_latch)
         return w * self.g, w * var + w * (1.0 - w) * self.g**2  # the mixture's mean and variance
 
@@ -191,7 +194,7 @@ class FusedAttitude:
         s_imu = self.imu.sigma_deg
         if not self.use_image:
             return Attitude(float(body[0]), float(body[1]), s_imu, s_imu, "imu", 0)
-        self.Pg = self.Pg + np.eye(2) * self.q
+        self.Pg = self.Pg + np.eye(2) * self.q * self.image.clock.k
         bias = np.array([0.0, self.roll_bias])
         res = self.image.fit(boxes, class_ids, body + self.g + bias, far=far)
         n, wm = 0, None
@@ -210,7 +213,7 @@ class FusedAttitude:
             self.image.counts.fitted += 1
         if wm is None:
             wm = self.image.motion_weight(None, None)
-        wm = max(wm, self.imu_still.weight(body, s_imu))
+        wm = max(wm, self.imu_still.weight(body, s_imu, self.image.clock.k))
         g, var_g = self.step_ground_gate()
         att = (body + g) * wm  # still body and ground (the image's still test): the calibration's zero
         self.image.x = att.copy()  # keeps the image filter warm for frames without IMU
