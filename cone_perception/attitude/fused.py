@@ -12,10 +12,10 @@ import numpy as np
 from ..errors import ConfigError
 from ..geometry.linalg import inv2
 from ..records import BoxColumns
-from .image import ImageAttitude, still_weight
-from .model import AttitudeCounts
+from .image import ImageAttitude
 from .imu import ImuAttitude
-from .model import ATTITUDE_MODES, FIXED, Attitude, default_attitude_mode
+from .model import ATTITUDE_MODES, FIXED, Attitude, AttitudeCounts, default_attitude_mode
+from .still import StillTest
 
 
 def attitude_estimator(mapper, mode: str | None, imu: "ImuAttitude | None" = None, config=None):
@@ -81,31 +81,21 @@ class GroundGate:
     hold_frames: float = 1000.0
 
 
-class ImuStillTest:
+class ImuStillTest(StillTest):
     """The image's still test (``ImageAttitudeConfig`` ``still_frames``, ``still_min_frames``, ``still_ratio``,
     ``still_ramp``, ``still_max_mean_deg``) run on the IMU's readings against the IMU's own 1-sigma: in ``fused`` a
     body is still only where its IMU says so too. The image fits alone cannot tell a body that jitters by less than
     their own 1-sigma (0.2-0.4° in roll on a small wide camera) from a still one, and the attitude returned to zero
     there threw the IMU's reading away (docs/attitude.md, "still test")."""
 
-    def __init__(self, cfg):
-        self.cfg = cfg
-        self.n, self.m1, self.m2 = 0, np.zeros(2), np.zeros(2)
-
     def weight(self, body: np.ndarray, sigma_deg: float, k: float = 1.0) -> float:
         """Fold one reading (pitch, roll; degrees) in; 1 = the IMU sees the body move or lean (keep the estimate),
         0 = still (as far as the IMU can tell); 1 until ``still_min_frames`` readings are in (``k``: this frame's
         length in ``frame_s``, :class:`~.model.FrameClock`; the windows count in those)."""
-        c = self.cfg
-        if c.still_frames <= 0:
+        if self.cfg.still_frames <= 0:
             return 1.0
-        self.n += k
-        a = k / min(self.n, c.still_frames)
-        self.m1 += a * (body - self.m1)
-        self.m2 += a * (body * body - self.m2)
-        if self.n < c.still_min_frames:
-            return 1.0
-        return still_weight(c, self.m1, self.m2, sigma_deg**2)
+        self.fold(body, np.full(2, sigma_deg**2), k)
+        return self.verdict() if self.judged else 1.0
 
 
 def _log_odds(p_flat: float) -> float:

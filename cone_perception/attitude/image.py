@@ -28,6 +28,7 @@ from ..geometry.linalg import inv2
 from .boxes import BoxModel, BoxReading, box_top_extra_px, range_cuts, read_boxes
 from .model import MAX_ABS_DEG, Attitude, AttitudeCounts, FrameClock, attitude_rotation
 from .sizes import SizeTrackConfig, SizeTracks
+from .still import StillTest
 
 
 @dataclass
@@ -141,10 +142,7 @@ class ImageAttitude:
         self.P = np.eye(2) * self.cfg.prior_sigma_deg**2
         self.bias = np.zeros(2)  # the fit's slowly varying bias (degrees), see ImageAttitudeConfig.bias_tau_frames
         self.n_bias = 0
-        self._m1 = np.zeros(2)  # exponential means of the fits, their squares and their variances (still test)
-        self._m2 = np.zeros(2)
-        self._mv = np.zeros(2)
-        self._n_still = 0
+        self.still = StillTest(self.cfg)  # the still test on the fits
         self.clock = FrameClock(self.cfg.frame_s)  # this frame's length in frame_s (the updates scale by it)
         self.sizes.reset()
 
@@ -155,25 +153,22 @@ class ImageAttitude:
         c = self.cfg
         if c.still_frames <= 0:
             return 1.0
-        if z is not None:  # counted in frames of frame_s
-            self._n_still += self.clock.k
-            a = self.clock.k / min(self._n_still, c.still_frames)
-            self._m1 += a * (z - self._m1)
-            self._m2 += a * (z * z - self._m2)
-            self._mv += a * (np.diag(Rz) - self._mv)
-        if self._n_still < c.still_min_frames:
+        if z is not None:
+            self.still.fold(z, np.diag(Rz), self.clock.k)
+        if not self.still.judged:
             if c.still_start_sigmas <= 0 or z is None or not start_from_fit:
                 return 1.0
             # not judged yet: this fit's own evidence that the body is off zero (a ramp of one sigma)
             return float(np.clip(np.max(np.abs(z) / np.sqrt(np.maximum(np.diag(Rz), 1e-12))) - c.still_start_sigmas, 0.0, 1.0))
-        return still_weight(c, self._m1, self._m2, self._mv)
+        return self.still.verdict()
 
     def still_sigma(self, sd: np.ndarray, wm: float) -> np.ndarray:
         """(2,) 1-sigma (degrees) of the attitude used: the estimate's ``sd`` while the body moves; while it is
         still (``wm`` 0) how far from zero the recent fits say it may be (their mean and spread)."""
         if wm >= 1.0:
             return sd
-        still = np.sqrt(self._m1**2 + np.maximum(self._m2 - self._m1**2, 0.0))
+        m1, m2 = self.still.m1, self.still.m2
+        still = np.sqrt(m1**2 + np.maximum(m2 - m1**2, 0.0))
         return wm * sd + (1.0 - wm) * np.minimum(still, sd)
 
     def debias(self, z: np.ndarray) -> np.ndarray:
@@ -462,16 +457,6 @@ class ImageAttitude:
             return self.calibration_fallback(n)
         x = self.x * wm
         return Attitude(float(x[0]), float(x[1]), float(sd[0]), float(sd[1]), source, n)
-
-
-def still_weight(cfg: ImageAttitudeConfig, m1: np.ndarray, m2: np.ndarray, ref_var) -> float:
-    """The still test's verdict from the running mean ``m1`` and mean square ``m2`` (pitch, roll; degrees) of what it
-    watched and the variance ``ref_var`` they would scatter by on a still body: 1 = moving or leaning (their spread
-    above ``still_ratio`` of it, or their mean beyond ``still_max_mean_deg``), 0 = still, a ramp between."""
-    spread = np.sqrt(np.maximum(m2 - m1**2, 0.0) / np.maximum(ref_var, 1e-12))
-    moving = (np.max(spread) - (cfg.still_ratio - cfg.still_ramp)) / cfg.still_ramp
-    sloped = (np.max(np.abs(m1)) - cfg.still_max_mean_deg) / (0.5 * cfg.still_max_mean_deg)
-    return float(np.clip(max(moving, sloped), 0.0, 1.0))
 
 
 def _irls(r0: np.ndarray, j0: np.ndarray, j1: np.ndarray, inv_s: np.ndarray, delta: np.ndarray, theta: np.ndarray,

@@ -34,14 +34,14 @@ from cone_perception.data.bags import read_attitude_truth, read_twists
 from cone_perception.detector.farband import FAR_PREFER, merge_boxes, same_cone
 from cone_perception.geometry.calib import load_calibration
 from cone_perception.mapping import ConeMapper, one_box_per_cone, part_of
-from cone_perception.records import xyxy_iou
+from cone_perception.records import BoxColumns, xyxy_iou
 
 sys.path.insert(0, str(Path(__file__).parent))
 from false_cones import cone_of_box, load_gt_boxes, origin_of  # noqa: E402
 
 
 def xyxy(b: np.ndarray) -> np.ndarray:
-    return np.c_[b["u1"], b["v1"], b["u2"], b["v2"]].astype(np.float64)
+    return np.asarray(BoxColumns.of(b).xyxy, np.float64)
 
 
 def merge_pairs(recs: list[dict]) -> None:
