@@ -115,11 +115,19 @@ class FusedAttitude:
     off). The IMU takes the body's own roll (cornering) out of that mean, which the
     image-only bias state (the mean of the raw fits) cannot do, so it may learn faster.
 
+    In pitch it is the other way round: the fits are the better reference (1-sigma 0.1-0.2 degree a
+    frame, their bias a few hundredths on most cameras), and the IMU's reading keeps what its rest
+    capture left of its bias (the rendered IMU: 0.05 degree 1-sigma a drive), which the ground gate
+    takes for flat ground below about 0.15 degree. So the IMU's pitch bias is learnt as the long-run
+    mean of (pitch fit minus IMU pitch), shrunk by ``pitch_bias_prior_frames`` pseudo-frames, the same
+    exponential mean, and added to the IMU's pitch (None: the IMU's pitch taken as exact); a grade
+    that lasts is taken up by it too, as the road ahead the camera sees.
+
     The ground offset is applied through ``gate`` (:class:`GroundGate`; None: always in full)."""
 
     def __init__(self, image: ImageAttitude, imu: ImuAttitude, use_image: bool = True,
                  offset_process_sigma_deg: float = 0.05, roll_bias_prior_frames: float = 30.0,
-                 gate: "GroundGate | None" = GroundGate()):
+                 gate: "GroundGate | None" = GroundGate(), *, pitch_bias_prior_frames: float | None = 30.0):
         self.image, self.imu, self.use_image = image, imu, use_image
         self.gate = gate  # None: the image's ground offset always applied in full
         self.g_mean, self.gate_latch = np.zeros(2), np.zeros(2)
@@ -132,6 +140,9 @@ class FusedAttitude:
         self.roll_bias_prior = float(roll_bias_prior_frames)
         self.roll_bias = 0.0  # the image fit's roll bias against the IMU, degrees
         self.n_roll_bias = 0
+        self.pitch_bias_prior = pitch_bias_prior_frames  # None: the IMU's pitch taken as exact
+        self.pitch_bias = 0.0  # the IMU's pitch bias against the ground the fits see, degrees
+        self.n_pitch_bias = 0.0
         self.imu_still = ImuStillTest(image.cfg)  # still only where the IMU says so too
 
     @property
@@ -147,6 +158,14 @@ class FusedAttitude:
             self.n_roll_bias += k
             self.roll_bias += (d_roll - self.roll_bias) * k / min(self.n_roll_bias + self.roll_bias_prior, tau)
         return np.array([0.0, self.roll_bias])
+
+    def debias_pitch(self, d_pitch: float) -> None:
+        """Fold one accepted fit's pitch minus the IMU's (degrees) into the IMU's pitch bias."""
+        tau = self.image.cfg.bias_tau_frames
+        if self.pitch_bias_prior is not None and tau > 0:
+            k = self.image.clock.k
+            self.n_pitch_bias += k
+            self.pitch_bias += (d_pitch - self.pitch_bias) * k / min(self.n_pitch_bias + self.pitch_bias_prior, tau)
 
     def step_ground_gate(self) -> tuple[np.ndarray, np.ndarray]:
         """One frame's step of the ground gate: the ground offset to add to the IMU's attitude and its
@@ -177,13 +196,14 @@ class FusedAttitude:
     def update(self, boxes: np.ndarray, class_ids: np.ndarray, stamp_ns: int | None,
                far: np.ndarray | None = None) -> Attitude:
         """``far``: (N,) bool, the far strip's network's boxes (:meth:`ImageAttitude.fit`)."""
-        body = self.imu.at(stamp_ns)
-        if body is None:
+        raw = self.imu.at(stamp_ns)
+        if raw is None:
             return self.image.update(boxes, class_ids, far, stamp_ns=stamp_ns)
         self.image.clock.step(stamp_ns)  # the image's still test counts in its frame_s
         s_imu = self.imu.sigma_deg
         if not self.use_image:
-            return Attitude(float(body[0]), float(body[1]), s_imu, s_imu, "imu", 0)
+            return Attitude(float(raw[0]), float(raw[1]), s_imu, s_imu, "imu", 0)
+        body = raw + np.array([self.pitch_bias, 0.0])
         self.Pg = self.Pg + np.eye(2) * self.q * self.image.clock.k
         bias = np.array([0.0, self.roll_bias])
         res = self.image.fit(boxes, class_ids, body + self.g + bias, far=far)
@@ -196,6 +216,7 @@ class FusedAttitude:
             z, Rz, n = res
             wm = self.image.motion_weight(z, Rz, start_from_fit=False)
             z = z - self.debias_roll(float(z[1] - body[1]))
+            self.debias_pitch(float(z[0] - raw[0]))
             S = self.Pg + Rz + np.eye(2) * s_imu**2
             G = self.Pg @ inv2(S)
             self.g = self.g + G @ (z - body - self.g)
@@ -203,7 +224,7 @@ class FusedAttitude:
             self.image.counts.fitted += 1
         if wm is None:
             wm = self.image.motion_weight(None, None)
-        wm = max(wm, self.imu_still.weight(body, s_imu, self.image.clock.k))
+        wm = max(wm, self.imu_still.weight(raw, s_imu, self.image.clock.k))
         g, var_g = self.step_ground_gate()
         att = (body + g) * wm  # still body and ground (the image's still test): the calibration's zero
         self.image.x = att.copy()  # keeps the image filter warm for frames without IMU

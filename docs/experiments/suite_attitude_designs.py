@@ -1,7 +1,7 @@
 """Image-attitude designs screened on the validation suite's cached drives (issue 41, part 3).
 
     .venv/bin/python docs/experiments/suite_attitude_designs.py BAG [BAG ...] [--set FIELD=VALUE,...] [--truth]
-        [--attitude image|fused|imu|fixed] [--one-box NAME=VALUE,...] [--merge NAME=VALUE,...]
+        [--attitude image|fused|imu|fixed] [--one-box NAME=VALUE,...] [--merge NAME=VALUE,...] [--fused NAME=VALUE,...]
 
 Each BAG is a drive the suite rendered (`cone-perception validate --tuning --seconds 2 --cache DIR` leaves them in
 DIR, named `tune-NAME`: screen on those, never on the judging drives). Each is replayed as the suite replays it
@@ -94,8 +94,17 @@ def main() -> None:
                     help="the attitude the drives are replayed with (default image, the suite's)")
     ap.add_argument("--one-box", default=None, help="mapping.one_box_per_cone NAME=VALUE,... (keyword-only settings)")
     ap.add_argument("--merge", default=None, help="farband.merge_boxes NAME=VALUE,... (keyword settings)")
+    ap.add_argument("--fused", default=None,
+                    help="FusedAttitude NAME=VALUE,... (keyword-only settings; 'none' for None)")
     args = ap.parse_args()
     patch_config(parse_set(args.set))
+    if args.fused:
+        from cone_perception.attitude.fused import FusedAttitude
+        kw = {k: (None if v == "none" else float(v)) for k, v in (kv.split("=", 1) for kv in args.fused.split(","))}
+        unknown = set(kw) - set(FusedAttitude.__init__.__kwdefaults__ or {})
+        if unknown:
+            raise SystemExit(f"--fused: {sorted(unknown)} not among {sorted(FusedAttitude.__init__.__kwdefaults__)}")
+        FusedAttitude.__init__.__kwdefaults__.update(kw)
     if args.merge:
         import functools
 
@@ -123,14 +132,15 @@ def main() -> None:
             r = suite.run_drive(bag, suite.Settings(attitude=args.attitude))
         rows.append(r)
         line = (f"{bag.name:28s} false {r['false_per_frame']:.2f} recall 15-25 {r['recall_15_25']:.3f} "
-                f"25-40 {r['recall_25_40']:.3f} att 7-15 {r['err_att_7_15']:.3f} m (fixed H {r['err_fixed_7_15']:.3f})")
+                f"25-40 {r['recall_25_40']:.3f} att 7-15 {r['err_att_7_15']:.3f} m (fixed H {r['err_fixed_7_15']:.3f}) "
+                f"pitch error {r['pitch_err_deg'] or 0.0:.3f} deg")
         if args.truth:
             line += " | false, boxes one by one, pitch/roll " + " ".join(
                 f"{p}/{q} {false_with(bag, captured['res'], (p, q)):.2f}" for p, q in
                 (("fit", "fit"), ("true", "true"), ("true", "fit"), ("fit", "true")))
         print(line, flush=True)
     f, rc, a = (np.array([r[k] for r in rows], float) for k in ("false_per_frame", "recall_25_40", "err_att_7_15"))
-    print(f"{args.set or 'defaults'}{' one-box ' + args.one_box if args.one_box else ''}{' merge ' + args.merge if args.merge else ''}: false/frame median {np.median(f):.2f} worst {f.max():.2f} (mean {f.mean():.2f}); "
+    print(f"{args.set or 'defaults'}{' one-box ' + args.one_box if args.one_box else ''}{' merge ' + args.merge if args.merge else ''}{' fused ' + args.fused if args.fused else ''}: false/frame median {np.median(f):.2f} worst {f.max():.2f} (mean {f.mean():.2f}); "
           f"recall 25-40 median {np.median(rc):.3f} worst {rc.min():.3f}; att 7-15 median {np.median(a):.3f} "
           f"worst {a.max():.3f} m ({len(rows)} drives)")
 
