@@ -533,3 +533,50 @@ def test_a_far_track_out_of_the_calibrations_range_is_not_counted_missed():
     assert trk.xy[0, 0] == pytest.approx(41.0, abs=0.2) and trk.certainty[0] == pytest.approx(c[0])
     trk.update(5 * DT_NS, cones([], BLUE), Motion2D(3.0, 0.0, 0.0))  # back at 38 m, in range and not seen
     assert trk.certainty[0] < c[0]
+
+
+def test_a_track_seen_once_is_not_kept_once_it_leaves_the_view_by_its_side():
+    """A cone placed once at the view's edge (a far cone on the track's other side, placed metres off by a wrong
+    first attitude) and never seen again: out of view no miss can lower its certainty, so kept it stayed on
+    /cones/tracked until the car had passed it (27-30 frames on `1080-nojitter`). With one hit it goes as it leaves
+    the view by its side or below it; with two it is kept there (a cone beside the car); beyond the view's far end
+    it is kept too (it may come into view: test_field_of_view_reaches_the_bands_top_with_the_cones_height)."""
+    motion = Motion2D(0.4, 0.0, 0.0)
+    for hits, kept in ((1, False), (2, True)):
+        trk = ConeTracker(TrackerConfig(), fov=box_fov())
+        for k in range(hits):  # at the side edge, then out of view (|y| > 5 m)
+            trk.update(k * DT_NS, cones([[10.0 - 0.4 * k, 4.9]], BLUE), motion if k else None)
+        trk.update(hits * DT_NS, cones(np.zeros((0, 2)), BLUE), Motion2D(0.4, -0.3, 0.0))  # the car turns away
+        assert (len(trk.output()) == 1) is kept, hits
+        assert trk.events["out_of_view_dropped"] == (0 if kept else 1)
+    off = ConeTracker(TrackerConfig(out_of_view_min_hits=0), fov=box_fov())
+    off.update(0, cones([[10.0, 4.9]], BLUE))
+    off.update(DT_NS, cones(np.zeros((0, 2)), BLUE), Motion2D(0.4, -0.3, 0.0))
+    assert len(off.output()) == 1  # the rule turned off: as before
+
+
+def test_field_of_view_reaches_the_bands_top_with_the_cones_height():
+    """The band's top cuts a cone off where its tip lies above it, not three margins below its foot: with the far
+    strip /cones reaches 40 m, where the old margin (64 px on a 1080 p band) ended the view at 20 m, so tracks of
+    far cones never missed were never removed."""
+    from cone_perception.geometry.calib import calibration_from_dict
+    from cone_perception.synth.config import SynthConfig
+    from cone_perception.tracking.view import FieldOfView as View
+
+    calib = calibration_from_dict(SynthConfig(seed=0).calibration().to_dict(), "test.yaml")
+    fov = View.from_calibration(calib)
+    old = View(fov.ground_to_pixels, (calib.crop.u0, calib.crop.v0, calib.crop.u1, calib.crop.v1), calib.max_range_m)
+    ahead = np.array([[x, 0.0] for x in (5.0, 15.0, 25.0, 30.0, 35.0)])
+    assert old.visible(ahead).tolist() == [True, True, False, False, False]
+    assert fov.visible(ahead).all()
+    # a cone's tip above the band's top is out of view: the tip row computed from the foot row and the horizon
+    uv = fov.ground_to_pixels(ahead)
+    horizon = fov.ground_to_pixels(ahead * 1e3)[:, 1]
+    tip = uv[:, 1] - (uv[:, 1] - horizon) * fov.cone_height_frac
+    assert np.all(tip >= fov.v0) and fov.cone_height_frac == pytest.approx(0.505 / calib.mount_pose.height_m)
+    # seen once, then missed: beyond the far end (the range cut) it is kept, below the view (passed) it goes
+    for x0, dx, kept in ((calib.max_range_m - 0.5, -1.0, True), (calib.max_range_m - 0.5, 0.0, True), (3.0, 2.5, False)):
+        trk = ConeTracker(TrackerConfig(), fov=fov)
+        trk.update(0, cones([[x0, 0.0]], BLUE))
+        trk.update(DT_NS, cones(np.zeros((0, 2)), BLUE), Motion2D(dx, 0.0, 0.0))
+        assert (len(trk.output()) == 1) is kept, (x0, dx)

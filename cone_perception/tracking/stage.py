@@ -10,7 +10,8 @@ import numpy as np
 
 from ..mapping import ConeMapper
 from ..geometry.motion import TwistBuffer
-from .tracker import ConeTracker, FieldOfView, FrameInfo, TrackerConfig
+from .tracker import ConeTracker, FrameInfo, TrackerConfig
+from .view import FieldOfView
 
 
 class TrackingStage:

@@ -30,9 +30,9 @@ import numpy as np
 from ..classes import NUM_CLASSES, UNKNOWN
 from ..errors import FrameError
 from ..geometry.linalg import inv2
-from ..mapping import ConeMapper
-from ..records import CONE_DTYPE, TRACKED_CONE_DTYPE
 from ..geometry.motion import Motion2D, from_twist, register_cones
+from ..records import CONE_DTYPE, TRACKED_CONE_DTYPE
+from .view import FieldOfView
 
 _BIG = 1e9
 #: :attr:`ConeTracker.events` that mean bad or missing input (a node's health WARNs when one grows);
@@ -60,6 +60,10 @@ class TrackerConfig:
     gap_tau_s: float = 1.0  # certainty *= exp(-gap / tau) over a gap above max_gap_s
     delete_below: float = 0.1
     behind_m: float = 3.0  # delete when x < -behind_m
+    # a track out of the field of view and not seen keeps its certainty (nothing says it is gone), but only with at
+    # least this many hits: one sighting (a far cone at the image's edge placed by a wrong first attitude) is not
+    # kept out of view, where no miss could ever remove it; 0 = every track kept (docs/tracking.md, "Out of view")
+    out_of_view_min_hits: int = 2
     min_hits: int = 1  # published from this many hits on (and publish_min_certainty)
     publish_min_certainty: float = 0.5
     max_gap_s: float = 0.5
@@ -95,41 +99,6 @@ class TrackerConfig:
     strong_score: float = 0.0  # 0: every detection is strong (as before weak detections existed)
     weak_likelihood_ratio: float = 1.35  # odds factor per weak hit (dimensionless, > 1)
     weak_spawn: bool = True  # a weak detection on no track starts a (yet unpublished) track
-
-
-class FieldOfView:
-    """Where the camera can see a cone: ground points whose foot pixel lies inside the band (with a
-    margin) and within ``max_range_m``.
-
-    ``ground_to_pixels`` maps (N, 2) rear_axle m to (N, 2) full-image px (NaN behind the camera),
-    e.g. :meth:`cone_perception.mapping.ConeMapper.ground_to_pixels`.
-    """
-
-    def __init__(self, ground_to_pixels, band_px: tuple[float, float, float, float], max_range_m: float,
-                 margin_frac: float = 0.03, min_range_m: float = 0.0):
-        self.ground_to_pixels = ground_to_pixels
-        u0, v0, u1, v1 = (float(x) for x in band_px)
-        mu, mv = margin_frac * (u1 - u0), margin_frac * (v1 - v0)
-        # a cone whose foot is near the top of the band is cut off by it: half the band's margin more there
-        self.u0, self.u1, self.v0, self.v1 = u0 + mu, u1 - mu, v0 + 3 * mv, v1 - mv
-        self.max_range_m = float(max_range_m)
-        self.min_range_m = float(min_range_m)
-
-    @classmethod
-    def from_calibration(cls, calib, margin_frac: float = 0.03) -> "FieldOfView":
-        c = calib.crop
-        return cls(ConeMapper(calib).ground.ground_to_pixels, (c.u0, c.v0, c.u1, c.v1), calib.max_range_m, margin_frac)
-
-    def visible(self, xy_m: np.ndarray) -> np.ndarray:
-        """(N, 2) rear_axle m -> (N,) bool."""
-        xy = np.asarray(xy_m, dtype=np.float64).reshape(-1, 2)
-        if len(xy) == 0:
-            return np.zeros(0, dtype=bool)
-        uv = self.ground_to_pixels(xy)
-        r = np.hypot(xy[:, 0], xy[:, 1])
-        with np.errstate(invalid="ignore"):
-            return ((uv[:, 0] >= self.u0) & (uv[:, 0] < self.u1) & (uv[:, 1] >= self.v0) & (uv[:, 1] < self.v1)
-                    & (r <= self.max_range_m) & (r >= self.min_range_m))
 
 
 @dataclass
@@ -338,15 +307,20 @@ class ConeTracker:
         # ---- misses: certainty decays only where the cone should have been seen ----
         missed = np.ones(n_t, dtype=bool)
         missed[cols] = False
+        unseen_out = np.zeros(n_t, dtype=bool)  # missed, out of view, too few hits to be kept there
         if missed.any():
             vis = self.fov.visible(self.xy[missed]) if self.fov is not None else np.ones(int(missed.sum()), bool)
             vis &= np.hypot(self.xy[missed, 0], self.xy[missed, 1]) <= self.max_range_m
             idx = np.flatnonzero(missed)[vis]
             self.misses[idx] += 1
             self.certainty[idx] = _bayes(self.certainty[idx], cfg.miss_likelihood_ratio)
+            out = np.flatnonzero(missed)[~vis]  # of those, the ones off the view's sides or below it (passed)
+            out = out[~self.fov.visible(self.xy[out], far_too=False)] if self.fov is not None else out[:0]
+            unseen_out[out] = self.hits[out] < cfg.out_of_view_min_hits
+            self.events["out_of_view_dropped"] += int(unseen_out.sum())
 
         # ---- deletion (and duplicates merged into the older track) ----
-        keep = (self.certainty >= cfg.delete_below) & (self.xy[:, 0] >= -cfg.behind_m)
+        keep = (self.certainty >= cfg.delete_below) & (self.xy[:, 0] >= -cfg.behind_m) & ~unseen_out
         if n_t > 1 and cfg.merge_chi2 > 0:
             keep &= ~self._duplicates()
         info.deleted = int((~keep).sum())
