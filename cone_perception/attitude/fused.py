@@ -14,7 +14,7 @@ from ..geometry.linalg import inv2
 from ..records import BoxColumns
 from .image import ImageAttitude
 from .imu import ImuAttitude
-from .model import ATTITUDE_MODES, FIXED, Attitude, AttitudeCounts, default_attitude_mode
+from .model import ATTITUDE_MODES, FIXED, Attitude, AttitudeCounts, RunningBias, default_attitude_mode
 from .still import StillTest
 
 
@@ -137,35 +137,30 @@ class FusedAttitude:
         self.q = offset_process_sigma_deg**2
         self.g = np.zeros(2)  # ground offset (total attitude minus IMU), degrees
         self.Pg = np.eye(2) * image.cfg.prior_sigma_deg**2
-        self.roll_bias_prior = float(roll_bias_prior_frames)
-        self.roll_bias = 0.0  # the image fit's roll bias against the IMU, degrees
-        self.n_roll_bias = 0
-        self.pitch_bias_prior = pitch_bias_prior_frames  # None: the IMU's pitch taken as exact
-        self.pitch_bias = 0.0  # the IMU's pitch bias against the ground the fits see, degrees
-        self.n_pitch_bias = 0.0
+        tau = image.cfg.bias_tau_frames
+        self.roll_mean = RunningBias(roll_bias_prior_frames, tau)  # the image fit's roll bias against the IMU
+        # the IMU's pitch bias against the ground the fits see; None: the IMU's pitch taken as exact
+        self.pitch_mean = RunningBias(pitch_bias_prior_frames, tau) if pitch_bias_prior_frames is not None else None
         self.imu_still = ImuStillTest(image.cfg)  # still only where the IMU says so too
 
     @property
     def counts(self) -> AttitudeCounts:
         return self.image.counts
 
+    @property
+    def roll_bias(self) -> float:
+        """The image fit's roll bias against the IMU now (degrees)."""
+        return self.roll_mean.value
+
     def debias_roll(self, d_roll: float) -> np.ndarray:
         """Fold one accepted fit's roll minus the IMU's (degrees) into the roll bias; return the bias
         (pitch, roll) to take off the fit."""
-        tau = self.image.cfg.bias_tau_frames
-        if tau > 0:  # counted in frames of frame_s
-            k = self.image.clock.k
-            self.n_roll_bias += k
-            self.roll_bias += (d_roll - self.roll_bias) * k / min(self.n_roll_bias + self.roll_bias_prior, tau)
-        return np.array([0.0, self.roll_bias])
+        return np.array([0.0, self.roll_mean.fold(d_roll, self.image.clock.k)])
 
-    def debias_pitch(self, d_pitch: float) -> None:
-        """Fold one accepted fit's pitch minus the IMU's (degrees) into the IMU's pitch bias."""
-        tau = self.image.cfg.bias_tau_frames
-        if self.pitch_bias_prior is not None and tau > 0:
-            k = self.image.clock.k
-            self.n_pitch_bias += k
-            self.pitch_bias += (d_pitch - self.pitch_bias) * k / min(self.n_pitch_bias + self.pitch_bias_prior, tau)
+    @property
+    def pitch_bias(self) -> float:
+        """The IMU's pitch bias against the ground the fits see now (degrees; 0 where not learnt)."""
+        return self.pitch_mean.value if self.pitch_mean is not None else 0.0
 
     def step_ground_gate(self) -> tuple[np.ndarray, np.ndarray]:
         """One frame's step of the ground gate: the ground offset to add to the IMU's attitude and its
@@ -216,7 +211,8 @@ class FusedAttitude:
             z, Rz, n = res
             wm = self.image.motion_weight(z, Rz, start_from_fit=False)
             z = z - self.debias_roll(float(z[1] - body[1]))
-            self.debias_pitch(float(z[0] - raw[0]))
+            if self.pitch_mean is not None:
+                self.pitch_mean.fold(float(z[0] - raw[0]), self.image.clock.k)
             S = self.Pg + Rz + np.eye(2) * s_imu**2
             G = self.Pg @ inv2(S)
             self.g = self.g + G @ (z - body - self.g)

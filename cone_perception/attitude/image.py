@@ -26,7 +26,7 @@ from ..geometry.camera import MountPose
 from ..geometry.homography import undistort_pixels
 from ..geometry.linalg import inv2
 from .boxes import BoxModel, BoxReading, box_top_extra_px, range_cuts, read_boxes
-from .model import MAX_ABS_DEG, Attitude, AttitudeCounts, FrameClock, attitude_rotation
+from .model import MAX_ABS_DEG, Attitude, AttitudeCounts, FrameClock, RunningBias, attitude_rotation
 from .sizes import SizeTrackConfig, SizeTracks
 from .still import StillTest
 
@@ -140,8 +140,8 @@ class ImageAttitude:
         """Forget the filter state (a new drive)."""
         self.x = np.zeros(2)
         self.P = np.eye(2) * self.cfg.prior_sigma_deg**2
-        self.bias = np.zeros(2)  # the fit's slowly varying bias (degrees), see ImageAttitudeConfig.bias_tau_frames
-        self.n_bias = 0
+        # the fit's slowly varying bias (degrees), see ImageAttitudeConfig.bias_tau_frames
+        self.bias_mean = RunningBias(self.cfg.bias_prior_frames, self.cfg.bias_tau_frames, np.zeros(2))
         self.still = StillTest(self.cfg)  # the still test on the fits
         self.clock = FrameClock(self.cfg.frame_s)  # this frame's length in frame_s (the updates scale by it)
         self.sizes.reset()
@@ -173,14 +173,17 @@ class ImageAttitude:
 
     def debias(self, z: np.ndarray) -> np.ndarray:
         """Fold one accepted fit ``z`` (2,) degrees into the bias estimate; return the fit less the bias."""
-        c = self.cfg
-        if c.bias_tau_frames <= 0:
+        if self.bias_mean.tau <= 0:
             return z
-        self.n_bias += self.clock.k
-        self.bias = self.bias + (z - self.bias) * self.clock.k / min(self.n_bias + c.bias_prior_frames, c.bias_tau_frames)
-        if not c.bias_pitch:
-            self.bias[0] = 0.0
+        self.bias_mean.fold(z, self.clock.k)
+        if not self.cfg.bias_pitch:
+            self.bias_mean.value[0] = 0.0
         return z - self.bias
+
+    @property
+    def bias(self) -> np.ndarray:
+        """(2,) the fit's bias now (degrees; :meth:`debias`)."""
+        return self.bias_mean.value
 
     # -- model ------------------------------------------------------------------------------------
     def _select(self, boxes: np.ndarray, class_ids: np.ndarray, by_size: bool = True, far: np.ndarray | None = None):

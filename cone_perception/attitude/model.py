@@ -134,3 +134,20 @@ class FrameClock:
             self.k = float(np.clip((stamp_ns - self.last_ns) * 1e-9 / self.frame_s, 0.25, 4.0))
         self.last_ns = stamp_ns if stamp_ns is not None else self.last_ns
         return self.k
+
+
+class RunningBias:
+    """A slowly varying bias learnt as a running mean of what a filter sees (degrees, a float or an array): shrunk
+    towards zero by ``prior`` pseudo-frames, an exponential mean of ``tau`` frames once that many are in; the frames are
+    of ``frame_s`` (each :meth:`fold` counts its ``k``, :class:`FrameClock`); ``tau`` 0: off (:attr:`value` stays 0).
+    The image fit's own bias, and in ``fused`` the fit's roll and the IMU's pitch against each other."""
+
+    def __init__(self, prior: float, tau: float, value=0.0):
+        self.prior, self.tau, self.n, self.value = float(prior), float(tau), 0.0, value
+
+    def fold(self, x, k: float = 1.0):
+        """Fold one reading ``x`` from a frame ``k`` frames long in; the bias now."""
+        if self.tau > 0:
+            self.n += k
+            self.value = self.value + (x - self.value) * k / min(self.n + self.prior, self.tau)
+        return self.value

@@ -309,13 +309,15 @@ class ConeTracker:
         missed[cols] = False
         unseen_out = np.zeros(n_t, dtype=bool)  # missed, out of view, too few hits to be kept there
         if missed.any():
-            vis = self.fov.visible(self.xy[missed]) if self.fov is not None else np.ones(int(missed.sum()), bool)
+            if self.fov is not None:  # in view; within its sides (or beyond its far end)
+                vis, sides = self.fov.view(self.xy[missed])
+            else:
+                vis, sides = np.ones(int(missed.sum()), bool), np.ones(int(missed.sum()), bool)
             vis &= np.hypot(self.xy[missed, 0], self.xy[missed, 1]) <= self.max_range_m
             idx = np.flatnonzero(missed)[vis]
             self.misses[idx] += 1
             self.certainty[idx] = _bayes(self.certainty[idx], cfg.miss_likelihood_ratio)
-            out = np.flatnonzero(missed)[~vis]  # of those, the ones off the view's sides or below it (passed)
-            out = out[~self.fov.visible(self.xy[out], far_too=False)] if self.fov is not None else out[:0]
+            out = np.flatnonzero(missed)[~sides]  # off the view's sides or below it (passed)
             unseen_out[out] = self.hits[out] < cfg.out_of_view_min_hits
             self.events["out_of_view_dropped"] += int(unseen_out.sum())
 

@@ -39,12 +39,16 @@ class FieldOfView:
         return cls(ConeMapper(calib).ground.ground_to_pixels, (c.u0, c.v0, c.u1, c.v1), calib.max_range_m, margin_frac,
                    cone_height_frac=frac)
 
-    def visible(self, xy_m: np.ndarray, far_too: bool = True) -> np.ndarray:
-        """(N, 2) rear_axle m -> (N,) bool. ``far_too`` False: also True where the point lies beyond the view's far end
-        (its foot above the band's top, or beyond ``max_range_m``) but within its sides: where it may come into view."""
+    def visible(self, xy_m: np.ndarray) -> np.ndarray:
+        """(N, 2) rear_axle m -> (N,) bool."""
+        return self.view(xy_m)[0]
+
+    def view(self, xy_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(N, 2) rear_axle m -> ((N,) in view, (N,) within the view's sides and above its bottom: in view, or beyond
+        its far end (the tip above the band's top, or beyond ``max_range_m``), where it may come into view)."""
         xy = np.asarray(xy_m, dtype=np.float64).reshape(-1, 2)
         if len(xy) == 0:
-            return np.zeros(0, dtype=bool)
+            return np.zeros(0, dtype=bool), np.zeros(0, dtype=bool)
         uv = self.ground_to_pixels(xy)
         r = np.hypot(xy[:, 0], xy[:, 1])
         top = uv[:, 1]
@@ -52,4 +56,4 @@ class FieldOfView:
             top = top - (top - self.ground_to_pixels(xy * (1e4 / np.maximum(r, 1e-6))[:, None])[:, 1]) * self.cone_height_frac
         with np.errstate(invalid="ignore"):
             sides = (uv[:, 0] >= self.u0) & (uv[:, 0] < self.u1) & (uv[:, 1] < self.v1) & (r >= self.min_range_m)
-            return sides & (top >= self.v0) & (r <= self.max_range_m) if far_too else sides
+            return sides & (top >= self.v0) & (r <= self.max_range_m), sides
